@@ -1,0 +1,3 @@
+from endocal.cli import main
+
+main()

@@ -1,0 +1,43 @@
+"""Domain errors.
+
+Every error a user can cause subclasses a builtin (so library callers can catch
+``ValueError`` or ``OSError`` as usual) and :class:`EndocalError` (so the CLI can
+turn it into one line and exit code 2). Messages say what was wrong, where, and
+what to do.
+"""
+
+
+class EndocalError(Exception):
+    """Base of every user-facing endocal error."""
+
+
+class ConfigError(EndocalError, ValueError):
+    """A probe, simulator or protocol configuration is malformed or out of range."""
+
+
+class ProtocolError(EndocalError, ValueError):
+    """An excitation protocol is unknown, malformed, or asks for an impossible motion."""
+
+
+class LimitError(EndocalError, ValueError):
+    """A command lies beyond the probe's knob, translation or rotation limits."""
+
+
+class RunFormatError(EndocalError, ValueError):
+    """A run folder or aligned table does not follow the run format."""
+
+
+class OutputExistsError(EndocalError, FileExistsError):
+    """An output path exists and ``force`` was not given."""
+
+
+class OutputPathError(EndocalError, OSError):
+    """An output path cannot be created or written."""
+
+
+class HardwareError(EndocalError, RuntimeError):
+    """A hardware device failed, is missing, or answered out of range."""
+
+
+class ModelError(EndocalError, ValueError):
+    """A model file or fit request is invalid (wrong version, fields, axis, or data)."""
