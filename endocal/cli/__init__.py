@@ -1,0 +1,41 @@
+"""The ``endocal`` command line: a thin layer over the library.
+
+Each command parses its arguments, calls one library function that returns a result
+object, and renders it. Library errors become one line on stderr and exit code 2.
+"""
+
+from __future__ import annotations
+
+import typer
+
+from endocal import __version__
+
+app = typer.Typer(
+    name="endocal",
+    help="Calibration and experiment toolkit for robot-driven, tendon-driven flexible endoscopes.\n\n"
+    "The loop: `excite` a probe (simulated by default) -> `fit` bending planes and hysteresis -> "
+    "`validate` the model against measurements -> `report`.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"endocal {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print the version and exit."),
+) -> None:
+    """Calibration and experiment toolkit for tendon-driven endoscopes."""
+
+
+def main() -> None:
+    """Console-script entry point."""
+    from endocal.cli import commands  # noqa: F401  (registers the subcommands on ``app``)
+
+    app()
