@@ -1,1 +1,8 @@
 """Registers every subcommand on the root app (kept apart so importing the app stays cheap)."""
+
+from endocal.cli import app
+from endocal.cli import protocols as _protocols
+from endocal.cli.excite import excite
+
+app.command("excite")(excite)
+app.add_typer(_protocols.app, name="protocols")

@@ -1,0 +1,34 @@
+# Two commands set everything up on a fresh machine: `make demo` and `make test`.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed-stamp
+DEMO   := demo-out
+
+.PHONY: install test demo bench clean data-samples
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+install: $(STAMP)
+
+test: $(STAMP)
+	$(BIN)/python -m pytest
+
+demo: $(STAMP)
+	$(BIN)/endocal excite damped-sine --out $(DEMO)/damped-sine --force
+	@echo
+	@echo "Results are in $(DEMO)/: run.json, motor/, tracker/, truth/ and aligned.parquet per run."
+
+bench: $(STAMP)
+	@for b in bench/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
+
+# Regenerates the small simulator runs in data_samples/ (see data_samples/README.md).
+data-samples: $(STAMP)
+	$(BIN)/python data_samples/make_samples.py
+
+clean:
+	rm -rf $(VENV) $(DEMO) .pytest_cache

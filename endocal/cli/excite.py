@@ -1,0 +1,114 @@
+"""``endocal excite``: play an excitation protocol on the simulator or the robot and log a run."""
+
+from __future__ import annotations
+
+import sys
+import tomllib
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+from endocal.backends.registry import make_backend
+from endocal.cli._common import cli_errors, err, fail, out
+from endocal.errors import ProtocolError
+from endocal.excite import run_excitation
+from endocal.probe import load_probe
+from endocal.protocols import load_protocol
+
+
+def parse_overrides(pairs: list[str]) -> dict:
+    """``["amplitude_deg=40", "axes=['ml']"]`` -> ``{"amplitude_deg": 40, "axes": ["ml"]}``.
+
+    Values are read as TOML values (numbers, lists, booleans, quoted strings); anything
+    that is not valid TOML is taken as a plain string.
+    """
+    overrides: dict = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or not key.strip():
+            raise ProtocolError(f"--set expects key=value, got '{pair}'")
+        try:
+            overrides[key.strip()] = tomllib.loads(f"v = {value.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            overrides[key.strip()] = value.strip()
+    return overrides
+
+
+@cli_errors
+def excite(
+    protocol: str = typer.Argument(..., help="Protocol name (see `endocal protocols`) or a protocol .toml file."),
+    out_dir: Path = typer.Option(..., "--out", "-o", help="Run folder to create."),
+    backend: str = typer.Option("sim", "--backend", "-b", help="`sim` (physics simulator) or `hardware` (the robot)."),
+    probe: str = typer.Option("tee", "--probe", help="Probe preset (`tee`: ap/ml, `duodenoscope`: ud/lr) or a probe .toml."),
+    sim_config: Optional[Path] = typer.Option(None, "--sim-config", help="Simulator TOML (effects and physics); see configs/sim-default.toml."),
+    hardware_config: Optional[Path] = typer.Option(None, "--hardware-config", help="Rig TOML for --backend hardware; see configs/hardware-example.toml."),
+    seed: int = typer.Option(0, "--seed", help="Seed of every random draw (simulator noise, random protocols)."),
+    realtime: bool = typer.Option(False, "--realtime", help="Pace the simulator to the wall clock (hardware always is)."),
+    force: bool = typer.Option(False, "--force", help="Replace --out if it exists."),
+    sets: list[str] = typer.Option([], "--set", help="Override a protocol parameter, e.g. --set frequency_hz=0.1 (repeatable)."),
+    amplitude: Optional[float] = typer.Option(None, "--amplitude", help="Shortcut for --set amplitude_deg=VALUE."),
+    offset: Optional[float] = typer.Option(None, "--offset", help="Shortcut for --set offset_deg=VALUE."),
+    duration: Optional[float] = typer.Option(None, "--duration", help="Shortcut for --set duration_s=VALUE."),
+    sample_rate: Optional[float] = typer.Option(None, "--sample-rate", help="Shortcut for --set sample_rate_hz=VALUE (motor clock)."),
+    axes: Optional[str] = typer.Option(None, "--axes", help="Comma-separated axes to drive, e.g. `ml` or `ap,ml`."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+) -> None:
+    """Run an excitation protocol and log motor and tracker streams to a run folder.
+
+    The simulator (the default backend) runs as fast as it can; `--realtime` paces it.
+    Ctrl-C stops cleanly and leaves a valid run (status `interrupted` in run.json).
+    """
+    overrides = parse_overrides(sets)
+    for key, value in (("amplitude_deg", amplitude), ("offset_deg", offset), ("duration_s", duration), ("sample_rate_hz", sample_rate)):
+        if value is not None:
+            overrides[key] = value
+    if axes is not None:
+        overrides["axes"] = [a.strip() for a in axes.split(",") if a.strip()]
+
+    probe_cfg = load_probe(probe)
+    proto = load_protocol(protocol, overrides=overrides or None)
+    trajectory = proto.trajectory(probe_cfg, seed=seed)
+    trajectory.check_limits(probe_cfg)  # before any backend is built or anything moves
+    be = make_backend(backend, probe_cfg, seed=seed, sim_config=sim_config, hardware_config=hardware_config)
+    protocol_info = {
+        "name": proto.name,
+        "params": proto.params,
+        "source": str(proto.source_path),
+        "sha256": proto.sha256,
+    }
+    command = "endocal " + " ".join(sys.argv[1:])
+
+    show = not quiet and err.is_terminal
+    with Progress(
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed:.0f}/{task.total:.0f} s"),
+        TimeRemainingColumn(),
+        console=err,
+        disable=not show,
+        transient=True,
+    ) as bar:
+        task = bar.add_task(f"{proto.name} on {be.name}", total=trajectory.duration_s)
+        result = run_excitation(
+            trajectory,
+            be,
+            probe_cfg,
+            out_dir,
+            protocol_info=protocol_info,
+            seed=seed,
+            realtime=realtime,
+            force=force,
+            command=command,
+            progress=lambda done, total: bar.update(task, completed=done),
+        )
+    speed = f", {result.speed_x_realtime:,.0f}x real time" if result.wall_s > 0 else ""
+    out.print(
+        f"run {result.status}: {result.run_dir} ({result.logged_s:.1f} of {result.planned_s:.1f} s logged, "
+        f"{result.motor_rows} motor ticks, {result.tracker_rows} tracker frames, {result.aligned_rows} aligned rows{speed})"
+    )
+    if result.alignment_error:
+        err.print(f"warning: no aligned table: {result.alignment_error}")
+    if result.status == "interrupted":
+        fail(f"interrupted: the run in {result.run_dir} is valid up to t = {result.logged_s:.1f} s", code=130)

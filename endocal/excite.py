@@ -1,0 +1,239 @@
+"""Play an excitation protocol on a backend and log it as a run folder.
+
+Everything that can be checked is checked before the output folder is created or any
+motor moves: the protocol, its overrides, the probe, the backend configuration, and every
+goal against the probe's limits. Then the run is logged chunk by chunk (see
+:mod:`endocal.runs.logger`); whatever happens next (normal end, Ctrl-C, a device failure)
+the backend is closed, which on hardware turns torque off, everything already logged is
+flushed, and ``run.json`` records how the run ended.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import shutil
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from endocal.backends.base import Backend
+from endocal.errors import OutputExistsError, OutputPathError, RunFormatError
+from endocal.probe import ProbeConfig
+from endocal.protocols import Trajectory
+from endocal.runs.aligned import align, read_stream
+from endocal.runs.format import (
+    ALIGNED,
+    FORMAT_NAME,
+    FORMAT_VERSION,
+    MOTOR,
+    RUN_JSON,
+    TRACKER,
+    UNITS,
+    atomic_write_bytes,
+    software_versions,
+    utc_now,
+    write_json,
+)
+from endocal.runs.logger import StreamLogger
+
+#: Run time per chunk: long chunks keep a fast backend fast; short ones keep realtime pacing tight.
+FAST_CHUNK_S = 30.0
+REALTIME_CHUNK_S = 0.1
+
+
+@dataclass
+class ExciteResult:
+    """What :func:`run_excitation` produced."""
+
+    run_dir: Path
+    status: str  # "complete" or "interrupted"
+    logged_s: float
+    planned_s: float
+    motor_rows: int
+    tracker_rows: int
+    aligned_rows: int
+    wall_s: float
+    alignment_error: str | None = None
+
+    @property
+    def speed_x_realtime(self) -> float:
+        return self.logged_s / self.wall_s if self.wall_s > 0 else float("inf")
+
+
+def prepare_output(out: Path, force: bool) -> None:
+    """Check that ``out`` can become a new run folder (without creating it).
+
+    Raises
+    ------
+    OutputExistsError
+        ``out`` exists and ``force`` is false.
+    OutputPathError
+        ``out`` exists as a file, or its parent cannot be created or written.
+    """
+    out = Path(out)
+    if out.exists():
+        if not force:
+            raise OutputExistsError(f"output {out} already exists: choose a new --out or pass --force to replace it")
+        if not out.is_dir():
+            raise OutputPathError(f"output {out} exists and is not a folder: choose another --out")
+    parent = out.parent if str(out.parent) else Path(".")
+    probe_dir = parent
+    while not probe_dir.exists():
+        probe_dir = probe_dir.parent
+    if not probe_dir.is_dir():
+        raise OutputPathError(f"cannot create {out}: {probe_dir} is not a folder")
+    if not os.access(probe_dir, os.W_OK | os.X_OK):
+        raise OutputPathError(f"cannot create {out}: {probe_dir} is not writable")
+
+
+def run_excitation(
+    trajectory: Trajectory,
+    backend: Backend,
+    probe: ProbeConfig,
+    out: Path,
+    *,
+    protocol_info: dict,
+    seed: int,
+    realtime: bool = False,
+    force: bool = False,
+    command: str | None = None,
+    progress: Callable[[float, float], None] | None = None,
+    flush_interval_s: float = 1.0,
+) -> ExciteResult:
+    """Play ``trajectory`` on ``backend`` and log the run to ``out``.
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+        Goals for every DoF of ``probe`` on the motor clock (already limit-checked by the caller
+        or here).
+    backend : Backend
+        Simulator or hardware; opened and always closed here.
+    probe : ProbeConfig
+    out : Path
+        Run folder to create.
+    protocol_info : dict
+        Protocol name, parameters, source and hash, recorded in ``run.json``.
+    seed : int
+        Seed given to the backend, recorded.
+    realtime : bool
+        Pace a non-realtime backend (the simulator) to the wall clock.
+    force : bool
+        Replace an existing ``out``.
+    progress : callable, optional
+        Called as ``progress(done_s, total_s)`` after each chunk.
+
+    Returns
+    -------
+    ExciteResult
+        ``status`` is ``interrupted`` when Ctrl-C stopped the run (the run is still valid).
+
+    Raises
+    ------
+    LimitError, OutputExistsError, OutputPathError
+        Before anything moves or is written.
+    """
+    out = Path(out)
+    trajectory.check_limits(probe)  # refuse before anything moves
+    prepare_output(out, force)
+    if out.exists():
+        shutil.rmtree(out)
+    try:
+        out.mkdir(parents=True)
+    except OSError as exc:
+        raise OutputPathError(f"cannot create {out}: {exc.strerror}") from None
+
+    meta = {
+        "format": FORMAT_NAME,
+        "version": FORMAT_VERSION,
+        "status": "running",
+        "protocol": protocol_info,
+        "probe": probe.to_dict(),
+        "backend": {"name": backend.name},
+        "seed": seed,
+        "realtime": bool(realtime or backend.realtime),
+        "software": software_versions(),
+        "command": command or " ".join(sys.argv),
+        "sample_rate_hz": trajectory.sample_rate_hz,
+        "planned_duration_s": trajectory.duration_s,
+        "units": UNITS,
+        "streams": {"motor": MOTOR + "/", "tracker": TRACKER + "/", "aligned": ALIGNED},
+    }
+    logger = StreamLogger(out, flush_interval_s=flush_interval_s)
+    status, error = "running", None
+    wall0 = time.monotonic()
+    try:
+        backend.open()
+        meta["backend"] = {"name": backend.name, **backend.describe()}
+        meta["started_utc"] = utc_now()
+        write_json(out / RUN_JSON, meta)
+        chunk_s = REALTIME_CHUNK_S if (realtime or backend.realtime) else FAST_CHUNK_S
+        n_chunk = max(1, int(round(chunk_s * trajectory.sample_rate_hz)))
+        t = trajectory.t_s
+        wall0 = time.monotonic()
+        for start in range(0, t.size, n_chunk):
+            sl = slice(start, start + n_chunk)
+            if realtime and not backend.realtime:
+                # Pace the simulator: a chunk is released when its first tick is due.
+                delay = wall0 + t[sl.start] - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+            chunk = backend.execute(t[sl], {dof: g[sl] for dof, g in trajectory.goal.items()})
+            logger.append(chunk)
+            if progress is not None:
+                progress(float(t[min(sl.stop, t.size) - 1]), trajectory.duration_s)
+        status = "complete"
+    except KeyboardInterrupt:
+        status = "interrupted"
+    except BaseException as exc:
+        status, error = "failed", f"{type(exc).__name__}: {exc}"
+        raise
+    finally:
+        try:
+            backend.close()
+        finally:
+            logger.flush()
+            _finish(out, meta, logger, status, error, time.monotonic() - wall0, probe)
+    return ExciteResult(
+        run_dir=out,
+        status=status,
+        logged_s=meta.get("logged_s", 0.0),
+        planned_s=trajectory.duration_s,
+        motor_rows=logger.rows_written[MOTOR],
+        tracker_rows=logger.rows_written[TRACKER],
+        aligned_rows=meta.get("counts", {}).get("aligned_rows", 0),
+        wall_s=meta.get("wall_s", 0.0),
+        alignment_error=meta.get("alignment_error"),
+    )
+
+
+def _finish(out: Path, meta: dict, logger: StreamLogger, status: str, error: str | None, wall_s: float, probe) -> None:
+    """Write the aligned table (if anything was logged) and the final ``run.json``."""
+    meta["status"] = status
+    meta["ended_utc"] = utc_now()
+    meta["wall_s"] = round(wall_s, 3)
+    meta.setdefault("started_utc", meta["ended_utc"])
+    if error:
+        meta["error"] = error
+    counts = {"motor_rows": logger.rows_written[MOTOR], "tracker_rows": logger.rows_written[TRACKER]}
+    if logger.rows_written[MOTOR] and logger.rows_written[TRACKER]:
+        try:
+            alignment = align(read_stream(out, MOTOR), read_stream(out, TRACKER), probe)
+        except RunFormatError as exc:
+            # The streams stay on disk; say why there is no aligned table rather than lose the run.
+            meta["alignment_error"] = str(exc)
+        else:
+            buf = io.BytesIO()
+            pq.write_table(pa.Table.from_pandas(alignment.table, preserve_index=False), buf)
+            atomic_write_bytes(out / ALIGNED, buf.getvalue())
+            counts.update(alignment.counts())
+    meta["counts"] = counts
+    meta["logged_s"] = float(logger.last_t_s) if np.isfinite(logger.last_t_s) else 0.0
+    write_json(out / RUN_JSON, meta)

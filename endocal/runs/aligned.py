@@ -1,0 +1,257 @@
+"""The aligned table: motor commands and measured bending angles on one clock.
+
+Every command downstream of ``excite`` reads data through :func:`load_aligned`, which takes
+a run folder or an aligned table recorded elsewhere (Parquet or CSV with the same columns):
+
+``t_s``
+    seconds, strictly increasing;
+``<axis>_cmd_deg``, ``<axis>_meas_deg``
+    per bending axis: the knob command and the bending angle measured from the tracker
+    (thesis eq. 1, in the base sensor's frame);
+anything else numeric
+    kept (knob positions, currents, ``sheath_wrap_deg``, ``contact_force_n``, ...).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+
+from endocal.errors import RunFormatError
+from endocal.kinematics.bending import bending_angles_deg, tip_in_base_mm
+from endocal.probe import ProbeConfig
+from endocal.runs.format import ALIGNED, MOTOR, RUN_JSON, TRACKER, read_run_json, sha256_of
+
+CMD, MEAS = "_cmd_deg", "_meas_deg"
+
+
+@dataclass
+class Alignment:
+    """The aligned table of a run and what alignment dropped."""
+
+    table: pd.DataFrame
+    tracker_frames: int
+    tracker_invalid: int
+    ticks_dropped: int
+    max_gap_s: float
+
+    def counts(self) -> dict[str, int]:
+        return {
+            "tracker_frames": self.tracker_frames,
+            "tracker_invalid_dropped": self.tracker_invalid,
+            "aligned_rows": len(self.table),
+            "motor_ticks_without_tracking": self.ticks_dropped,
+        }
+
+
+def read_stream(run_dir: Path, name: str) -> pd.DataFrame:
+    """Read one stream folder of a run (all its parts) as a DataFrame sorted by ``t_s``.
+
+    Raises
+    ------
+    RunFormatError
+        The folder is missing or holds no part yet.
+    """
+    folder = Path(run_dir) / name
+    parts = sorted(folder.glob("part-*.parquet")) if folder.is_dir() else []
+    if not parts:
+        raise RunFormatError(f"{run_dir}: no {name} samples were logged ({folder} is missing or empty)")
+    df = pq.read_table(parts).to_pandas() if len(parts) > 1 else pq.read_table(parts[0]).to_pandas()
+    return df.sort_values("t_s", kind="stable").reset_index(drop=True)
+
+
+def align(motor: pd.DataFrame, tracker: pd.DataFrame, probe: ProbeConfig, max_gap_s: float = 0.2) -> Alignment:
+    """Put tracker-measured bending angles on the motor clock.
+
+    Frames flagged invalid are dropped, as is any instant where the tip or base frame is
+    missing. For each remaining frame the tip position is expressed in the base sensor's
+    frame and turned into the two projected bending angles (thesis eq. 1); these are
+    interpolated linearly onto the motor ticks. Motor ticks outside the tracked span, or
+    inside a tracking gap longer than ``max_gap_s``, have no measurement and are dropped.
+
+    Parameters
+    ----------
+    motor : DataFrame
+        Motor stream (``t_s``, ``<dof>_goal_<u>``, ...).
+    tracker : DataFrame
+        Tracker stream (``t_s``, ``sensor``, ``x_mm``.., ``qw``.., ``valid``).
+    probe : ProbeConfig
+        Gives the bending axis names (first: y-z plane, second: x-z plane).
+    max_gap_s : float
+        Longest tracking gap to interpolate across, seconds.
+    """
+    missing = [s for s in ("tip", "base") if s not in set(tracker["sensor"].astype(str))]
+    if missing:
+        raise RunFormatError(f"tracker stream has no '{missing[0]}' sensor frames: eq. 1 needs both tip and base sensors")
+    valid = tracker["valid"].astype(bool).to_numpy()
+    n_invalid = int((~valid).sum())
+    good = tracker.loc[valid]
+    cols = ["t_s", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz"]
+    tip = good.loc[good["sensor"].astype(str) == "tip", cols]
+    base = good.loc[good["sensor"].astype(str) == "base", cols]
+    pairs = tip.merge(base, on="t_s", suffixes=("_tip", "_base")).sort_values("t_s")
+    n_frames = int((tracker["sensor"].astype(str) == "tip").sum())
+    xyz = ["x_mm", "y_mm", "z_mm"]
+    p = tip_in_base_mm(
+        pairs[[c + "_tip" for c in xyz]].to_numpy(),
+        pairs[[c + "_base" for c in xyz]].to_numpy(),
+        pairs[["qw_base", "qx_base", "qy_base", "qz_base"]].to_numpy(),
+    )
+    theta_first, theta_second = bending_angles_deg(p)  # thesis eq. 1
+    t_frames = pairs["t_s"].to_numpy(float)
+
+    t = motor["t_s"].to_numpy(float)
+    ok = np.zeros(t.size, bool)
+    if t_frames.size >= 2:
+        idx = np.searchsorted(t_frames, t, side="right")
+        inside = (idx > 0) & (idx < t_frames.size)
+        lo = np.clip(idx - 1, 0, t_frames.size - 1)
+        hi = np.clip(idx, 0, t_frames.size - 1)
+        gap = t_frames[hi] - t_frames[lo]
+        ok = (inside & (gap <= max_gap_s)) | (t == t_frames[-1])
+    out = {"t_s": t[ok]}
+    first, second = probe.bending_axes
+    for axis, theta in ((first, theta_first), (second, theta_second)):
+        out[axis + CMD] = motor[f"{axis}_goal_deg"].to_numpy(float)[ok]
+        out[axis + MEAS] = np.interp(t[ok], t_frames, theta) if t_frames.size else np.empty(0)
+    for col in motor.columns:
+        if col == "t_s" or col in (f"{a}_goal_deg" for a in probe.bending_axes):
+            continue
+        if pd.api.types.is_numeric_dtype(motor[col]) and not pd.api.types.is_bool_dtype(motor[col]):
+            out[col] = motor[col].to_numpy(float)[ok]
+    return Alignment(pd.DataFrame(out), n_frames, n_invalid, int((~ok).sum()), max_gap_s)
+
+
+@dataclass
+class AlignedData:
+    """An aligned table, checked, with where it came from.
+
+    Attributes
+    ----------
+    table : DataFrame
+        ``t_s``, ``<axis>_cmd_deg``, ``<axis>_meas_deg`` per axis, and numeric extras.
+    axes : list of str
+        Bending axes present (those with both a command and a measurement column).
+    source : Path
+        The run folder or table file.
+    sha256 : str
+        Hash of the source (the table file, or the run's streams and run.json).
+    meta : dict
+        ``run.json`` for a run folder, empty for a bare table.
+    """
+
+    table: pd.DataFrame
+    axes: list[str]
+    source: Path
+    sha256: str
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def extras(self) -> list[str]:
+        """Numeric columns beyond time, commands and measurements."""
+        core = {"t_s"} | {a + CMD for a in self.axes} | {a + MEAS for a in self.axes}
+        return [c for c in self.table.columns if c not in core]
+
+    def cmd_deg(self, axis: str) -> np.ndarray:
+        return self.table[self._axis(axis) + CMD].to_numpy(float)
+
+    def meas_deg(self, axis: str) -> np.ndarray:
+        return self.table[self._axis(axis) + MEAS].to_numpy(float)
+
+    @property
+    def t_s(self) -> np.ndarray:
+        return self.table["t_s"].to_numpy(float)
+
+    def _axis(self, axis: str) -> str:
+        if axis not in self.axes:
+            raise RunFormatError(f"{self.source}: no axis '{axis}' in the data (it has {', '.join(self.axes)})")
+        return axis
+
+
+def _read_table(path: Path) -> pd.DataFrame:
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".parquet":
+            return pq.read_table(path).to_pandas()
+        if suffix in (".csv", ".txt"):
+            return pd.read_csv(path)
+    except FileNotFoundError:
+        raise RunFormatError(f"{path} does not exist") from None
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError) as exc:
+        raise RunFormatError(f"{path} cannot be read as {suffix[1:].upper()}: {str(exc).splitlines()[0]}") from None
+    raise RunFormatError(f"{path}: expected a run folder, a .parquet or a .csv aligned table")
+
+
+def check_aligned(df: pd.DataFrame, where: str) -> list[str]:
+    """Check an aligned table and return its bending axes.
+
+    Raises
+    ------
+    RunFormatError
+        No ``t_s``, no axis with both command and measurement, non-numeric, NaN or
+        infinite values in time/commands/measurements, or time that does not increase.
+    """
+    if "t_s" not in df.columns:
+        raise RunFormatError(f"{where}: no 't_s' column (an aligned table needs t_s, <axis>_cmd_deg, <axis>_meas_deg)")
+    cmd_axes = [c[: -len(CMD)] for c in df.columns if c.endswith(CMD)]
+    axes = [a for a in cmd_axes if a + MEAS in df.columns]
+    if not axes:
+        lonely = [c for c in df.columns if c.endswith(CMD) or c.endswith(MEAS)]
+        hint = f" (found only {', '.join(lonely)})" if lonely else ""
+        raise RunFormatError(
+            f"{where}: no bending axis with both '<axis>_cmd_deg' and '<axis>_meas_deg' columns{hint}"
+        )
+    if len(df) == 0:
+        raise RunFormatError(f"{where}: the table has no rows")
+    for col in ["t_s"] + [a + s for a in axes for s in (CMD, MEAS)]:
+        if not pd.api.types.is_numeric_dtype(df[col]):
+            raise RunFormatError(f"{where}: column '{col}' is not numeric")
+        values = df[col].to_numpy(float)
+        bad = ~np.isfinite(values)
+        if bad.any():
+            i = int(np.argmax(bad))
+            kind = "NaN" if np.isnan(values[i]) else "infinite"
+            raise RunFormatError(f"{where}: column '{col}' is {kind} at row {i}; drop or fill such rows first")
+    t = df["t_s"].to_numpy(float)
+    steps = np.diff(t)
+    if (steps <= 0).any():
+        i = int(np.argmax(steps <= 0)) + 1
+        raise RunFormatError(
+            f"{where}: time must increase, but t_s goes from {t[i - 1]:g} to {t[i]:g} at row {i}; sort the table or fix its clock"
+        )
+    return axes
+
+
+def load_aligned(path: str | Path, max_gap_s: float = 0.2) -> AlignedData:
+    """Load and check the aligned table of a run folder or of a Parquet/CSV file.
+
+    A run folder whose ``aligned.parquet`` is missing (the run was killed) has its table
+    rebuilt from the logged streams.
+
+    Raises
+    ------
+    RunFormatError
+        Missing path, unreadable file, or a table that breaks the format (see
+        :func:`check_aligned`).
+    """
+    path = Path(path)
+    if path.is_dir():
+        meta = read_run_json(path)
+        if (path / ALIGNED).is_file():
+            df = pq.read_table(path / ALIGNED).to_pandas()
+            digest = sha256_of(path / ALIGNED)
+        else:
+            probe = ProbeConfig.from_dict(meta["probe"], where=str(path / RUN_JSON))
+            df = align(read_stream(path, MOTOR), read_stream(path, TRACKER), probe, max_gap_s).table
+            digest = sha256_of(path)
+        axes = check_aligned(df, str(path))
+        return AlignedData(df, axes, path, digest, meta)
+    if not path.exists():
+        raise RunFormatError(f"{path} does not exist: give a run folder or an aligned table (.parquet or .csv)")
+    df = _read_table(path)
+    axes = check_aligned(df, str(path))
+    return AlignedData(df, axes, path, sha256_of(path), {})

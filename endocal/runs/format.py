@@ -1,0 +1,145 @@
+"""The run format: one folder per excitation run.
+
+::
+
+    RUN/
+      run.json          what was run: protocol + parameters, probe, backend, seed, versions,
+                        start/end time (UTC), units, status, row counts
+      motor/            motor stream, a Parquet dataset (part-NNNNNN.parquet, one per flush)
+      tracker/          EM-tracker stream, a Parquet dataset (long format, one row per sensor frame)
+      truth/            simulator ground truth (simulator runs only)
+      aligned.parquet   one row per motor tick: t_s, <axis>_cmd_deg, <axis>_meas_deg, + numeric extras
+
+The streams are folders of Parquet parts so that a crash (``kill -9``) loses at most the
+part being buffered: each part is written to a hidden temporary name and renamed into
+place, and both ``pyarrow.dataset.dataset(RUN/"motor")`` and ``pandas.read_parquet`` read
+the folder as one table (they skip hidden files). ``run.json`` is rewritten atomically.
+``status`` is ``running`` while logging, then ``complete``, ``interrupted`` (Ctrl-C) or
+``failed``; a run left ``running`` was killed, and readers rebuild its aligned table from
+the streams.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import platform
+import tempfile
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+from endocal import __version__
+from endocal.errors import RunFormatError
+
+FORMAT_NAME = "endocal-run"
+FORMAT_VERSION = 1
+RUN_JSON = "run.json"
+MOTOR = "motor"
+TRACKER = "tracker"
+TRUTH = "truth"
+ALIGNED = "aligned.parquet"
+STREAMS = (MOTOR, TRACKER, TRUTH)
+
+UNITS = {
+    "t_s": "seconds, monotonic from run start (motor clock)",
+    "*_deg": "degrees (knob angles, probe rotation, bending angles)",
+    "*_mm": "millimetres",
+    "*_dps": "degrees per second",
+    "*_mmps": "millimetres per second",
+    "*_ma": "milliamperes",
+    "*_n": "newtons",
+    "qw qx qy qz": "unit quaternion, sensor to tracker rotation, scalar first",
+}
+
+
+def utc_now() -> str:
+    """Current time as an ISO 8601 UTC string with a ``Z`` suffix."""
+    return datetime.now(timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+def software_versions() -> dict[str, str]:
+    """Versions of endocal and of the libraries that shape its numbers, for provenance."""
+    import pandas
+    import pyarrow
+    import scipy
+
+    return {
+        "endocal": __version__,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "pandas": pandas.__version__,
+        "pyarrow": pyarrow.__version__,
+    }
+
+
+def sha256_of(path: Path) -> str:
+    """Hex SHA-256 of a file's bytes, or of every file of a folder (sorted by relative path)."""
+    h = hashlib.sha256()
+    path = Path(path)
+    files = sorted(p for p in path.rglob("*") if p.is_file() and not p.name.startswith(".")) if path.is_dir() else [path]
+    for f in files:
+        if path.is_dir():
+            h.update(str(f.relative_to(path)).encode())
+        with open(f, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+    return h.hexdigest()
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` so that readers see the old file or the new one, never half."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _json_default(obj):
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (np.floating,)):
+        return float(obj)
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
+
+
+def write_json(path: Path, obj: dict) -> None:
+    """Atomically write ``obj`` as indented JSON."""
+    atomic_write_bytes(path, (json.dumps(obj, indent=2, default=_json_default) + "\n").encode())
+
+
+def read_run_json(run_dir: Path) -> dict:
+    """Read and check ``RUN/run.json``.
+
+    Raises
+    ------
+    RunFormatError
+        Missing, not JSON, not an endocal run, or from a newer format version.
+    """
+    path = Path(run_dir) / RUN_JSON
+    try:
+        meta = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise RunFormatError(f"{run_dir} is not a run folder: it has no {RUN_JSON}") from None
+    except json.JSONDecodeError as exc:
+        raise RunFormatError(f"{path} is not valid JSON (line {exc.lineno}): {exc.msg}") from None
+    if meta.get("format") != FORMAT_NAME:
+        raise RunFormatError(f"{path} is not an endocal run file (format is {meta.get('format')!r}, expected {FORMAT_NAME!r})")
+    version = meta.get("version")
+    if not isinstance(version, int) or version > FORMAT_VERSION:
+        raise RunFormatError(
+            f"{path} has run format version {version!r}; this endocal reads up to {FORMAT_VERSION}: upgrade endocal"
+        )
+    return meta
