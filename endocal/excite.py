@@ -17,7 +17,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 import pyarrow as pa
@@ -26,7 +26,6 @@ import pyarrow.parquet as pq
 from endocal.backends.base import Backend
 from endocal.errors import OutputExistsError, OutputPathError, RunFormatError
 from endocal.probe import ProbeConfig
-from endocal.protocols import Trajectory
 from endocal.runs.aligned import align, read_stream
 from endocal.runs.format import (
     ALIGNED,
@@ -42,6 +41,9 @@ from endocal.runs.format import (
     write_json,
 )
 from endocal.runs.logger import StreamLogger
+
+if TYPE_CHECKING:
+    from endocal.protocols import Trajectory
 
 #: Run time per chunk: long chunks keep a fast backend fast; short ones keep realtime pacing tight.
 FAST_CHUNK_S = 30.0

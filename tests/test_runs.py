@@ -1,0 +1,196 @@
+"""Run format: logging, the aligned table, eq. 1 through real sensor frames, and bad tables."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+import pyarrow.dataset as ds
+import pytest
+
+from endocal.errors import LimitError, OutputExistsError, RunFormatError
+from endocal.excite import run_excitation
+from endocal.runs.aligned import load_aligned
+from endocal.runs.format import read_run_json
+from tests.conftest import GeometryBackend
+
+
+@dataclass
+class Traj:
+    """The smallest object with the Trajectory interface run_excitation needs."""
+
+    t_s: np.ndarray
+    goal: dict
+    sample_rate_hz: float
+
+    @property
+    def duration_s(self):
+        return float(self.t_s[-1])
+
+    def check_limits(self, probe):
+        for dof, g in self.goal.items():
+            lo, hi = probe.limits(dof)
+            if g.min() < lo or g.max() > hi:
+                raise LimitError(f"{dof} beyond limits")
+
+
+def sine_traj(probe, seconds=20.0, fs=100.0, amp=40.0):
+    t = np.arange(int(seconds * fs) + 1) / fs
+    goal = {dof: np.zeros_like(t) for dof in probe.dofs}
+    goal[probe.bending_axes[0]] = amp * np.sin(2 * np.pi * 0.1 * t)
+    goal[probe.bending_axes[1]] = -0.5 * amp * np.sin(2 * np.pi * 0.05 * t) * (t > 10)  # planar first 10 s
+    return Traj(t, goal, fs)
+
+
+def excite(tmp_path, probe, backend=None, traj=None, **kw):
+    backend = backend or GeometryBackend(probe)
+    traj = traj or sine_traj(probe)
+    return run_excitation(traj, backend, probe, tmp_path / "run", protocol_info={"name": "test"}, seed=3, **kw), traj, backend
+
+
+def test_run_round_trip_and_eq1_through_sensor_frames(tmp_path, tee):
+    result, traj, backend = excite(tmp_path, tee)
+    run = tmp_path / "run"
+    meta = read_run_json(run)
+    assert meta["status"] == "complete" and meta["seed"] == 3 and meta["probe"]["name"] == "tee"
+    assert meta["software"]["endocal"] and meta["started_utc"].endswith("Z")
+    assert backend.closed == 1
+    # Streams readable by plain pyarrow.dataset and pandas, with every sample.
+    motor = ds.dataset(run / "motor", format="parquet").to_table().to_pandas()
+    tracker = pd.read_parquet(run / "tracker")
+    assert len(motor) == traj.t_s.size == result.motor_rows
+    assert len(tracker) == 2 * (int(traj.duration_s * 40) + 1)
+    data = load_aligned(run)
+    assert data.axes == ["ap", "ml"]
+    # The geometry backend bends by exactly the knob angle (total tip angle); eq. 1 gives the
+    # chord angle, which is half the tip angle for a planar arc. Single-axis instants are
+    # planar, so meas = cmd / 2 up to linear interpolation between 40 Hz frames
+    # (curvature error < (1/40 s)^2/8 * max|d2/dt2| = 7.8e-5 * 40*(2pi*0.1)^2/2 deg = 6e-4 deg).
+    planar = np.abs(data.cmd_deg("ml")) < 1e-9
+    assert planar.sum() > 900
+    np.testing.assert_allclose(data.meas_deg("ap")[planar], data.cmd_deg("ap")[planar] / 2, atol=2e-3)
+    # Away from planar instants eq. 1 is the projection of the tip, computed here by hand.
+    bx, by = np.radians(data.cmd_deg("ml")), np.radians(data.cmd_deg("ap"))
+    alpha, phi = np.hypot(bx, by), np.arctan2(by, bx)
+    r = 1 - np.cos(alpha)
+    expected_ap = np.degrees(np.arctan2(r * np.sin(phi), np.sin(alpha)))
+    np.testing.assert_allclose(data.meas_deg("ap"), expected_ap, atol=0.05)
+    assert "sheath_wrap_deg" in data.extras and "ap_pos_deg" in data.extras
+
+
+def test_invalid_frames_are_dropped_and_counted(tmp_path, tee):
+    backend = GeometryBackend(tee, invalid_every=5)
+    excite(tmp_path, tee, backend=backend)
+    meta = read_run_json(tmp_path / "run")
+    assert meta["counts"]["tracker_invalid_dropped"] == pytest.approx(meta["counts"]["tracker_frames"] / 5, abs=1)
+    data = load_aligned(tmp_path / "run")
+    assert np.isfinite(data.table.to_numpy()).all()
+
+
+def test_existing_output_refused_without_force(tmp_path, tee):
+    excite(tmp_path, tee)
+    before = (tmp_path / "run" / "run.json").read_text()
+    with pytest.raises(OutputExistsError, match="--force"):
+        excite(tmp_path, tee)
+    assert (tmp_path / "run" / "run.json").read_text() == before  # nothing lost
+    excite(tmp_path, tee, force=True)
+
+
+def test_limits_refused_before_anything_is_written(tmp_path, tee):
+    traj = sine_traj(tee, amp=120.0)  # knob limit is 90 deg
+    backend = GeometryBackend(tee)
+    with pytest.raises(LimitError):
+        excite(tmp_path, tee, backend=backend, traj=traj)
+    assert not (tmp_path / "run").exists()
+
+
+def test_interrupt_leaves_a_valid_run(tmp_path, tee):
+    class Interrupting(GeometryBackend):
+        calls = 0
+
+        def execute(self, t_s, goal):
+            self.calls += 1
+            if self.calls == 3:
+                raise KeyboardInterrupt
+            return super().execute(t_s, goal)
+
+    backend = Interrupting(tee)
+    traj = sine_traj(tee, seconds=100.0)
+    result = run_excitation(traj, backend, tee, tmp_path / "run", protocol_info={}, seed=0)
+    assert result.status == "interrupted" and backend.closed == 1
+    assert result.logged_s == pytest.approx(2 * 30.0 - 0.01, abs=0.02)  # two 30 s chunks made it
+    meta = read_run_json(tmp_path / "run")
+    assert meta["status"] == "interrupted"
+    assert len(load_aligned(tmp_path / "run").table) > 5000
+
+
+def test_failure_closes_backend_and_keeps_what_was_logged(tmp_path, tee):
+    class Failing(GeometryBackend):
+        calls = 0
+
+        def execute(self, t_s, goal):
+            self.calls += 1
+            if self.calls == 2:
+                raise RuntimeError("bus error")
+            return super().execute(t_s, goal)
+
+    backend = Failing(tee)
+    with pytest.raises(RuntimeError):
+        run_excitation(sine_traj(tee, seconds=100.0), backend, tee, tmp_path / "run", protocol_info={}, seed=0)
+    assert backend.closed == 1
+    meta = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert meta["status"] == "failed" and "bus error" in meta["error"]
+    assert meta["counts"]["motor_rows"] == 3000
+
+
+def test_killed_run_without_aligned_table_is_rebuilt_from_streams(tmp_path, tee):
+    excite(tmp_path, tee)
+    run = tmp_path / "run"
+    complete = load_aligned(run).table
+    (run / "aligned.parquet").unlink()
+    meta = json.loads((run / "run.json").read_text())
+    meta["status"] = "running"
+    (run / "run.json").write_text(json.dumps(meta))
+    rebuilt = load_aligned(run).table
+    pd.testing.assert_frame_equal(rebuilt, complete)
+
+
+@pytest.mark.parametrize(
+    "mutate, message",
+    [
+        (lambda df: df.drop(columns=["t_s"]), "no 't_s' column"),
+        (lambda df: df.drop(columns=["ap_meas_deg", "ml_meas_deg"]), "found only ap_cmd_deg"),
+        (lambda df: df.assign(ap_meas_deg=df["ap_meas_deg"].where(df.index != 7)), "'ap_meas_deg' is NaN at row 7"),
+        (lambda df: df.assign(ml_cmd_deg=df["ml_cmd_deg"].where(df.index != 3, np.inf)), "'ml_cmd_deg' is infinite at row 3"),
+        (lambda df: df.assign(t_s=df["t_s"].where(df.index != 10, 0.0)), "time must increase"),
+        (lambda df: df.iloc[:0], "no rows"),
+        (lambda df: df.assign(t_s=df["t_s"].astype(object).where(df.index != 4, "n/a")), "'t_s' is not numeric"),
+    ],
+)
+def test_bad_aligned_tables(tmp_path, mutate, message):
+    t = np.arange(50) * 0.01
+    df = pd.DataFrame({"t_s": t, "ap_cmd_deg": np.sin(t), "ap_meas_deg": np.sin(t), "ml_cmd_deg": t, "ml_meas_deg": t})
+    path = tmp_path / "bad.csv"
+    mutate(df).to_csv(path, index=False)
+    with pytest.raises(RunFormatError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        load_aligned(path)
+
+
+def test_user_tables_in_csv_and_parquet(tmp_path):
+    t = np.arange(200) * 0.01
+    df = pd.DataFrame({"t_s": t, "ud_cmd_deg": 30 * np.sin(t), "ud_meas_deg": 20 * np.sin(t), "torque_nm": t})
+    df.to_csv(tmp_path / "a.csv", index=False)
+    df.to_parquet(tmp_path / "a.parquet")
+    for name in ("a.csv", "a.parquet"):
+        data = load_aligned(tmp_path / name)
+        assert data.axes == ["ud"] and data.extras == ["torque_nm"]
+        np.testing.assert_allclose(data.meas_deg("ud"), 20 * np.sin(t))
+    with pytest.raises(RunFormatError, match="no axis 'ap'"):
+        data.cmd_deg("ap")
+    with pytest.raises(RunFormatError, match="does not exist"):
+        load_aligned(tmp_path / "missing.parquet")
+    (tmp_path / "x.json").write_text("{}")
+    with pytest.raises(RunFormatError, match="expected a run folder"):
+        load_aligned(tmp_path / "x.json")
