@@ -166,7 +166,7 @@ def test_killed_run_without_aligned_table_is_rebuilt_from_streams(tmp_path, tee)
         (lambda df: df.assign(ml_cmd_deg=df["ml_cmd_deg"].where(df.index != 3, np.inf)), "'ml_cmd_deg' is infinite at row 3"),
         (lambda df: df.assign(t_s=df["t_s"].where(df.index != 10, 0.0)), "time must increase"),
         (lambda df: df.iloc[:0], "no rows"),
-        (lambda df: df.assign(t_s=df["t_s"].astype(object).where(df.index != 4, "n/a")), "'t_s' is not numeric"),
+        (lambda df: df.assign(t_s=df["t_s"].astype(object).where(df.index != 4, "abc")), "'t_s' is not numeric"),
     ],
 )
 def test_bad_aligned_tables(tmp_path, mutate, message):
