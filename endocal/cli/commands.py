@@ -3,6 +3,8 @@
 from endocal.cli import app
 from endocal.cli import protocols as _protocols
 from endocal.cli.excite import excite
+from endocal.cli.info import info
 
 app.command("excite")(excite)
+app.command("info")(info)
 app.add_typer(_protocols.app, name="protocols")

@@ -1,0 +1,77 @@
+"""A short description of a run or aligned table: what `endocal info` shows."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from endocal.runs.aligned import CMD, MEAS, load_aligned
+
+
+@dataclass
+class AxisSummary:
+    axis: str
+    cmd_range_deg: tuple[float, float]
+    meas_range_deg: tuple[float, float]
+    reversals: int
+
+
+@dataclass
+class DataSummary:
+    """Rows, span, axes and ranges of an aligned table, plus the run's record when it is a run."""
+
+    source: Path
+    rows: int
+    duration_s: float
+    rate_hz: float
+    axes: list[AxisSummary]
+    extras: list[str]
+    sha256: str
+    status: str | None = None
+    protocol: str | None = None
+    backend: str | None = None
+    seed: int | None = None
+    counts: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        from dataclasses import asdict
+
+        d = asdict(self)
+        d["source"] = str(self.source)
+        return d
+
+
+def summarize(path: str | Path) -> DataSummary:
+    """Summarise the run folder or aligned table at ``path`` (see :func:`load_aligned` for errors)."""
+    data = load_aligned(path)
+    t = data.t_s
+    axes = []
+    for axis in data.axes:
+        cmd, meas = data.table[axis + CMD].to_numpy(float), data.table[axis + MEAS].to_numpy(float)
+        direction = np.sign(np.diff(cmd))
+        direction = direction[direction != 0]
+        axes.append(
+            AxisSummary(
+                axis,
+                (float(cmd.min()), float(cmd.max())),
+                (float(meas.min()), float(meas.max())),
+                int(np.count_nonzero(np.diff(direction))),
+            )
+        )
+    meta = data.meta
+    return DataSummary(
+        source=data.source,
+        rows=len(t),
+        duration_s=float(t[-1] - t[0]),
+        rate_hz=float((len(t) - 1) / (t[-1] - t[0])) if len(t) > 1 and t[-1] > t[0] else float("nan"),
+        axes=axes,
+        extras=data.extras,
+        sha256=data.sha256,
+        status=meta.get("status"),
+        protocol=(meta.get("protocol") or {}).get("name"),
+        backend=(meta.get("backend") or {}).get("name"),
+        seed=meta.get("seed"),
+        counts=meta.get("counts", {}),
+    )
