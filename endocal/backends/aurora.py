@@ -1,0 +1,380 @@
+"""NDI Aurora electromagnetic tracker: two 6-DoF sensors at the tip and base of the bending section.
+
+The thesis places one Aurora 6-DoF sensor at each end of the bending section (summary,
+section 2.2) and turns their positions into bending angles with its equation 1. This
+module reads the tracker through ``scikit-surgerynditracker`` (an optional extra:
+``pip install 'endocal-toolkit[aurora]'``), converts each ``sensor2tracker`` 4x4 matrix
+into a position in mm and a unit quaternion ``(qw, qx, qy, qz)``, and delivers frames
+in the tracker-stream layout of :mod:`endocal.backends.base`.
+
+Frames are read by a background thread at the tracker rate (Aurora: 40 Hz) and stamped
+on the run's monotonic clock (the midpoint of the ``get_frame`` call, so half the serial
+round trip is the stamp's uncertainty); a frame whose frame number did not change since
+the last read is a repeat and is dropped. A sensor that is missing, out of the field
+volume or reports NaN gives a row with ``valid = False`` and NaN values.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from endocal.backends.base import SENSORS, TRACKER_COLUMNS
+from endocal.errors import ConfigError, HardwareError
+
+INSTALL_HINT = "pip install 'endocal-toolkit[aurora]'"
+TRACKER_KEYS = {"serial_port", "tip_port_handle", "base_port_handle", "rom_files", "rate_hz", "detect_timeout_s"}
+
+
+def matrix_to_pose(sensor2tracker) -> tuple[np.ndarray, np.ndarray]:
+    """Position (mm) and unit quaternion ``(qw, qx, qy, qz)`` of homogeneous 4x4 transforms.
+
+    Parameters
+    ----------
+    sensor2tracker : array_like, shape (4, 4) or (n, 4, 4)
+        Rigid transforms with translation in mm (the Aurora reports mm).
+
+    Returns
+    -------
+    pos_mm : ndarray, shape (n, 3)
+    quat_wxyz : ndarray, shape (n, 4)
+        Scalar first, normalised, with ``qw >= 0`` (``q`` and ``-q`` are the same rotation;
+        the sign is fixed so that logged streams do not flip). Rows whose matrix holds a
+        NaN are NaN.
+
+    Notes
+    -----
+    Shepperd's method: take the square root of the largest of ``1 + trace`` and
+    ``1 + 2 R_ii - trace`` so the division never goes through a small number.
+    """
+    m = np.asarray(sensor2tracker, dtype=float)
+    if m.ndim == 2:
+        m = m[None]
+    if m.shape[1:] != (4, 4):
+        raise ValueError(f"expected (n, 4, 4) transforms, got shape {m.shape}")
+    pos = m[:, :3, 3].copy()
+    r = m[:, :3, :3]
+    n = m.shape[0]
+    q = np.full((n, 4), np.nan)
+    ok = np.isfinite(m).all(axis=(1, 2))
+    tr = np.trace(r, axis1=1, axis2=2)
+    for k in np.flatnonzero(ok):
+        rk = r[k]
+        cand = (tr[k], rk[0, 0], rk[1, 1], rk[2, 2])
+        i = int(np.argmax(cand))
+        if i == 0:
+            s = 2.0 * math.sqrt(max(1.0 + tr[k], 0.0))
+            w, x, y, z = 0.25 * s, (rk[2, 1] - rk[1, 2]) / s, (rk[0, 2] - rk[2, 0]) / s, (rk[1, 0] - rk[0, 1]) / s
+        elif i == 1:
+            s = 2.0 * math.sqrt(max(1.0 + 2.0 * rk[0, 0] - tr[k], 0.0))
+            w, x, y, z = (rk[2, 1] - rk[1, 2]) / s, 0.25 * s, (rk[0, 1] + rk[1, 0]) / s, (rk[0, 2] + rk[2, 0]) / s
+        elif i == 2:
+            s = 2.0 * math.sqrt(max(1.0 + 2.0 * rk[1, 1] - tr[k], 0.0))
+            w, x, y, z = (rk[0, 2] - rk[2, 0]) / s, (rk[0, 1] + rk[1, 0]) / s, 0.25 * s, (rk[1, 2] + rk[2, 1]) / s
+        else:
+            s = 2.0 * math.sqrt(max(1.0 + 2.0 * rk[2, 2] - tr[k], 0.0))
+            w, x, y, z = (rk[1, 0] - rk[0, 1]) / s, (rk[0, 2] + rk[2, 0]) / s, (rk[1, 2] + rk[2, 1]) / s, 0.25 * s
+        qk = np.array([w, x, y, z])
+        qk /= np.linalg.norm(qk)
+        q[k] = qk if qk[0] >= 0 else -qk
+    pos[~ok] = np.nan
+    return pos, q
+
+
+@dataclass(frozen=True)
+class AuroraConfig:
+    """Which tracker port and which tool is which sensor.
+
+    Parameters
+    ----------
+    serial_port : str
+        Serial device of the Aurora System Control Unit, or ``"auto"`` to probe the ports.
+    tip_port_handle, base_port_handle : int
+        NDI port handles of the tip and base sensors (as listed by
+        ``NDITracker.get_tool_descriptions()``; wired Aurora tools are found automatically).
+    rom_files : tuple of str
+        Tool definition (.rom) files, for tools that carry no SROM of their own. Each must
+        exist; they are handed to the tracker as ``romfiles`` and recorded in ``run.json``.
+    rate_hz : float
+        How often the background thread asks for a frame (the Aurora measures at 40 Hz).
+    detect_timeout_s : float
+        How long :meth:`AuroraTracker.open` waits for both sensors to report a valid pose.
+    """
+
+    tip_port_handle: int
+    base_port_handle: int
+    serial_port: str = "auto"
+    rom_files: tuple[str, ...] = ()
+    rate_hz: float = 40.0
+    detect_timeout_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        if self.tip_port_handle == self.base_port_handle:
+            raise ConfigError(f"tracker: tip and base use the same port handle {self.tip_port_handle}")
+        if not 0 < self.rate_hz <= 1000:
+            raise ConfigError(f"tracker: rate_hz must be in (0, 1000], got {self.rate_hz}")
+        if not self.detect_timeout_s > 0:
+            raise ConfigError(f"tracker: detect_timeout_s must be positive, got {self.detect_timeout_s}")
+
+    @property
+    def handles(self) -> dict[str, int]:
+        """Sensor name (``tip``, ``base``) -> port handle."""
+        return {"tip": self.tip_port_handle, "base": self.base_port_handle}
+
+    def settings(self) -> dict:
+        """The ``NDITracker`` configuration dictionary."""
+        s: dict[str, Any] = {"tracker type": "aurora", "use quaternions": False}
+        if self.serial_port != "auto":
+            s["serial port"] = self.serial_port
+        if self.rom_files:
+            s["romfiles"] = list(self.rom_files)
+        return s
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str, base_dir: Path | None = None) -> AuroraConfig:
+        """Build from the ``[tracker]`` table of a rig TOML; relative ROM paths are relative to the file."""
+        unknown = sorted(set(d) - TRACKER_KEYS)
+        if unknown:
+            raise ConfigError(
+                f"{where} [tracker]: unknown key '{unknown[0]}' (known keys: {', '.join(sorted(TRACKER_KEYS))})"
+            )
+        for key in ("tip_port_handle", "base_port_handle"):
+            if key not in d:
+                raise ConfigError(
+                    f"{where} [tracker]: missing key '{key}' (the NDI port handle of that sensor, e.g. 0x0A)"
+                )
+        roms = []
+        for rom in d.get("rom_files", []):
+            path = Path(rom)
+            if base_dir is not None and not path.is_absolute():
+                path = base_dir / path
+            if not path.is_file():
+                raise ConfigError(f"{where} [tracker]: ROM file {path} does not exist")
+            roms.append(str(path))
+        try:
+            return cls(
+                tip_port_handle=int(d["tip_port_handle"]),
+                base_port_handle=int(d["base_port_handle"]),
+                serial_port=str(d.get("serial_port", "auto")),
+                rom_files=tuple(roms),
+                rate_hz=float(d.get("rate_hz", 40.0)),
+                detect_timeout_s=float(d.get("detect_timeout_s", 2.0)),
+            )
+        except ConfigError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(f"{where} [tracker]: {exc}") from None
+
+
+def default_tracker_factory(settings: dict) -> Any:
+    """Import ``scikit-surgerynditracker`` lazily and connect an ``NDITracker``.
+
+    Raises
+    ------
+    HardwareError
+        The package is not installed (with the command that installs it), or the
+        tracker cannot be reached.
+    """
+    try:
+        from sksurgerynditracker.nditracker import NDITracker
+    except ImportError as exc:
+        raise HardwareError(
+            f"the NDI Aurora backend needs scikit-surgerynditracker, which is not installed ({exc}): {INSTALL_HINT}"
+        ) from None
+    try:
+        return NDITracker(settings)
+    except (OSError, ValueError, KeyError) as exc:
+        port = settings.get("serial port", "any serial port (auto)")
+        msg = " ".join(str(exc).split())
+        raise HardwareError(
+            f"cannot connect to the NDI Aurora on {port}: {msg}; check the System Control Unit is on, "
+            "the USB/serial cable, and the port (Linux: 'dialout' group)"
+        ) from None
+
+
+def tracker_package_version() -> str:
+    """Installed ``scikit-surgerynditracker`` version, or ``"not installed"``."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("scikit-surgerynditracker")
+    except PackageNotFoundError:
+        return "not installed"
+
+
+def _frame_rows(frame, handles: dict[str, int], t_s: float) -> tuple[list[tuple], tuple]:
+    """Tracker-stream rows (one per sensor) and the frame numbers of one ``get_frame`` result."""
+    port_handles, _timestamps, frame_numbers, tracking, _quality = frame
+    index = {int(h): k for k, h in enumerate(port_handles)}
+    rows, numbers = [], []
+    for sensor in SENSORS:
+        k = index.get(handles[sensor])
+        if k is None:
+            rows.append((t_s, sensor, *([math.nan] * 7), False))
+            numbers.append(None)
+            continue
+        numbers.append(frame_numbers[k])
+        pos, quat = matrix_to_pose(np.asarray(tracking[k], dtype=float).reshape(4, 4))
+        valid = bool(np.isfinite(pos).all() and np.isfinite(quat).all())
+        rows.append((t_s, sensor, *pos[0].tolist(), *quat[0].tolist(), valid))
+    return rows, tuple(numbers)
+
+
+class AuroraTracker:
+    """The Aurora with its tip and base sensors, read in a background thread.
+
+    Parameters
+    ----------
+    config : AuroraConfig
+    tracker_factory : callable, optional
+        ``settings -> tracker`` with the ``NDITracker`` methods ``start_tracking``,
+        ``get_frame``, ``get_tool_descriptions``, ``stop_tracking`` and ``close``
+        (default: :func:`default_tracker_factory`; tests inject a fake).
+    """
+
+    def __init__(self, config: AuroraConfig, *, tracker_factory: Callable[[dict], Any] | None = None) -> None:
+        self.config = config
+        self._factory = tracker_factory or default_tracker_factory
+        self._tracker = None
+        self._tracking = False
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._rows: list[tuple] = []
+        self._error: BaseException | None = None
+        self._last_numbers: tuple | None = None
+        self.info: dict = {}
+
+    def open(self) -> None:
+        """Connect, start tracking and wait until both sensors report a valid pose.
+
+        Raises
+        ------
+        HardwareError
+            Package missing, tracker unreachable, a configured port handle absent, or a
+            sensor never seen inside the field volume within ``detect_timeout_s``.
+        """
+        self._tracker = self._factory(self.config.settings())
+        try:
+            handles_seen, descriptions = self._tracker.get_tool_descriptions()
+        except Exception as exc:  # noqa: BLE001 - any driver failure is a hardware problem here
+            raise HardwareError(f"NDI Aurora: cannot list the tools ({exc})") from None
+        seen = [int(h) for h in handles_seen]
+        self.info = {"port_handles": seen, "tool_descriptions": [str(d) for d in descriptions]}
+        for sensor, handle in self.config.handles.items():
+            if handle not in seen:
+                listed = ", ".join(f"{h} ({h:#04x})" for h in seen) or "none"
+                raise HardwareError(
+                    f"NDI Aurora: no tool on port handle {handle} ({handle:#04x}) for the {sensor} sensor "
+                    f"(tools seen: {listed}); check the sensor is plugged into the Sensor Interface Unit "
+                    f"and set tracker.{sensor}_port_handle"
+                )
+        try:
+            self._tracker.start_tracking()
+        except Exception as exc:  # noqa: BLE001
+            raise HardwareError(f"NDI Aurora: cannot start tracking ({exc})") from None
+        self._tracking = True
+        seen_valid = {s: False for s in SENSORS}
+        deadline = time.monotonic() + self.config.detect_timeout_s
+        while not all(seen_valid.values()):
+            rows, _ = _frame_rows(self._tracker.get_frame(), self.config.handles, 0.0)
+            for row in rows:
+                seen_valid[row[1]] = seen_valid[row[1]] or row[-1]
+            if all(seen_valid.values()):
+                break
+            if time.monotonic() > deadline:
+                missing = [f"{s} (port handle {self.config.handles[s]:#04x})" for s, ok in seen_valid.items() if not ok]
+                raise HardwareError(
+                    f"NDI Aurora: {', '.join(missing)} reported no valid pose within "
+                    f"{self.config.detect_timeout_s:g} s; check the sensor lies inside the field generator's "
+                    "measurement volume, away from metal"
+                )
+            time.sleep(1.0 / self.config.rate_hz)
+
+    def start(self, clock: Callable[[], float]) -> None:
+        """Start the reader thread; ``clock()`` returns the run's monotonic time in s."""
+        if self._thread is not None:
+            return
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, args=(clock,), name="endocal-aurora", daemon=True)
+        self._thread.start()
+
+    def _run(self, clock: Callable[[], float]) -> None:
+        period = 1.0 / self.config.rate_hz
+        next_t = time.monotonic()
+        try:
+            while not self._stop.is_set():
+                t_before = clock()
+                frame = self._tracker.get_frame()
+                t_s = 0.5 * (t_before + clock())
+                rows, numbers = _frame_rows(frame, self.config.handles, t_s)
+                if numbers != self._last_numbers or None in numbers:
+                    self._last_numbers = numbers
+                    with self._lock:
+                        self._rows.extend(rows)
+                next_t += period
+                delay = next_t - time.monotonic()
+                if delay < 0:  # fell behind (slow serial): re-anchor instead of bursting
+                    next_t = time.monotonic()
+                    delay = 0.0
+                self._stop.wait(delay)
+        except BaseException as exc:  # noqa: BLE001 - handed to the main thread by check()
+            self._error = exc
+
+    def check(self) -> None:
+        """Raise :class:`HardwareError` if the reader thread died."""
+        if self._error is not None:
+            raise HardwareError(f"NDI Aurora: reading frames failed ({self._error}); check the tracker cable and power")
+
+    def drain(self) -> dict[str, np.ndarray]:
+        """Every frame received since the last drain, as tracker-stream columns."""
+        with self._lock:
+            rows, self._rows = self._rows, []
+        return rows_to_columns(rows)
+
+    def close(self) -> None:
+        """Stop the thread, stop tracking, close the tracker. Idempotent."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        tracker, self._tracker = self._tracker, None
+        if tracker is None:
+            return
+        try:
+            if self._tracking:
+                tracker.stop_tracking()
+        finally:
+            self._tracking = False
+            tracker.close()
+
+    def describe(self) -> dict:
+        """Configuration, tools seen at open and package version, for ``run.json``."""
+        return {
+            "serial_port": self.config.serial_port,
+            "port_handles": {s: h for s, h in self.config.handles.items()},
+            "rom_files": list(self.config.rom_files),
+            "rate_hz": self.config.rate_hz,
+            "tools_seen": dict(self.info),
+            "scikit-surgerynditracker": tracker_package_version(),
+        }
+
+
+def rows_to_columns(rows: list[tuple]) -> dict[str, np.ndarray]:
+    """Tracker rows ``(t_s, sensor, x, y, z, qw, qx, qy, qz, valid)`` -> column arrays."""
+    if not rows:
+        cols: dict[str, np.ndarray] = {c: np.empty(0, dtype=float) for c in TRACKER_COLUMNS}
+        cols["sensor"] = np.empty(0, dtype=object)
+        cols["valid"] = np.empty(0, dtype=bool)
+        return cols
+    by_col = dict(zip(TRACKER_COLUMNS, zip(*rows)))
+    cols = {c: np.asarray(by_col[c], dtype=float) for c in TRACKER_COLUMNS if c not in ("sensor", "valid")}
+    cols["sensor"] = np.asarray(by_col["sensor"], dtype=object)
+    cols["valid"] = np.asarray(by_col["valid"], dtype=bool)
+    return {c: cols[c] for c in TRACKER_COLUMNS}
