@@ -523,10 +523,14 @@ class KnobServos:
         Raises
         ------
         HardwareError
-            Naming every servo that could not be switched off.
+            Naming every servo that could not be switched off, when torque had been
+            switched on by :meth:`torque_on`.
         """
         if self._port is None or self._ph is None or not self._is_open:
             return
+        # Only a failure to switch off a torque we switched on is an emergency; before torque_on
+        # (e.g. a servo that never answered its ping) there is nothing to switch off.
+        must_succeed = self._torque_on
         # An interrupt (Ctrl-C, SIGTERM) inside a transaction leaves the SDK's port marked busy
         # and half a packet in the buffers; clear both so the torque-off packets go out.
         self._port.is_using = False
@@ -550,7 +554,7 @@ class KnobServos:
             else:
                 failed.append(f"ID {motor.id} ('{motor.axis}'): {last}")
         self._torque_on = False
-        if failed:
+        if failed and must_succeed:
             raise HardwareError(
                 f"could not turn torque off on {self.config.port} ({'; '.join(failed)}): CUT THE SERVO POWER NOW"
             )
