@@ -772,3 +772,48 @@ def test_config_must_fit_probe_and_register_range(tmp_path):
     path.write_text(path.read_text().replace("zero_ticks = 2048\ndirection = 1", "zero_ticks = 300\ndirection = 1"))
     with pytest.raises(ConfigError, match=r"knob 'ap' limits \(-60\.0, 80\.0\) deg map to ticks -383\.\.1210"):
         HardwareBackend(HardwareConfig.from_toml(path), TEE)
+
+
+# --- end to end: a hardware run folder through endocal.excite ------------------------------
+class RotatedBaseTracker(FakeTracker):
+    """Base sensor turned 90 deg about z at (10, 0, 0) mm; tip at (1, 2, 60) mm in the base frame."""
+
+    def get_frame(self):
+        handles, stamps, numbers, _, quality = super().get_frame()
+        rz90 = np.array([[0, -1, 0], [1, 0, 0], [0, 0, 1]], float)
+        base_p = np.array([10.0, 0.0, 0.0])
+        tip_p = base_p + rz90 @ np.array([1.0, 2.0, 60.0])
+        return handles, stamps, numbers, [transform(rz90, tip_p), transform(rz90, base_p)], quality
+
+
+def test_hardware_run_folder_through_run_excitation(tmp_path):
+    from endocal.excite import run_excitation
+    from endocal.protocols.protocol import Trajectory
+    from endocal.runs.aligned import read_stream
+
+    config = HardwareConfig.from_toml(rig_toml(tmp_path))
+    bus = FakeBus({1: FakeServo(), 2: FakeServo()})
+    backend = HardwareBackend(config, TEE, port_handler=bus, packet_handler=bus,
+                              tracker_factory=lambda s: RotatedBaseTracker(s))
+    fs = 100.0
+    t = np.arange(31) / fs
+    goal = {d: np.zeros(t.size) for d in TEE.dofs}
+    goal["ap"] = 3.0 * np.sin(2 * np.pi * 2.0 * t)  # peak speed 37.7 deg/s < 100 deg/s
+    traj = Trajectory(t_s=t, goal=goal, sample_rate_hz=fs, protocol="test")
+    result = run_excitation(traj, backend, TEE, tmp_path / "run", protocol_info={"name": "test"}, seed=0)
+    assert result.status == "complete" and result.motor_rows == t.size
+    assert bus.torques() == {1: 0, 2: 0} and not bus.is_open
+    meta = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert meta["backend"]["name"] == "hardware" and meta["backend"]["dynamixel"]["servos"]["ap"]["model_number"] == 1020
+    motor = read_stream(tmp_path / "run", "motor")
+    np.testing.assert_allclose(motor["ap_goal_deg"], goal["ap"])
+    aligned = pd_read(tmp_path / "run" / "aligned.parquet")
+    # thesis eq. 1 on tip_in_base = (1, 2, 60) mm: atan2(2, 60) and atan2(1, 60), whatever the base's pose
+    np.testing.assert_allclose(aligned["ap_meas_deg"], math.degrees(math.atan2(2.0, 60.0)), atol=1e-9)
+    np.testing.assert_allclose(aligned["ml_meas_deg"], math.degrees(math.atan2(1.0, 60.0)), atol=1e-9)
+
+
+def pd_read(path):
+    import pandas as pd
+
+    return pd.read_parquet(path)
