@@ -969,7 +969,7 @@ def read_protocol_file(path: str | Path) -> Protocol:
     spec = _spec(data["signal"], where)
     params = data.get("params", {})
     if not isinstance(params, dict):
-        raise ProtocolError(f"{where}: 'params' must be a table ([params])")
+        raise ProtocolError(f"{where}: 'params' must be a table (a section headed params)")
     return Protocol(
         name=path.stem,
         description=" ".join(data["description"].split()),
