@@ -197,6 +197,15 @@ class FakeBus:
         start, n = self._sync
         return list(self.servos[dxl_id].mem[start:start + n]), COMM_SUCCESS, 0
 
+    def fastSyncReadRx(self, port, dxl_id, length):
+        # one status packet for all servos: per servo [error, id, data..., crc_l, crc_h]
+        start, n = self._sync
+        raw = []
+        for servo_id, servo in self.servos.items():
+            raw += [0, servo_id, *servo.mem[start:start + n], 0, 0]
+        assert len(raw) == length
+        return raw, COMM_SUCCESS, 0
+
     # test helpers
     def torques(self):
         return {i: s.torque for i, s in self.servos.items()}
@@ -326,8 +335,12 @@ def test_velocity_and_current_units():
     assert dxl.to_signed(4095, 4) == 4095
 
 
-def test_read_state_decodes_signed_registers_through_sync_read(tmp_path):
-    config = HardwareConfig.from_toml(rig_toml(tmp_path)).dynamixel
+@pytest.mark.parametrize("fast", [False, True])
+def test_read_state_decodes_signed_registers_through_sync_read(tmp_path, fast):
+    path = rig_toml(tmp_path)
+    path.write_text(path.read_text().replace("baudrate = 1000000", f"baudrate = 1000000\nfast_sync_read = {str(fast).lower()}"))
+    config = HardwareConfig.from_toml(path).dynamixel
+    assert config.fast_sync_read is fast
     servos = {1: FakeServo(), 2: FakeServo()}
     bus = FakeBus(servos)
     knobs = dxl.KnobServos(config, port_handler=bus, packet_handler=bus)
@@ -355,6 +368,19 @@ def test_limit_registers_hold_the_tighter_limits_in_ticks(tmp_path):
     assert bus.servos[2].get(52, 4) == 1252 and bus.servos[2].get(48, 4) == 2844
     assert backend.limits["ap"] == (-60.0, 80.0)
     assert backend.max_speed["ap"] == 100.0 and backend.max_speed["ml"] == TEE.max_knob_speed_dps
+
+
+def test_extended_position_mode_sets_the_mode_and_leaves_limit_registers_alone(tmp_path):
+    path = rig_toml(tmp_path)
+    path.write_text(path.read_text().replace("baudrate = 1000000", 'baudrate = 1000000\noperating_mode = "extended_position"'))
+    bus = FakeBus({1: FakeServo(), 2: FakeServo()})
+    backend = HardwareBackend(HardwareConfig.from_toml(path), TEE, port_handler=bus, packet_handler=bus,
+                              tracker_factory=lambda s: FakeTracker(s))
+    with backend:
+        backend.execute(*sine_chunk())
+    assert all(s.get(11, 1) == 4 for s in bus.servos.values())  # Operating Mode 4 = extended position
+    assert not [e for e in bus.log if e[2] in (48, 52)]  # the servo ignores them in this mode
+    assert "position_limit_ticks" not in backend.describe()["dynamixel"]["servos"]["ap"]
 
 
 # --- safety: limits refused before any write ----------------------------------------------

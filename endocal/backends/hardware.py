@@ -797,11 +797,10 @@ class HardwareBackend:
 
     def _on_signal(self, signum: int, frame: Any) -> None:
         # Torque off right here (the interrupted bus transaction is abandoned, close() clears it),
-        # then unwind like sys.exit so the caller's finally blocks still flush the run.
-        try:
-            self.close()
-        finally:
-            raise SystemExit(128 + signum)
+        # then unwind like sys.exit so the caller's finally blocks still flush the run. If torque
+        # could not be switched off, that HardwareError ("cut the power") is what propagates.
+        self.close()
+        raise SystemExit(128 + signum)
 
     # -- record --------------------------------------------------------------------------
     def describe(self) -> dict:
