@@ -1,0 +1,58 @@
+"""The simulator as a backend: :class:`SimBackend` wraps :class:`endocal.sim.Simulator`.
+
+It runs as fast as it can (``realtime = False``); pacing to the wall clock is the caller's job.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from endocal.backends.base import StreamChunk
+from endocal.probe import ProbeConfig
+from endocal.sim import SimConfig, Simulator
+
+
+class SimBackend:
+    """Backend contract over the physics simulator.
+
+    Parameters
+    ----------
+    config : SimConfig
+        Simulator configuration (``SimConfig.default()`` when None).
+    probe : ProbeConfig
+    seed : int
+        Seed of every random draw; the same seed and goals give the same streams.
+    """
+
+    name = "sim"
+    realtime = False
+
+    def __init__(self, config: SimConfig | None, probe: ProbeConfig, seed: int = 0) -> None:
+        self.config = config if config is not None else SimConfig.default()
+        self.probe = probe
+        self.seed = seed
+        self._sim: Simulator | None = None
+        Simulator(self.config, probe, seed)  # validate now (contact axis, seed) rather than at open()
+
+    def open(self) -> None:
+        """Start a fresh simulation (neutral probe, clock and random streams at their start)."""
+        self._sim = Simulator(self.config, self.probe, self.seed)
+
+    def execute(self, t_s: np.ndarray, goal: dict[str, np.ndarray]) -> StreamChunk:
+        """Simulate one chunk; see :meth:`endocal.sim.Simulator.execute`. Opens on first use."""
+        if self._sim is None:
+            self.open()
+        return self._sim.execute(t_s, goal)
+
+    def close(self) -> None:
+        """Release the simulation; safe to call more than once."""
+        self._sim = None
+
+    def describe(self) -> dict:
+        """What ``run.json`` records: config (every parameter), seed, config hash, effects on."""
+        return {
+            "config": self.config.to_dict(),
+            "config_hash": self.config.config_hash(),
+            "seed": self.seed,
+            "effects_enabled": self.config.effects_enabled(),
+        }

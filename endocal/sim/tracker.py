@@ -1,0 +1,130 @@
+"""Simulated EM tracker: tip and base sensor frames with noise, latency, slip and dropouts.
+
+Frames ``k = 0, 1, 2, ...`` are stamped on the motor clock at ``t_k = k / rate_hz``; frame
+``k`` shows the probe as it was at ``t_k - latency`` (interpolated between motor ticks).
+Poses compose as
+
+    base2tracker = mount2tracker * probe_motion(translation along z, rotation about z)
+    tip2tracker  = base2tracker * tip2base(bend)            (constant curvature)
+
+The base sensor reports ``base2tracker * slip`` where ``slip`` is the ``[drift]`` sensor slip
+(a rotation growing linearly in time), so the measured eq.-1 angles drift by the configured
+rates while the true bend does not.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from endocal.kinematics import tip_pose_in_base
+from endocal.sim.config import TrackerConfig
+
+
+def frame_indices(k_next: int, t_end_s: float, rate_hz: float) -> np.ndarray:
+    """Frame numbers ``k >= k_next`` with ``k / rate_hz <= t_end_s`` (exact float comparison)."""
+    k_max = int(np.floor(t_end_s * rate_hz))
+    while (k_max + 1) / rate_hz <= t_end_s:
+        k_max += 1
+    while k_max >= k_next and k_max / rate_hz > t_end_s:
+        k_max -= 1
+    return np.arange(k_next, k_max + 1, dtype=np.int64)
+
+
+def slip_rotation(t_s: np.ndarray, drift_deg_per_min: tuple[float, float]) -> Rotation:
+    """Base-sensor slip at times ``t_s`` that shifts the measured eq.-1 angles by ``rate * t``.
+
+    A rotation of the tip-in-base vector by ``-delta_1`` about ``x`` adds ``delta_1`` to the
+    first axis' angle ``atan2(y, z)``; one by ``+delta_2`` about ``y`` adds ``delta_2`` to the
+    second's ``atan2(x, z)``. The sensor reports ``base2tracker * slip``, so the measured
+    tip-in-base is ``slip^-1 tip_in_base`` and ``slip^-1 = Rx(-delta_1) Ry(delta_2)``.
+    """
+    minutes = np.asarray(t_s, float) / 60.0
+    d1 = np.radians(drift_deg_per_min[0] * minutes)
+    d2 = np.radians(drift_deg_per_min[1] * minutes)
+    zeros = np.zeros_like(d1)
+    slip_inv = Rotation.from_rotvec(np.column_stack([-d1, zeros, zeros])) * Rotation.from_rotvec(
+        np.column_stack([zeros, d2, zeros])
+    )
+    return slip_inv.inv()
+
+
+def sensor_frames(
+    t_frame_s: np.ndarray,
+    state: np.ndarray,
+    length_mm: float,
+    cfg: TrackerConfig,
+    drift_deg_per_min: tuple[float, float] | None,
+    rng_pos: np.random.Generator,
+    rng_rot: np.random.Generator,
+    rng_valid: np.random.Generator,
+    t_source_s: np.ndarray,
+) -> dict[str, np.ndarray]:
+    """Tracker rows (long format, tip then base per frame) for frames at ``t_frame_s``.
+
+    Parameters
+    ----------
+    t_frame_s : (m,) array
+        Frame stamps on the motor clock (s).
+    state : (m, 4) array
+        ``bend_x_rad, bend_y_rad, translation_mm, rotation_rad`` at the frames' source times.
+    length_mm : float
+        Bending length.
+    cfg : TrackerConfig
+    drift_deg_per_min : pair of float or None
+        Sensor slip rates (``[drift]``), None when off.
+    rng_pos, rng_rot, rng_valid : numpy Generators
+        Separate streams so that chunking never changes which draw goes where.
+    t_source_s : (m,) array
+        Times the frames show (``t_frame_s - latency``), for the slip.
+
+    Returns
+    -------
+    dict of (2m,) arrays
+        ``t_s, sensor, x_mm, y_mm, z_mm, qw, qx, qy, qz, valid``; invalid frames carry NaN.
+    """
+    m = t_frame_s.size
+    if m == 0:
+        return empty_frames()
+    # Draw first, always the same amount per frame, so the streams stay aligned across chunks.
+    pos_noise = rng_pos.standard_normal((m, 2, 3)) * (cfg.noise_mm / np.sqrt(3.0))
+    rot_noise = rng_rot.standard_normal((m, 2, 3)) * (np.radians(cfg.orientation_noise_deg) / np.sqrt(3.0))
+    valid = rng_valid.random((m, 2)) >= cfg.invalid_rate
+
+    tip_in_base, tip2base = tip_pose_in_base(state[:, 0], state[:, 1], length_mm)
+    mount = Rotation.from_euler("xyz", cfg.mount_rpy_deg, degrees=True)
+    spin = Rotation.from_rotvec(np.column_stack([np.zeros(m), np.zeros(m), state[:, 3]]))
+    base2tracker = mount * spin
+    base_mm = np.asarray(cfg.mount_xyz_mm, float) + mount.apply(np.column_stack([np.zeros(m), np.zeros(m), state[:, 2]]))
+    tip_mm = base_mm + base2tracker.apply(tip_in_base)
+    tip2tracker = base2tracker * tip2base
+    base_reported = base2tracker if drift_deg_per_min is None else base2tracker * slip_rotation(t_source_s, drift_deg_per_min)
+
+    pos = np.stack([tip_mm, base_mm], axis=1) + pos_noise  # (m, 2, 3)
+    quat = np.empty((m, 2, 4))
+    quat[:, 0] = (Rotation.from_rotvec(rot_noise[:, 0]) * tip2tracker).as_quat(scalar_first=True)
+    quat[:, 1] = (Rotation.from_rotvec(rot_noise[:, 1]) * base_reported).as_quat(scalar_first=True)
+    pos[~valid] = np.nan
+    quat[~valid] = np.nan
+    pos = pos.reshape(2 * m, 3)
+    quat = quat.reshape(2 * m, 4)
+    return {
+        "t_s": np.repeat(np.asarray(t_frame_s, float), 2),
+        "sensor": np.tile(np.array(["tip", "base"], dtype=object), m),
+        "x_mm": pos[:, 0],
+        "y_mm": pos[:, 1],
+        "z_mm": pos[:, 2],
+        "qw": quat[:, 0],
+        "qx": quat[:, 1],
+        "qy": quat[:, 2],
+        "qz": quat[:, 3],
+        "valid": valid.reshape(2 * m),
+    }
+
+
+def empty_frames() -> dict[str, np.ndarray]:
+    """A tracker chunk with no rows (a chunk shorter than one frame period)."""
+    out = {k: np.empty(0) for k in ("t_s", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz")}
+    out["sensor"] = np.empty(0, dtype=object)
+    out["valid"] = np.empty(0, dtype=bool)
+    return {k: out[k] for k in ("t_s", "sensor", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz", "valid")}
