@@ -1,0 +1,353 @@
+"""Compiled recursions shared by the hysteresis models (numba, ``cache=True``).
+
+Every kernel works on one concatenated sample axis with ``run_starts`` (int64,
+first entry 0): operator states restart at the first sample of each run, so
+several runs are fitted and predicted together without leaking state between them.
+Angles are in degrees (or in envelope units where a docstring says so).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def play_bank_forward(x, thresholds, weights, run_starts):
+    """Weighted sum of play operators (duodenoscope paper, eqs. 5 and 7).
+
+    ``Phi_i(t_0) = max(x_0 - r_i, min(x_0 + r_i, 0))`` and
+    ``Phi_i(t_k) = max(x_k - r_i, min(x_k + r_i, Phi_i(t_{k-1})))``;
+    output ``sum_i w_i Phi_i``. ``x`` is the (enveloped) input, shape (n,).
+    """
+    n = x.shape[0]
+    m = thresholds.shape[0]
+    y = np.empty(n)
+    state = np.zeros(m)
+    n_runs = run_starts.shape[0]
+    for q in range(n_runs):
+        a = run_starts[q]
+        b = run_starts[q + 1] if q + 1 < n_runs else n
+        for i in range(m):
+            state[i] = 0.0
+        for k in range(a, b):
+            xk = x[k]
+            acc = 0.0
+            for i in range(m):
+                lo = xk - thresholds[i]
+                hi = xk + thresholds[i]
+                s = state[i]
+                if s < lo:
+                    s = lo
+                elif s > hi:
+                    s = hi
+                state[i] = s
+                acc += weights[i] * s
+            y[k] = acc
+    return y
+
+
+@njit(cache=True)
+def play_bank_states(x, thresholds, run_starts):
+    """Every play operator's output, shape (n, m): the regressors of a PI with free weights (eq. 5)."""
+    n = x.shape[0]
+    m = thresholds.shape[0]
+    out = np.empty((n, m))
+    state = np.zeros(m)
+    n_runs = run_starts.shape[0]
+    for q in range(n_runs):
+        a = run_starts[q]
+        b = run_starts[q + 1] if q + 1 < n_runs else n
+        for i in range(m):
+            state[i] = 0.0
+        for k in range(a, b):
+            xk = x[k]
+            for i in range(m):
+                s = state[i]
+                if s < xk - thresholds[i]:
+                    s = xk - thresholds[i]
+                elif s > xk + thresholds[i]:
+                    s = xk + thresholds[i]
+                state[i] = s
+                out[k, i] = s
+    return out
+
+
+@njit(cache=True)
+def play_bank_step(xk, thresholds, weights, state):
+    """One sample of :func:`play_bank_forward` on a caller-held ``state`` (updated in place)."""
+    acc = 0.0
+    for i in range(thresholds.shape[0]):
+        s = state[i]
+        if s < xk - thresholds[i]:
+            s = xk - thresholds[i]
+        elif s > xk + thresholds[i]:
+            s = xk + thresholds[i]
+        state[i] = s
+        acc += weights[i] * s
+    return acc
+
+
+@njit(cache=True)
+def play_single(x, width, x0_state, run_starts):
+    """One play (backlash) operator of half-width ``width`` with initial state ``x0_state`` per run."""
+    n = x.shape[0]
+    y = np.empty(n)
+    n_runs = run_starts.shape[0]
+    for q in range(n_runs):
+        a = run_starts[q]
+        b = run_starts[q + 1] if q + 1 < n_runs else n
+        s = x0_state[q]
+        for k in range(a, b):
+            if s < x[k] - width:
+                s = x[k] - width
+            elif s > x[k] + width:
+                s = x[k] + width
+            y[k] = s
+    return y
+
+
+@njit(cache=True)
+def backlash_inverse(v, width, run_starts):
+    """Right inverse of :func:`play_single` started at the run's first value: ``u = v + width*direction``.
+
+    The direction is that of the last non-zero change of ``v``; before any motion the
+    command equals ``v`` (the play's state starts at the first input).
+    """
+    n = v.shape[0]
+    u = np.empty(n)
+    n_runs = run_starts.shape[0]
+    for q in range(n_runs):
+        a = run_starts[q]
+        b = run_starts[q + 1] if q + 1 < n_runs else n
+        d = 0.0
+        for k in range(a, b):
+            if k > a:
+                dv = v[k] - v[k - 1]
+                if dv > 0.0:
+                    d = 1.0
+                elif dv < 0.0:
+                    d = -1.0
+            u[k] = v[k] + width * d
+    return u
+
+
+@njit(cache=True)
+def bspline_eval(t, c, deg, x):
+    """Value of the B-spline (knots ``t``, coefficients ``c``, degree ``deg``) at ``x``.
+
+    Beyond the base interval the end polynomial pieces are extended (as scipy's
+    ``BSpline(extrapolate=True)``). de Boor's algorithm.
+    """
+    nc = c.shape[0]
+    # interval index ell with t[ell] <= x < t[ell+1], restricted to deg <= ell <= nc-1
+    lo = deg
+    hi = nc - 1
+    if x <= t[lo]:
+        ell = lo
+    elif x >= t[hi]:
+        ell = hi
+    else:
+        # binary search
+        a = lo
+        b = hi
+        while b - a > 1:
+            mid = (a + b) // 2
+            if t[mid] <= x:
+                a = mid
+            else:
+                b = mid
+        ell = a
+    d = np.empty(deg + 1)
+    for j in range(deg + 1):
+        d[j] = c[ell - deg + j]
+    for r in range(1, deg + 1):
+        for j in range(deg, r - 1, -1):
+            left = t[ell - deg + j]
+            right = t[ell + 1 + j - r]
+            den = right - left
+            alpha = 0.0 if den == 0.0 else (x - left) / den
+            d[j] = (1.0 - alpha) * d[j - 1] + alpha * d[j]
+    return d[deg]
+
+
+@njit(cache=True)
+def gplay_forward(v, lower, upper, slope, run_starts):
+    """Generalised play: ``y_k = clip(y_{k-1} + slope*(v_k - v_{k-1}), lower_k, upper_k)``.
+
+    ``lower``/``upper`` are the two branches evaluated at ``v`` (the ascending and
+    descending curves); each run starts on their mid-line. This is the
+    direction-dependent model with a backlash transition of slope ``slope`` from
+    the reversal point to the other branch (thesis, Lee et al.).
+    """
+    n = v.shape[0]
+    y = np.empty(n)
+    n_runs = run_starts.shape[0]
+    for q in range(n_runs):
+        a = run_starts[q]
+        b = run_starts[q + 1] if q + 1 < n_runs else n
+        lo = min(lower[a], upper[a])
+        hi = max(lower[a], upper[a])
+        yk = 0.5 * (lo + hi)
+        y[a] = yk
+        for k in range(a + 1, b):
+            lo = min(lower[k], upper[k])
+            hi = max(lower[k], upper[k])
+            yk = yk + slope * (v[k] - v[k - 1])
+            if yk < lo:
+                yk = lo
+            elif yk > hi:
+                yk = hi
+            y[k] = yk
+    return y
+
+
+@njit(cache=True)
+def _gplay_g(u, u_prev, y_prev, slope, t_up, c_up, t_dn, c_dn, deg):
+    a = bspline_eval(t_up, c_up, deg, u)
+    b = bspline_eval(t_dn, c_dn, deg, u)
+    lo = min(a, b)
+    hi = max(a, b)
+    y = y_prev + slope * (u - u_prev)
+    if y < lo:
+        return lo
+    if y > hi:
+        return hi
+    return y
+
+
+@njit(cache=True)
+def gplay_inverse_step(target, u_prev, y_prev, slope, t_up, c_up, t_dn, c_dn, deg, u_min, u_max):
+    """Command ``u`` whose generalised-play output from state (``u_prev``, ``y_prev``) is ``target``.
+
+    The step map is non-decreasing in ``u``, so bisection is exact to the tolerance;
+    among equal outputs the command closest to ``u_prev`` is returned (no needless
+    motion inside the backlash band). Unreachable targets give the nearest bound.
+    Returns ``(u, y)``.
+    """
+    g0 = _gplay_g(u_prev, u_prev, y_prev, slope, t_up, c_up, t_dn, c_dn, deg)
+    if g0 == target:
+        return u_prev, g0
+    if target > g0:
+        a = u_prev
+        b = max(u_max, u_prev)
+        gb = _gplay_g(b, u_prev, y_prev, slope, t_up, c_up, t_dn, c_dn, deg)
+        if gb <= target:
+            return b, gb
+        # smallest u in [a, b] with g(u) >= target
+        for _ in range(80):
+            mid = 0.5 * (a + b)
+            if mid == a or mid == b:
+                break
+            if _gplay_g(mid, u_prev, y_prev, slope, t_up, c_up, t_dn, c_dn, deg) >= target:
+                b = mid
+            else:
+                a = mid
+        u = b
+    else:
+        a = min(u_min, u_prev)
+        b = u_prev
+        ga = _gplay_g(a, u_prev, y_prev, slope, t_up, c_up, t_dn, c_dn, deg)
+        if ga >= target:
+            return a, ga
+        # largest u in [a, b] with g(u) <= target
+        for _ in range(80):
+            mid = 0.5 * (a + b)
+            if mid == a or mid == b:
+                break
+            if _gplay_g(mid, u_prev, y_prev, slope, t_up, c_up, t_dn, c_dn, deg) <= target:
+                a = mid
+            else:
+                b = mid
+        u = a
+    return u, _gplay_g(u, u_prev, y_prev, slope, t_up, c_up, t_dn, c_dn, deg)
+
+
+@njit(cache=True)
+def gplay_midline_inverse(target, t_up, c_up, t_dn, c_dn, deg, u_min, u_max):
+    """Command on the branches' mid-line (where a run starts) giving ``target``; returns ``(u, y)``."""
+    lo_u = u_min
+    hi_u = u_max
+    for _ in range(200):
+        mid = 0.5 * (lo_u + hi_u)
+        if mid == lo_u or mid == hi_u:
+            break
+        m = 0.5 * (bspline_eval(t_up, c_up, deg, mid) + bspline_eval(t_dn, c_dn, deg, mid))
+        if m < target:
+            lo_u = mid
+        else:
+            hi_u = mid
+    uk = 0.5 * (lo_u + hi_u)
+    return uk, 0.5 * (bspline_eval(t_up, c_up, deg, uk) + bspline_eval(t_dn, c_dn, deg, uk))
+
+
+@njit(cache=True)
+def gplay_inverse(y, slope, t_up, c_up, t_dn, c_dn, deg, u_min, u_max, run_starts):
+    """Numerical inverse of :func:`gplay_forward` sample by sample (bisection), per run.
+
+    The first sample of a run is inverted on the mid-line (where the forward model
+    starts); later samples with :func:`gplay_inverse_step`.
+    """
+    n = y.shape[0]
+    u = np.empty(n)
+    n_runs = run_starts.shape[0]
+    for q in range(n_runs):
+        a = run_starts[q]
+        b = run_starts[q + 1] if q + 1 < n_runs else n
+        uk, yk = gplay_midline_inverse(y[a], t_up, c_up, t_dn, c_dn, deg, u_min, u_max)
+        u[a] = uk
+        for k in range(a + 1, b):
+            uk, yk = gplay_inverse_step(y[k], uk, yk, slope, t_up, c_up, t_dn, c_dn, deg, u_min, u_max)
+            u[k] = uk
+    return u
+
+
+@njit(cache=True)
+def lowpass_first_order(x, t, tau, run_starts):
+    """First-order low-pass ``tau*dz/dt = x - z`` (exact for piecewise-constant input), z=x at each run start."""
+    n = x.shape[0]
+    z = np.empty(n)
+    n_runs = run_starts.shape[0]
+    for q in range(n_runs):
+        a = run_starts[q]
+        b = run_starts[q + 1] if q + 1 < n_runs else n
+        zk = x[a]
+        z[a] = zk
+        for k in range(a + 1, b):
+            alpha = np.exp(-(t[k] - t[k - 1]) / tau) if tau > 0.0 else 0.0
+            zk = alpha * zk + (1.0 - alpha) * x[k - 1]
+            z[k] = zk
+    return z
+
+
+@njit(cache=True)
+def count_reversals(u, tol):
+    """Direction reversals of ``u`` that travel back at least ``tol`` from the last extreme."""
+    direction = 0
+    anchor = u[0]
+    extreme = u[0]
+    total = 0
+    for k in range(1, u.shape[0]):
+        x = u[k]
+        if direction == 0:
+            if x >= anchor + tol:
+                direction = 1
+                extreme = x
+            elif x <= anchor - tol:
+                direction = -1
+                extreme = x
+        elif direction == 1:
+            if x > extreme:
+                extreme = x
+            elif x <= extreme - tol:
+                direction = -1
+                extreme = x
+                total += 1
+        else:
+            if x < extreme:
+                extreme = x
+            elif x >= extreme + tol:
+                direction = 1
+                extreme = x
+                total += 1
+    return total

@@ -1,0 +1,597 @@
+"""The estimator every hysteresis model shares: fit, predict, inverse, print, save.
+
+A model is a *base* (the direction-dependent hysteresis: :mod:`~endocal.models.linear`,
+:mod:`~endocal.models.bspline`, :mod:`~endocal.models.pi`) plus *effect terms*
+(:mod:`endocal.models.effects`)::
+
+    u = E_in(cmd)            input effects, in order (delay, rate, deadzone, envelope)
+    y = base(u) + sum E_out  output effects (drift, coupling, creep, load)
+
+Contract (scikit-learn / lmfit style): ``__init__`` only stores its arguments;
+``fit`` returns ``self`` and sets the trailing-underscore attributes (``params_``,
+``stderr_``, ``correlation_``, ``fit_report_``, ``structure_`` ...); ``predict`` and
+``inverse`` refuse an unfitted model. Fitting is :func:`scipy.optimize.least_squares`
+(trust-region reflective with bounds) on all free parameters of the base and the
+effects jointly; standard errors come from the Jacobian at the optimum.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+import warnings
+from abc import ABC, abstractmethod
+from dataclasses import asdict, dataclass
+from typing import ClassVar
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from endocal.errors import ModelError
+from endocal.models.data import HysteresisData, as_data
+from endocal.models.effects import resolve_effects
+from endocal.models.effects.base import Effect, InputEffect, OutputEffect
+from endocal.models.params import Parameter
+
+OUT_OF_RANGE_CHOICES = ("error", "clamp")
+
+
+class OutOfRangeWarning(UserWarning):
+    """Commands beyond the fitted range were clamped (``out_of_range="clamp"``)."""
+
+
+@dataclass
+class FitReport:
+    """How the least-squares fit went.
+
+    Attributes
+    ----------
+    success : bool
+        scipy's convergence flag.
+    status : int
+        scipy's status code (``least_squares``: 1-4 converged, 0 max evaluations).
+    message : str
+        Why it stopped.
+    nfev, njev : int
+        Residual and Jacobian evaluations (iterations of the trust-region method).
+    cost : float
+        Half the sum of squared residuals (deg²).
+    rmse_deg : float
+        Root-mean-square residual at the optimum.
+    n_samples, n_runs, n_free : int
+        Samples, runs and free parameters in the fit.
+    rank_deficient : bool
+        The Jacobian was (numerically) singular: some parameters are not identified by
+        the data, their standard errors are infinite.
+    method : str
+        Optimiser used.
+    """
+
+    success: bool
+    status: int
+    message: str
+    nfev: int
+    njev: int
+    cost: float
+    rmse_deg: float
+    n_samples: int
+    n_runs: int
+    n_free: int
+    rank_deficient: bool
+    method: str = "trf"
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def _split_params(names: list[str], values, owners: dict[str, tuple[object, str]]) -> dict:
+    """Group full-named values by owner (``"base"`` or an effect) with short names."""
+    out: dict = {}
+    for n, v in zip(names, values):
+        owner, short = owners[n]
+        out.setdefault(id(owner), {})[short] = float(v)
+    return out
+
+
+class HysteresisModel(ABC):
+    """Common machinery of the hysteresis models (not used directly).
+
+    Parameters (shared by every model, after the model's own settings)
+    ----------
+    effects : sequence of str or Effect, optional
+        Effect terms composed onto the base (``"envelope"``, ``"load:sheath_wrap_deg"``,
+        or :class:`~endocal.models.effects.base.Effect` instances).
+    fixed : dict of str to float, optional
+        Parameters held at the given values during the fit (lmfit's ``vary=False``).
+        When None, the model fixes only what is needed to make the parameters
+        identifiable (e.g. the envelope's scale, see ``fixed_``).
+    axis : str, optional
+        Name of the bending axis (``ap``, ``ml``, ``ud``, ``lr``); printed and saved.
+    out_of_range : {"error", "clamp"}
+        What ``predict``/``inverse`` do with commands beyond the fitted range:
+        raise ModelError, or clamp them with an :class:`OutOfRangeWarning`.
+    """
+
+    #: name in the registry and in model files
+    base_name: ClassVar[str] = ""
+    #: settings that are not base-specific (handled here)
+    _common = ("effects", "fixed", "axis", "out_of_range")
+
+    # ------------------------------------------------------------------ settings
+    def get_settings(self) -> dict:
+        """The base model's own constructor arguments (JSON-able), without the common ones."""
+        sig = inspect.signature(type(self).__init__)
+        return {k: getattr(self, k) for k in sig.parameters if k != "self" and k not in self._common}
+
+    def _check_common(self) -> None:
+        if self.out_of_range not in OUT_OF_RANGE_CHOICES:
+            raise ModelError(f"out_of_range must be one of {OUT_OF_RANGE_CHOICES}, got {self.out_of_range!r}")
+
+    def _effects(self) -> list[Effect]:
+        return resolve_effects(self.effects)
+
+    # ------------------------------------------------------------------ base hooks
+    @abstractmethod
+    def _resolve_structure(self, effects: list[Effect], v: np.ndarray | None, data: HysteresisData | None) -> dict:
+        """Resolve "auto" settings and data-dependent structure (thresholds, knots) into a JSON-able dict.
+
+        ``v`` is the effective input reaching the base at the start values (None when
+        the structure is set without data, :meth:`set_parameters`).
+        """
+
+    @abstractmethod
+    def _base_names(self, structure: dict) -> list[str]:
+        """Short names of the base parameters for this structure."""
+
+    @abstractmethod
+    def _base_initial(self, structure: dict, v: np.ndarray, data: HysteresisData) -> list[Parameter]:
+        """Base parameters (short names) with bounds and a start from the data (effective input ``v``)."""
+
+    @abstractmethod
+    def _base_forward(self, structure: dict, p: dict, v: np.ndarray, run_starts: np.ndarray) -> np.ndarray:
+        """Base output (deg) for effective input ``v`` (n,)."""
+
+    @abstractmethod
+    def _base_inverse(self, structure: dict, p: dict, y: np.ndarray, run_starts: np.ndarray,
+                      v_range: tuple[float, float]) -> np.ndarray:
+        """Effective input (n,) whose base output is ``y`` (analytic or numerical)."""
+
+    @abstractmethod
+    def _base_describe(self, structure: dict, p: dict, se: dict, inner: str) -> str:
+        """Equation of the base acting on the expression ``inner``, with its parameters."""
+
+    @abstractmethod
+    def _base_stepper(self, structure: dict, p: dict, v_range: tuple[float, float]):
+        """An object with ``reset()`` and ``step(y) -> v`` (one-sample base inverse)."""
+
+    def _gauge(self, effects: list[Effect]) -> dict[str, float]:
+        """Parameters to fix so the composition is identifiable (when the user fixes none)."""
+        return {}
+
+    inverse_kind: ClassVar[str] = "numerical"
+
+    # ------------------------------------------------------------------ helpers
+    def _require_fitted(self) -> None:
+        if not hasattr(self, "params_"):
+            raise ModelError(f"this {type(self).__name__} is not fitted yet: call fit(...) or set_parameters(...) first")
+
+    def _owners(self, effects: list[Effect], structure: dict) -> dict[str, tuple[object, str]]:
+        owners: dict[str, tuple[object, str]] = {}
+        for short in self._base_names(structure):
+            owners[f"{self.base_name}_{short}"] = ("base", short)
+        for e in effects:
+            for short, full in zip(e.param_names(), e.full_names()):
+                if full in owners:
+                    other = owners[full][0]
+                    who = "the base model" if other == "base" else f"effect '{other.label}'"
+                    raise ModelError(f"parameter '{full}' is claimed by effect '{e.label}' and by {who}; "
+                                     "give one of them another prefix or drop one")
+                owners[full] = (e, short)
+        return owners
+
+    def _grouped(self, values: dict[str, float]) -> tuple[dict, dict[int, dict]]:
+        base: dict = {}
+        per_effect: dict[int, dict] = {}
+        for full, v in values.items():
+            owner, short = self._owner_map_[full]
+            if owner == "base":
+                base[short] = v
+            else:
+                per_effect.setdefault(id(owner), {})[short] = v
+        return base, per_effect
+
+    def _forward(self, data: HysteresisData, base_p: dict, eff_p: dict[int, dict], structure: dict,
+                 effects: list[Effect]) -> np.ndarray:
+        u = data.cmd_deg
+        for e in effects:
+            if isinstance(e, InputEffect):
+                u = e.apply(eff_p[id(e)], u, data)
+        y = self._base_forward(structure, base_p, u, data.run_starts)
+        for e in effects:
+            if isinstance(e, OutputEffect):
+                y = y + e.term(eff_p[id(e)], data.cmd_deg, data)
+        return y
+
+    @staticmethod
+    def _ordered(effects: list[Effect]) -> list[Effect]:
+        inputs = sorted((e for e in effects if isinstance(e, InputEffect)), key=lambda e: e.order)
+        outputs = [e for e in effects if isinstance(e, OutputEffect)]
+        return inputs + outputs
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, data, meas_deg=None, *, t_s=None, extras=None, max_nfev: int | None = None):
+        """Fit the base and all effect terms jointly by least squares.
+
+        Parameters
+        ----------
+        data : HysteresisData, list of HysteresisData, ndarray (n,) or list of ndarray
+            Knob commands (deg), or data objects carrying them. A list is several runs
+            fitted together (operator states restart at each run).
+        meas_deg : ndarray (n,) or list of ndarray, optional
+            Measured bending angles (deg) when ``data`` is arrays.
+        t_s : ndarray (n,) or list, optional
+            Time stamps (s), needed by time-based effects.
+        extras : dict or list of dict, optional
+            Extra named columns (n,) needed by effects (``other_cmd_deg``, covariates).
+        max_nfev : int, optional
+            Cap on residual evaluations (default: scipy's, 100 × free parameters).
+
+        Returns
+        -------
+        self
+
+        Raises
+        ------
+        ModelError
+            Invalid settings or data: NaN/inf, non-monotonic time, no measurement, too few
+            samples for the free parameters, a command that never reverses (backlash
+            cannot be identified), missing columns for an effect, duplicate parameters.
+        """
+        self._check_common()
+        d, _ = as_data(data, meas_deg, t_s=t_s, extras=extras)
+        if d.meas_deg is None:
+            raise ModelError("fitting needs the measured bending angle meas_deg (deg)")
+        effects = self._ordered(self._effects())
+        for e in effects:
+            e.check(d)
+        if d.n_reversals() == 0:
+            raise ModelError("backlash cannot be identified: the command never reverses; "
+                             "fit on data that moves the knob back and forth (e.g. a damped sine)")
+
+        fixed = dict(self.fixed) if self.fixed is not None else self._gauge(effects)
+        # Start values: input effects in chain order (each sees the command the chain gives it).
+        start: dict[str, Parameter] = {}
+        u = d.cmd_deg
+        for e in effects:
+            if isinstance(e, InputEffect):
+                for prm in e.initial(d, u):
+                    start[prm.name] = prm
+                self._apply_fixed(start, fixed, e)
+                e.adapt_start(start, fixed)
+                u = e.apply({s: start[f].value for s, f in zip(e.param_names(), e.full_names())}, u, d)
+        structure = self._resolve_structure(effects, u, d)
+        owners = self._owners(effects, structure)
+        for prm in self._base_initial(structure, u, d):
+            start[f"{self.base_name}_{prm.name}"] = Parameter(f"{self.base_name}_{prm.name}", prm.value, prm.lower, prm.upper)
+        for e in effects:
+            if isinstance(e, OutputEffect):
+                for prm in e.initial(d, d.cmd_deg):
+                    start[prm.name] = prm
+                e.adapt_start(start, fixed)
+        unknown = set(fixed) - set(owners)
+        if unknown:
+            raise ModelError(f"fixed names unknown parameter(s) {sorted(unknown)}; this model has {sorted(owners)}")
+        for name, val in fixed.items():
+            start[name].value = float(val)
+
+        names = list(owners)
+        free = [n for n in names if n not in fixed]
+        n_free = len(free)
+        need = max(50, 10 * n_free)
+        if d.n_samples < need:
+            raise ModelError(f"too few samples to fit {n_free} parameters: got {d.n_samples}, need at least {need}")
+
+        self._owner_map_ = owners
+        x0 = np.array([start[n].clipped_start() for n in free])
+        lo = np.array([start[n].lower for n in free])
+        hi = np.array([start[n].upper for n in free])
+        values = {n: float(start[n].value) for n in names}
+        meas = d.meas_deg
+
+        def residual(x):
+            for n, v in zip(free, x):
+                values[n] = float(v)
+            base_p, eff_p = self._grouped(values)
+            return self._forward(d, base_p, eff_p, structure, effects) - meas
+
+        res = least_squares(residual, x0, bounds=(lo, hi), method="trf", x_scale="jac",
+                            max_nfev=max_nfev)
+        r = res.fun
+        m = r.size
+        for n, v in zip(free, res.x):
+            values[n] = float(v)
+        dof = max(m - n_free, 1)
+        s2 = float(r @ r) / dof
+        J = np.atleast_2d(res.jac)
+        cov, rank_def = _covariance(J, s2)
+        stderr = {n: 0.0 for n in names if n in fixed}
+        diag = np.diag(cov)
+        for i, n in enumerate(free):
+            stderr[n] = float(math.sqrt(diag[i])) if np.isfinite(diag[i]) and diag[i] >= 0 else math.inf
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sd = np.sqrt(np.where(np.isfinite(diag) & (diag > 0), diag, np.nan))
+            corr = cov / np.outer(sd, sd)
+
+        self.effects_ = effects
+        self.structure_ = structure
+        self.fixed_ = {k: float(v) for k, v in fixed.items()}
+        self.params_ = {n: values[n] for n in names}
+        self.stderr_ = {n: stderr[n] for n in names}
+        self.param_names_ = free
+        self.covariance_ = cov
+        self.correlation_ = corr
+        self.cmd_range_deg_ = (float(d.cmd_deg.min()), float(d.cmd_deg.max()))
+        self.training_data_ = d.fingerprint()
+        self.fit_report_ = FitReport(
+            success=bool(res.success), status=int(res.status), message=str(res.message),
+            nfev=int(res.nfev), njev=int(res.njev or 0), cost=float(res.cost),
+            rmse_deg=float(math.sqrt(float(r @ r) / m)), n_samples=d.n_samples, n_runs=d.n_runs,
+            n_free=n_free, rank_deficient=rank_def,
+        )
+        return self
+
+    @staticmethod
+    def _apply_fixed(start: dict, fixed: dict, e: Effect) -> None:
+        for full in e.full_names():
+            if full in fixed:
+                start[full].value = float(fixed[full])
+
+    # ------------------------------------------------------------------ known parameters
+    def set_parameters(self, values: dict[str, float], *, cmd_range_deg: tuple[float, float] | None = None,
+                       structure: dict | None = None):
+        """Use known parameter values instead of fitting (e.g. a paper's table).
+
+        Parameters
+        ----------
+        values : dict of str to float
+            Every parameter of the model by full name (see :meth:`parameter_names`).
+        cmd_range_deg : (float, float), optional
+            Valid command range (deg); unlimited when None.
+        structure : dict, optional
+            Data-dependent structure (thresholds, knots) for models that need it.
+
+        Returns
+        -------
+        self
+        """
+        self._check_common()
+        effects = self._ordered(self._effects())
+        st = self._resolve_structure(effects, None, None)
+        if structure:
+            st.update(structure)
+        owners = self._owners(effects, st)
+        missing = sorted(set(owners) - set(values))
+        extra = sorted(set(values) - set(owners))
+        if missing or extra:
+            raise ModelError(f"set_parameters: missing {missing}, unknown {extra}; this model has {list(owners)}")
+        self._owner_map_ = owners
+        self.effects_ = effects
+        self.structure_ = st
+        self.fixed_ = {}
+        self.params_ = {n: float(values[n]) for n in owners}
+        self.stderr_ = {n: math.nan for n in owners}
+        self.param_names_ = []
+        self.covariance_ = np.zeros((0, 0))
+        self.correlation_ = np.zeros((0, 0))
+        self.cmd_range_deg_ = (-math.inf, math.inf) if cmd_range_deg is None else tuple(map(float, cmd_range_deg))
+        self.training_data_ = []
+        self.fit_report_ = None
+        return self
+
+    def parameter_names(self) -> list[str]:
+        """Full names of all parameters (base first, then effects); needs a fitted model or no data-dependent structure."""
+        effects = self._ordered(self._effects())
+        st = self.structure_ if hasattr(self, "structure_") else self._resolve_structure(effects, None, None)
+        return list(self._owners(effects, st))
+
+    # ------------------------------------------------------------------ predict / inverse
+    def _range_check(self, cmd: np.ndarray, what: str) -> np.ndarray:
+        lo, hi = self.cmd_range_deg_
+        tol = 1e-9 * max(1.0, abs(lo) if math.isfinite(lo) else 1.0, abs(hi) if math.isfinite(hi) else 1.0)
+        bad = (cmd < lo - tol) | (cmd > hi + tol)
+        if not bad.any():
+            return cmd
+        k = int(np.flatnonzero(bad)[0])
+        msg = (f"{what} {cmd[k]:.3f} deg at sample {k} lies outside the fitted command range "
+               f"[{lo:.3f}, {hi:.3f}] deg ({int(bad.sum())} samples)")
+        if self.out_of_range == "error":
+            raise ModelError(msg + "; refit on wider data, reduce the amplitude, or use out_of_range='clamp'")
+        warnings.warn(msg + "; clamped", OutOfRangeWarning, stacklevel=3)
+        return np.clip(cmd, lo, hi)
+
+    def predict(self, data, *, t_s=None, extras=None):
+        """Bending angle (deg) predicted from knob commands.
+
+        Parameters
+        ----------
+        data : ndarray (n,), list of ndarray, HysteresisData or list of them
+            Knob commands (deg); a list is several runs (states restart per run).
+        t_s, extras : optional
+            Time stamps (s) and extra columns when effects need them.
+
+        Returns
+        -------
+        ndarray (n,), or a list of arrays when runs were given as a list.
+        """
+        self._require_fitted()
+        self._check_common()
+        d, was_list = as_data(data, t_s=t_s, extras=extras)
+        for e in self.effects_:
+            e.check(d)
+        cmd = self._range_check(d.cmd_deg, "command")
+        if cmd is not d.cmd_deg:
+            d = HysteresisData(cmd_deg=cmd, t_s=d.t_s, extras=d.extras, run_starts=d.run_starts)
+        base_p, eff_p = self._grouped(self.params_)
+        y = self._forward(d, base_p, eff_p, self.structure_, self.effects_)
+        return d.split(y) if was_list else y
+
+    def _v_range(self) -> tuple[float, float]:
+        """Range of the effective base input over the fitted command range (for numerical inverses)."""
+        lo, hi = self.cmd_range_deg_
+        if not (math.isfinite(lo) and math.isfinite(hi)):
+            return (-1e6, 1e6)
+        span = hi - lo
+        grid = np.linspace(lo - span, hi + span, 64)
+        base_p, eff_p = self._grouped(self.params_)
+        v = grid
+        probe = HysteresisData(cmd_deg=grid, t_s=np.arange(grid.size, dtype=float))
+        for e in self.effects_:
+            if isinstance(e, InputEffect) and e.name == "envelope":
+                v = e.apply(eff_p[id(e)], v, probe)
+        return (float(v.min()), float(v.max()))
+
+    def inverse(self, desired_deg, *, t_s=None, extras=None, max_iter: int = 50, tol_deg: float = 1e-10):
+        """Knob commands (deg) that make the model output follow ``desired_deg`` (feedforward compensation).
+
+        The base inverse is analytic for ``pi`` (duodenoscope paper, eqs. 9-11) and
+        numerical (sample-by-sample bisection) for ``linear`` and ``bspline``; input
+        effects are undone in reverse order; output terms that depend on the command
+        are handled by fixed-point iteration.
+
+        Parameters
+        ----------
+        desired_deg : ndarray (n,) or list of ndarray
+            Desired bending angle (deg); a list is several runs.
+        t_s, extras : optional
+            Time stamps (s) and extra columns when effects need them.
+        max_iter : int
+            Fixed-point iterations for command-dependent output terms.
+        tol_deg : float
+            Convergence tolerance of that iteration (deg).
+
+        Returns
+        -------
+        ndarray (n,) of commands (deg), or a list per run.
+
+        Raises
+        ------
+        ModelError
+            Unfitted model, bad input, or (``out_of_range="error"``) a desired angle that
+            needs a command outside the fitted range.
+        """
+        self._require_fitted()
+        self._check_common()
+        d, was_list = as_data(desired_deg, t_s=t_s, extras=extras)
+        for e in self.effects_:
+            e.check(d)
+        y_des = d.cmd_deg
+        base_p, eff_p = self._grouped(self.params_)
+        outputs = [e for e in self.effects_ if isinstance(e, OutputEffect)]
+        inputs = [e for e in self.effects_ if isinstance(e, InputEffect)]
+        v_range = self._v_range()
+        terms = np.zeros_like(y_des)
+        iterate = any(e.depends_on_command for e in outputs)
+        for e in outputs:
+            if not e.depends_on_command:
+                terms = terms + e.term(eff_p[id(e)], y_des, d)
+        fixed_terms = terms.copy()
+        u = y_des
+        for _ in range(max_iter if iterate else 1):
+            v = self._base_inverse(self.structure_, base_p, y_des - terms, d.run_starts, v_range)
+            u = v
+            for e in reversed(inputs):
+                u = e.invert(eff_p[id(e)], u, d)
+            if not iterate:
+                break
+            new = fixed_terms.copy()
+            for e in outputs:
+                if e.depends_on_command:
+                    new = new + e.term(eff_p[id(e)], u, d)
+            change = float(np.max(np.abs(new - terms))) if new.size else 0.0
+            terms = new
+            if change <= tol_deg:
+                break
+        u = self._range_check(np.asarray(u, dtype=float), "command needed for the desired angle")
+        return d.split(u) if was_list else u
+
+    # ------------------------------------------------------------------ streaming
+    def compensator(self):
+        """A streaming compensator for a control loop: ``step(desired_deg) -> cmd_deg``.
+
+        See :class:`endocal.models.compensator.StreamingCompensator`.
+        """
+        from endocal.models.compensator import StreamingCompensator
+
+        self._require_fitted()
+        return StreamingCompensator(self)
+
+    # ------------------------------------------------------------------ printing
+    def equation(self) -> str:
+        """The fitted model as an equation with values and standard errors; zero terms dropped."""
+        self._require_fitted()
+        base_p, eff_p = self._grouped(self.params_)
+        base_se, eff_se = self._grouped(self.stderr_)
+        inner = "cmd"
+        defs = []
+        for e in self.effects_:
+            if isinstance(e, InputEffect):
+                inner = e.wrap(inner)
+                defs.append(e.describe(eff_p[id(e)], eff_se.get(id(e), {})))
+        out = self._base_describe(self.structure_, base_p, base_se, inner)
+        for e in self.effects_:
+            if isinstance(e, OutputEffect) and not e.is_zero(eff_p[id(e)]):
+                out += " + " + e.describe(eff_p[id(e)], eff_se.get(id(e), {}))
+        lhs = f"{self.axis}_deg" if self.axis else "angle_deg"
+        return f"{lhs} = {out}" + "".join(f"; {s}" for s in defs)
+
+    def _settings_repr(self) -> str:
+        parts = [f"{k}={v!r}" for k, v in self.get_settings().items()]
+        if self.effects:
+            parts.append(f"effects={[e if isinstance(e, str) else e.label for e in self.effects]!r}")
+        if self.fixed is not None:
+            parts.append(f"fixed={self.fixed!r}")
+        if self.axis is not None:
+            parts.append(f"axis={self.axis!r}")
+        if self.out_of_range != "error":
+            parts.append(f"out_of_range={self.out_of_range!r}")
+        return f"{type(self).__name__}({', '.join(parts)})"
+
+    def __repr__(self) -> str:
+        if hasattr(self, "params_"):
+            return self.equation() + f"  (inverse: {self.inverse_kind})"
+        return self._settings_repr() + f"  (unfitted; inverse: {self.inverse_kind})"
+
+    __str__ = __repr__
+
+    # ------------------------------------------------------------------ files
+    def to_dict(self) -> dict:
+        """The model as a JSON-able dict (format ``endocal-model`` version 1); see :mod:`endocal.models.io`."""
+        from endocal.models.io import model_to_dict
+
+        return model_to_dict(self)
+
+    def save(self, path) -> None:
+        """Write the fitted model as human-readable JSON (never pickle)."""
+        from endocal.models.io import save_model
+
+        save_model(self, path)
+
+
+def _covariance(J: np.ndarray, s2: float) -> tuple[np.ndarray, bool]:
+    """Parameter covariance ``s² (JᵀJ)⁻¹`` via SVD; unidentified directions get infinite variance."""
+    p = J.shape[1]
+    if p == 0:
+        return np.zeros((0, 0)), False
+    _, sv, vt = np.linalg.svd(J, full_matrices=False)
+    thresh = np.finfo(float).eps * max(J.shape) * (sv[0] if sv.size else 0.0)
+    good = sv > thresh
+    inv = np.where(good, 1.0 / np.where(good, sv, 1.0) ** 2, 0.0)
+    cov = (vt.T * inv) @ vt * s2
+    rank_def = not bool(good.all())
+    if rank_def:
+        # parameters touched by a null direction are not identified
+        null = vt[~good]
+        touched = np.any(np.abs(null) > 1e-8, axis=0)
+        cov[touched, :] = np.inf
+        cov[:, touched] = np.inf
+    return cov, rank_def

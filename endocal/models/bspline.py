@@ -1,0 +1,124 @@
+"""``bspline``: direction-dependent B-spline hysteresis, as in the thesis.
+
+Thesis, section 2.3: the loop is modelled by one B-spline for increasing and one for
+decreasing command (:class:`scipy.interpolate.BSpline`, shared knots at quantiles of
+the command, extrapolated beyond them). At a reversal the output leaves the branch it
+was on along a backlash transition of slope ``s`` until it meets the other branch
+(:mod:`endocal.models._directional`), so the switch is continuous. Fitting adjusts
+both splines' coefficients and ``s`` jointly by least squares, from per-direction
+linear least-squares splines as the start.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.interpolate import BSpline
+
+from endocal.errors import ModelError
+from endocal.models._directional import DirectionalModel, direction_masks
+from endocal.models.data import HysteresisData
+from endocal.models.effects.base import Effect
+from endocal.models.params import Parameter, fmt_value
+
+
+def _lsq_spline(t: np.ndarray, k: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Spline coefficients by linear least squares, lightly regularised for empty knot spans."""
+    B = BSpline.design_matrix(np.clip(x, t[k], t[-k - 1]), t, k).toarray()
+    m = B.shape[1]
+    lam = 1e-8 * max(1.0, float(np.trace(B.T @ B)) / m)
+    D = np.diff(np.eye(m), 2, axis=0) if m > 2 else np.zeros((0, m))
+    A = B.T @ B + lam * (np.eye(m) + D.T @ D)
+    return np.linalg.solve(A, B.T @ y)
+
+
+class BSplineModel(DirectionalModel):
+    """Direction-dependent B-spline hysteresis model (thesis).
+
+    Parameters (prefix ``bspline_``): ``up_c0``… and ``down_c0``… (spline
+    coefficients, deg) and ``transition_slope``.
+
+    Parameters
+    ----------
+    n_knots : int
+        Interior knots of each spline, at quantiles of the command (default 6).
+    degree : int
+        Spline degree (default 3, cubic).
+    effects, fixed, axis, out_of_range
+        See :class:`~endocal.models.base.HysteresisModel`.
+
+    Notes
+    -----
+    The inverse is numerical (bisection per sample on the monotone step map).
+    """
+
+    base_name = "bspline"
+
+    def __init__(self, n_knots: int = 6, degree: int = 3, *, effects=(), fixed=None, axis=None,
+                 out_of_range="error"):
+        self.n_knots = n_knots
+        self.degree = degree
+        self.effects = effects
+        self.fixed = fixed
+        self.axis = axis
+        self.out_of_range = out_of_range
+
+    def _resolve_structure(self, effects: list[Effect], v, data) -> dict:
+        for name, val, lo, hi in (("n_knots", self.n_knots, 0, 100), ("degree", self.degree, 1, 5)):
+            if not isinstance(val, (int, np.integer)) or isinstance(val, bool) or not lo <= val <= hi:
+                raise ModelError(f"{name} must be an integer in {lo}..{hi}, got {val!r}")
+        st = {"degree": int(self.degree), "knots": None}
+        if v is not None:
+            a, b = float(v.min()), float(v.max())
+            if not b > a:
+                raise ModelError("the command reaching the B-spline model is constant: nothing to fit")
+            inner = np.quantile(v, np.linspace(0, 1, self.n_knots + 2)[1:-1]) if self.n_knots else np.array([])
+            inner = np.unique(np.clip(inner, a + 1e-9 * (b - a), b - 1e-9 * (b - a)))
+            k = self.degree
+            st["knots"] = [a] * (k + 1) + [float(x) for x in inner] + [b] * (k + 1)
+        return st
+
+    def _n_coef(self, structure: dict) -> int:
+        if structure["knots"] is None:
+            raise ModelError("a B-spline model needs structure={'knots': [...]} in set_parameters")
+        return len(structure["knots"]) - structure["degree"] - 1
+
+    def _base_names(self, structure: dict) -> list[str]:
+        m = self._n_coef(structure)
+        return [f"up_c{i}" for i in range(m)] + [f"down_c{i}" for i in range(m)] + ["transition_slope"]
+
+    def _base_initial(self, structure: dict, v: np.ndarray, data: HysteresisData) -> list[Parameter]:
+        t = np.asarray(structure["knots"])
+        k = structure["degree"]
+        inc, dec = direction_masks(v, data.run_starts)
+        if inc.sum() < 2 or dec.sum() < 2:
+            raise ModelError("backlash cannot be identified: the command never reverses")
+        y = data.meas_deg
+        c_up = _lsq_spline(t, k, v[inc], y[inc])
+        c_dn = _lsq_spline(t, k, v[dec], y[dec])
+        slope = float(np.polyfit(v, y, 1)[0])
+        out = [Parameter(f"up_c{i}", float(c)) for i, c in enumerate(c_up)]
+        out += [Parameter(f"down_c{i}", float(c)) for i, c in enumerate(c_dn)]
+        out.append(Parameter("transition_slope", 0.2 * max(slope, 1e-6), 0.0, np.inf))
+        return out
+
+    def _coefs(self, structure: dict, p: dict) -> tuple[np.ndarray, np.ndarray]:
+        m = self._n_coef(structure)
+        return (np.array([p[f"up_c{i}"] for i in range(m)]), np.array([p[f"down_c{i}"] for i in range(m)]))
+
+    def _branches(self, structure: dict, p: dict):
+        t = np.asarray(structure["knots"], dtype=float)
+        c_up, c_dn = self._coefs(structure, p)
+        return t, c_up, t.copy(), c_dn, structure["degree"]
+
+    def _eval_branches(self, structure: dict, p: dict, v: np.ndarray):
+        t = np.asarray(structure["knots"], dtype=float)
+        c_up, c_dn = self._coefs(structure, p)
+        k = structure["degree"]
+        return BSpline(t, c_up, k, extrapolate=True)(v), BSpline(t, c_dn, k, extrapolate=True)(v)
+
+    def _base_describe(self, structure: dict, p: dict, se: dict, inner: str) -> str:
+        t = structure["knots"]
+        k = structure["degree"]
+        m = self._n_coef(structure)
+        return (f"BSpline{k}({inner}) [up/down: {m} coefficients each, knots {t[k]:.4g}..{t[-k - 1]:.4g}, "
+                f"transition={fmt_value(p['transition_slope'], se.get('transition_slope'))}]")

@@ -1,0 +1,227 @@
+"""The data a hysteresis model is fitted on and predicts from: :class:`HysteresisData`.
+
+One axis, one or more runs concatenated along the sample axis. Besides the knob
+command (deg) and the measured bending angle (deg) it carries the time stamps
+(s) and any extra named columns (the other axis's command or angle, logged
+covariates such as ``sheath_wrap_deg``) that effect terms may need.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from endocal.errors import ModelError
+from endocal.models._kernels import count_reversals
+
+#: Extra column holding the other bending axis's knob command (deg), used by ``coupling``.
+OTHER_CMD = "other_cmd_deg"
+
+
+def _as_1d(name: str, values, n: int | None = None) -> np.ndarray:
+    try:
+        arr = np.asarray(values, dtype=float)
+    except (TypeError, ValueError):
+        raise ModelError(f"{name} must be numeric") from None
+    if arr.ndim != 1:
+        raise ModelError(f"{name} must be one-dimensional (time along axis 0), got shape {arr.shape}")
+    if n is not None and arr.shape[0] != n:
+        raise ModelError(f"{name} has {arr.shape[0]} samples but cmd_deg has {n}")
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise ModelError(f"{name} contains NaN or inf ({int(bad.sum())} samples, first at index {k}); "
+                         "drop or interpolate those samples before fitting")
+    return arr
+
+
+@dataclass(frozen=True)
+class HysteresisData:
+    """Command and measurement sequences of one axis, possibly several runs.
+
+    Parameters
+    ----------
+    cmd_deg : ndarray, shape (n,)
+        Knob command (deg).
+    meas_deg : ndarray, shape (n,), optional
+        Measured bending angle (deg). Needed to fit, not to predict.
+    t_s : ndarray, shape (n,), optional
+        Time stamps (s), strictly increasing within each run. Needed by time-based
+        effects (delay, rate, drift, creep).
+    extras : dict of str to ndarray, optional
+        Further named columns of shape (n,), e.g. ``other_cmd_deg`` or a logged covariate.
+    run_starts : ndarray of int, optional
+        Index of the first sample of each run (starts with 0). Operator states
+        restart at every run start. Default: one run.
+
+    Raises
+    ------
+    ModelError
+        NaN/inf, mismatched lengths, time not strictly increasing inside a run,
+        malformed run starts.
+    """
+
+    cmd_deg: np.ndarray
+    meas_deg: np.ndarray | None = None
+    t_s: np.ndarray | None = None
+    extras: Mapping[str, np.ndarray] = field(default_factory=dict)
+    run_starts: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        cmd = _as_1d("cmd_deg", self.cmd_deg)
+        n = cmd.shape[0]
+        if n == 0:
+            raise ModelError("cmd_deg is empty")
+        object.__setattr__(self, "cmd_deg", cmd)
+        if self.meas_deg is not None:
+            object.__setattr__(self, "meas_deg", _as_1d("meas_deg", self.meas_deg, n))
+        if self.run_starts is None:
+            starts = np.zeros(1, dtype=np.int64)
+        else:
+            starts = np.asarray(self.run_starts, dtype=np.int64).ravel()
+            if starts.size == 0 or starts[0] != 0 or np.any(np.diff(starts) <= 0) or starts[-1] >= n:
+                raise ModelError(f"run_starts must start at 0, increase strictly and stay below {n}; got {starts.tolist()}")
+        object.__setattr__(self, "run_starts", starts)
+        if self.t_s is not None:
+            t = _as_1d("t_s", self.t_s, n)
+            dt = np.diff(t)
+            first_of_run = np.zeros(n, dtype=bool)
+            first_of_run[starts] = True
+            bad = (dt <= 0) & ~first_of_run[1:]
+            if bad.any():
+                k = int(np.flatnonzero(bad)[0]) + 1
+                raise ModelError(f"t_s is not strictly increasing at sample {k} ({t[k - 1]!r} -> {t[k]!r} s); "
+                                 "sort the samples or split the data into runs")
+            object.__setattr__(self, "t_s", t)
+        ex = {}
+        for name, col in dict(self.extras).items():
+            if not isinstance(name, str) or not name:
+                raise ModelError(f"extra column names must be non-empty strings, got {name!r}")
+            ex[name] = _as_1d(name, col, n)
+        object.__setattr__(self, "extras", ex)
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_runs(cls, runs: Sequence[HysteresisData]) -> HysteresisData:
+        """Concatenate runs (each may itself hold several runs); columns must agree."""
+        runs = list(runs)
+        if not runs:
+            raise ModelError("no runs given")
+        has_meas = {r.meas_deg is not None for r in runs}
+        has_t = {r.t_s is not None for r in runs}
+        keys = {tuple(sorted(r.extras)) for r in runs}
+        if len(has_meas) > 1 or len(has_t) > 1 or len(keys) > 1:
+            raise ModelError("runs disagree on their columns (meas_deg, t_s or extras); give every run the same columns")
+        offsets = np.cumsum([0] + [r.n_samples for r in runs[:-1]])
+        return cls(
+            cmd_deg=np.concatenate([r.cmd_deg for r in runs]),
+            meas_deg=np.concatenate([r.meas_deg for r in runs]) if runs[0].meas_deg is not None else None,
+            t_s=np.concatenate([r.t_s for r in runs]) if runs[0].t_s is not None else None,
+            extras={k: np.concatenate([r.extras[k] for r in runs]) for k in runs[0].extras},
+            run_starts=np.concatenate([r.run_starts + o for r, o in zip(runs, offsets)]),
+        )
+
+    # ------------------------------------------------------------------ views
+    @property
+    def n_samples(self) -> int:
+        return int(self.cmd_deg.shape[0])
+
+    @property
+    def n_runs(self) -> int:
+        return int(self.run_starts.shape[0])
+
+    def run_slices(self) -> list[slice]:
+        """One slice per run into the concatenated sample axis."""
+        ends = list(self.run_starts[1:]) + [self.n_samples]
+        return [slice(int(a), int(b)) for a, b in zip(self.run_starts, ends)]
+
+    def split(self, values: np.ndarray) -> list[np.ndarray]:
+        """Cut a concatenated (n,) array into per-run arrays."""
+        return [values[s] for s in self.run_slices()]
+
+    def with_cmd(self, cmd_deg: np.ndarray) -> HysteresisData:
+        """Same time base, extras and runs, another command (and no measurement)."""
+        return HysteresisData(cmd_deg=cmd_deg, t_s=self.t_s, extras=self.extras, run_starts=self.run_starts)
+
+    def column(self, name: str) -> np.ndarray:
+        """An extra column by name.
+
+        Raises
+        ------
+        ModelError
+            The column is absent (the message lists those present).
+        """
+        try:
+            return self.extras[name]
+        except KeyError:
+            have = ", ".join(sorted(self.extras)) or "none"
+            raise ModelError(f"the data has no column '{name}' (extra columns present: {have})") from None
+
+    def require_time(self, who: str) -> np.ndarray:
+        """``t_s``, or a ModelError naming the effect ``who`` that needs it."""
+        if self.t_s is None:
+            raise ModelError(f"{who} needs time stamps: give t_s (s) with the data")
+        return self.t_s
+
+    def n_reversals(self, tol_frac: float = 0.01) -> int:
+        """Direction reversals of the command, ignoring wiggles below ``tol_frac`` of its span (per run)."""
+        total = 0
+        for s in self.run_slices():
+            u = self.cmd_deg[s]
+            span = float(u.max() - u.min())
+            if span > 0.0:
+                total += int(count_reversals(u, tol_frac * span))
+        return total
+
+    def fingerprint(self) -> list[dict]:
+        """Per-run SHA-256 of the command, measurement and time bytes (recorded in model files)."""
+        out = []
+        for s in self.run_slices():
+            h = hashlib.sha256()
+            for arr in (self.cmd_deg, self.meas_deg, self.t_s):
+                if arr is not None:
+                    h.update(np.ascontiguousarray(arr[s], dtype="<f8").tobytes())
+            out.append({"sha256": h.hexdigest(), "n_samples": s.stop - s.start})
+        return out
+
+
+def as_data(data=None, meas_deg=None, *, t_s=None, extras=None) -> tuple[HysteresisData, bool]:
+    """Turn what a user passes to ``fit``/``predict``/``inverse`` into :class:`HysteresisData`.
+
+    Accepts a :class:`HysteresisData`, a list of them, a 1-D array of commands (with
+    optional ``meas_deg``, ``t_s``, ``extras``), or lists of such arrays (one per run).
+
+    Returns
+    -------
+    data : HysteresisData
+    was_list : bool
+        Whether the input was a list of runs (then results are returned per run).
+    """
+    if isinstance(data, HysteresisData):
+        if meas_deg is not None or t_s is not None or extras is not None:
+            raise ModelError("give either a HysteresisData or arrays (cmd_deg, meas_deg, t_s, extras), not both")
+        return data, False
+    if isinstance(data, (list, tuple)) and data and isinstance(data[0], HysteresisData):
+        if meas_deg is not None or t_s is not None or extras is not None:
+            raise ModelError("give either HysteresisData runs or arrays, not both")
+        return HysteresisData.from_runs(data), True
+    if isinstance(data, (list, tuple)) and data and np.ndim(data[0]) == 1:
+        n = len(data)
+
+        def per_run(x, name):
+            if x is None:
+                return [None] * n
+            if not isinstance(x, (list, tuple)) or len(x) != n:
+                raise ModelError(f"{name} must be a list of {n} arrays, one per run, like the commands")
+            return list(x)
+
+        ms, ts = per_run(meas_deg, "meas_deg"), per_run(t_s, "t_s")
+        exs = per_run(extras, "extras") if extras is not None else [{}] * n
+        runs = [HysteresisData(cmd_deg=c, meas_deg=m, t_s=t, extras=e or {}) for c, m, t, e in zip(data, ms, ts, exs)]
+        return HysteresisData.from_runs(runs), True
+    if data is None:
+        raise ModelError("no data given")
+    return HysteresisData(cmd_deg=data, meas_deg=meas_deg, t_s=t_s, extras=extras or {}), False

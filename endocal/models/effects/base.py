@@ -1,0 +1,139 @@
+"""The effect-term contract: what every composable physical effect provides.
+
+A hysteresis model is a base (``linear``, ``bspline``, ``pi``) plus effect terms::
+
+    u   = cmd                      knob command (deg)
+    u   = E_in_k(... E_in_1(u))    input effects, in ascending ``order`` (delay, rate, deadzone, envelope)
+    y   = base(u)                  direction-dependent hysteresis of the base model
+    y  += sum_j E_out_j(cmd, data) output effects (drift, coupling, creep, load, ...)
+
+An :class:`InputEffect` transforms the command sequence and knows its inverse; an
+:class:`OutputEffect` adds a term in degrees of bending. Each effect owns its
+parameters (named ``<prefix>_<short>``), their bounds and a starting guess from the
+data, and may need more than the command: ``t_s``, the other axis, extra columns.
+Adding an effect never changes a base model.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import ClassVar
+
+import numpy as np
+
+from endocal.errors import ModelError
+from endocal.models.data import HysteresisData
+from endocal.models.params import Parameter, fmt_value
+
+
+class Effect(ABC):
+    """Base of all effect terms.
+
+    Class attributes describe the effect for users (``endocal effects``):
+    ``name`` (catalog name), ``cause`` (physical cause), ``signature`` (what it leaves
+    in residuals), ``protocol`` (which excitation reveals it).
+    """
+
+    name: ClassVar[str] = ""
+    kind: ClassVar[str] = ""
+    cause: ClassVar[str] = ""
+    signature: ClassVar[str] = ""
+    protocol: ClassVar[str] = ""
+    #: short parameter names (without prefix) and their units for printing
+    units: ClassVar[dict[str, str]] = {}
+    #: True when the effect can be compensated one sample at a time (streaming loop)
+    streamable: ClassVar[bool] = False
+
+    @property
+    def prefix(self) -> str:
+        """Parameter-name prefix; unique per effect instance in a model."""
+        return self.name
+
+    @property
+    def label(self) -> str:
+        """The name as users write it in ``--effects`` (``load:sheath_wrap_deg`` for load terms)."""
+        return self.name
+
+    def settings(self) -> dict:
+        """JSON-able constructor arguments (saved in model files)."""
+        return {}
+
+    def param_names(self) -> list[str]:
+        """Short parameter names, in a fixed order."""
+        return list(self.units)
+
+    def full_names(self) -> list[str]:
+        return [f"{self.prefix}_{s}" for s in self.param_names()]
+
+    def check(self, data: HysteresisData) -> None:
+        """Raise ModelError when ``data`` lacks what this effect needs (columns, time)."""
+
+    @abstractmethod
+    def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
+        """Full-named parameters with bounds and a data-driven start; ``u`` is the command reaching this effect."""
+
+    @abstractmethod
+    def describe(self, p: dict, se: dict) -> str:
+        """Equation fragment with values and standard errors, e.g. ``drift[0.010+-0.002 deg/s]``."""
+
+    def adapt_start(self, start: dict[str, Parameter], fixed: dict[str, float]) -> None:
+        """Make the start values agree with parameters the user holds fixed (default: nothing to do)."""
+
+    def is_zero(self, p: dict) -> bool:
+        """True when the term has no effect at these values (dropped from the printed equation)."""
+        return all(v == 0.0 for v in p.values())
+
+    def _bracket(self, p: dict, se: dict) -> str:
+        parts = [f"{k}={fmt_value(p[k], se.get(k), self.units.get(k, ''))}" for k in self.param_names()]
+        return "[" + ", ".join(parts) + "]"
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self.settings().items())
+        return f"{type(self).__name__}({args})"
+
+    def __eq__(self, other) -> bool:
+        return type(self) is type(other) and self.settings() == other.settings()
+
+    def __hash__(self) -> int:
+        return hash((type(self).__name__, tuple(sorted(self.settings().items()))))
+
+
+class InputEffect(Effect):
+    """An effect that transforms the knob command before the base model sees it."""
+
+    kind: ClassVar[str] = "input"
+    #: position in the input chain (lower acts first: time shift before static shape)
+    order: ClassVar[int] = 50
+
+    def wrap(self, inner: str) -> str:
+        """How the equation writes this transform applied to ``inner`` (e.g. ``f(cmd)``)."""
+        return f"{self.name}({inner})"
+
+    @abstractmethod
+    def apply(self, p: dict, u: np.ndarray, data: HysteresisData) -> np.ndarray:
+        """Transformed command (n,); ``p`` maps short names to values."""
+
+    @abstractmethod
+    def invert(self, p: dict, v: np.ndarray, data: HysteresisData) -> np.ndarray:
+        """Command (n,) whose transform is ``v`` (feedforward compensation)."""
+
+    def stream_state(self, p: dict) -> np.ndarray:
+        """Initial state of :meth:`invert_step` (streamable effects only)."""
+        return np.zeros(1)
+
+    def invert_step(self, p: dict, v: float, state: np.ndarray) -> float:
+        """One sample of :meth:`invert` on a caller-held state (streamable effects only)."""
+        raise ModelError(f"effect '{self.label}' cannot be compensated one sample at a time "
+                         "(it needs future or logged samples); use the batch inverse")
+
+
+class OutputEffect(Effect):
+    """An effect that adds a term (deg of bending) to the base model's output."""
+
+    kind: ClassVar[str] = "output"
+    #: True when the term depends on the command (then the inverse iterates)
+    depends_on_command: ClassVar[bool] = True
+
+    @abstractmethod
+    def term(self, p: dict, cmd: np.ndarray, data: HysteresisData) -> np.ndarray:
+        """Additive term (n,) in degrees; ``cmd`` is the knob command (deg)."""

@@ -1,0 +1,153 @@
+"""``envelope``: the static, piecewise-linear input shape of the modified PI model.
+
+Duodenoscope paper, eq. 6 (envelope) and eq. 10 (its inverse)::
+
+    f(θ) = k0 (θ - θ0) + k1 (θ0 - θ1)   for θ < θ0
+           k1 (θ - θ1)                  for θ0 <= θ <= θ2
+           k2 (θ - θ2) + k1 (θ2 - θ1)   for θ > θ2
+
+written here as ``k1 (θ - θ1) + (k0 - k1) min(θ - θ0, 0) + (k2 - k1) max(θ - θ2, 0)``
+(identical for θ0 <= θ2, and defined everywhere). A shallow middle slope ``k1`` is a
+dead band around neutral; steeper outer slopes are the stiffening at large bends.
+On ``pi`` it makes the paper's modified PI; on ``linear``/``bspline`` it is a static
+input nonlinearity.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from endocal.errors import ModelError
+from endocal.models.data import HysteresisData
+from endocal.models.effects.base import InputEffect
+from endocal.models.params import Parameter
+
+_K_MIN = 1e-12
+
+
+def envelope(theta_deg, theta0, theta1, theta2, k0, k1, k2):
+    """Envelope ``f(θ)`` of the duodenoscope paper, eq. 6 (input in deg, output in envelope units)."""
+    th = np.asarray(theta_deg, dtype=float)
+    return k1 * (th - theta1) + (k0 - k1) * np.minimum(th - theta0, 0.0) + (k2 - k1) * np.maximum(th - theta2, 0.0)
+
+
+def envelope_inverse(x, theta0, theta1, theta2, k0, k1, k2):
+    """Inverse envelope ``f⁻¹(x)`` (duodenoscope paper, eq. 10); needs k0, k1, k2 > 0 and θ0 <= θ2."""
+    if not (k0 > 0 and k1 > 0 and k2 > 0):
+        raise ModelError(f"the envelope cannot be inverted: slopes must be positive, got k0={k0}, k1={k1}, k2={k2}")
+    if theta0 > theta2:
+        raise ModelError(f"the envelope cannot be inverted: theta0={theta0} lies above theta2={theta2}")
+    x = np.asarray(x, dtype=float)
+    x0 = k1 * (theta0 - theta1)  # f(θ0)
+    x2 = k1 * (theta2 - theta1)  # f(θ2)
+    mid = x / k1 + theta1
+    return np.where(x < x0, (x - x0) / k0 + theta0, np.where(x > x2, (x - x2) / k2 + theta2, mid))
+
+
+def _hinge_start(u: np.ndarray, y: np.ndarray, split: float):
+    """Start values from a continuous three-segment line fitted to (u, y), hysteresis averaged out.
+
+    Both branches are sampled, so a least-squares fit of ``y ≈ a + k1 (u - θ1) + (k0-k1)
+    min(u-θ0, 0) + (k2-k1) max(u-θ2, 0)`` over a grid of kinks finds the dead band and
+    the stiffening; returns ``θ0, θ1, θ2, k0/k1, k2/k1``.
+    """
+    stride = max(1, u.size // 4000)
+    uu, yy = u[::stride], y[::stride]
+    lo_grid = np.quantile(uu, np.linspace(0.03, 0.5, 12))
+    hi_grid = np.quantile(uu, np.linspace(0.5, 0.97, 12))
+    lo_grid = lo_grid[lo_grid <= split]
+    hi_grid = hi_grid[hi_grid >= split]
+    best = None
+    ones = np.ones_like(uu)
+    for a in lo_grid:
+        for b in hi_grid:
+            if b <= a:
+                continue
+            A = np.column_stack([ones, uu, np.minimum(uu - a, 0.0), np.maximum(uu - b, 0.0)])
+            coef, *_ = np.linalg.lstsq(A, yy, rcond=None)
+            cost = float(np.sum((A @ coef - yy) ** 2))
+            if best is None or cost < best[0]:
+                best = (cost, float(a), float(b), coef)
+    if best is None:
+        return float(np.quantile(u, 0.2)), split, float(np.quantile(u, 0.8)), 1.0, 1.0
+    _, a, b, (c0, c1, d0, d2) = best
+    k1 = c1 if c1 > 0 else max(abs(c1), 1e-6)
+    ratio0 = max((c1 + d0) / k1, 0.05)
+    ratio2 = max((c1 + d2) / k1, 0.05)
+    th1 = float(np.clip(-c0 / k1, u.min(), u.max()))
+    return a, th1, b, float(ratio0), float(ratio2)
+
+
+class Envelope(InputEffect):
+    """Piecewise-linear envelope ``f`` (duodenoscope paper, eqs. 6 and 10).
+
+    Parameters (prefix ``envelope_``): ``theta0_deg``, ``theta1_deg``, ``theta2_deg``
+    (knob angles, deg: lower kink, zero of f, upper kink) and ``k0``, ``k1``, ``k2``
+    (slopes below, between and above the kinks, envelope units per deg). Its scale
+    trades off against the base model's (the play operator is homogeneous), so the
+    model fixes a gauge (``envelope_k1``) unless the user fixes parameters himself.
+    """
+
+    name = "envelope"
+    order = 90
+    streamable = True
+    cause = "static stiffness of the bending section: dead band around neutral (slack tendons), stiffening at large bends"
+    signature = "residual that is a function of the command amplitude alone, the same on both branches (S-shaped vs command)"
+    protocol = "large-amplitude sweeps through neutral (damped sine)"
+    units = {"theta0_deg": "deg", "theta1_deg": "deg", "theta2_deg": "deg", "k0": "", "k1": "", "k2": ""}
+
+    def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
+        split = float(np.median(u))
+        th0, th2, th1 = float(np.quantile(u, 0.2)), float(np.quantile(u, 0.8)), split
+        ratio0 = ratio2 = 1.0
+        if data.meas_deg is not None and np.ptp(u) > 0:
+            th0, th1, th2, ratio0, ratio2 = _hinge_start(u, data.meas_deg, split)
+        pre = self.prefix
+        return [
+            Parameter(f"{pre}_theta0_deg", th0, -np.inf, split),
+            Parameter(f"{pre}_theta1_deg", th1),
+            Parameter(f"{pre}_theta2_deg", th2, split, np.inf),
+            Parameter(f"{pre}_k0", ratio0, _K_MIN, np.inf),
+            Parameter(f"{pre}_k1", 1.0, _K_MIN, np.inf),
+            Parameter(f"{pre}_k2", ratio2, _K_MIN, np.inf),
+        ]
+
+    def adapt_start(self, start: dict[str, Parameter], fixed: dict[str, float]) -> None:
+        # Keep the start's slope ratios at the scale the user fixed (e.g. the paper's k1).
+        names = [f"{self.prefix}_{key}" for key in ("k0", "k1", "k2")]
+        for name in names:
+            if name in fixed:
+                scale = fixed[name] / start[name].value
+                for other in names:
+                    if other not in fixed:
+                        start[other].value *= scale
+                return
+
+    def _args(self, p: dict):
+        return (p["theta0_deg"], p["theta1_deg"], p["theta2_deg"], p["k0"], p["k1"], p["k2"])
+
+    def apply(self, p: dict, u: np.ndarray, data: HysteresisData) -> np.ndarray:
+        return envelope(u, *self._args(p))
+
+    def invert(self, p: dict, v: np.ndarray, data: HysteresisData) -> np.ndarray:
+        return envelope_inverse(v, *self._args(p))
+
+    def invert_step(self, p: dict, v: float, state: np.ndarray) -> float:
+        # scalar form of eq. 10 (a numpy call per sample would dominate a 1 kHz loop)
+        th0, th1, th2, k0, k1, k2 = self._args(p)
+        x0 = k1 * (th0 - th1)
+        x2 = k1 * (th2 - th1)
+        if v < x0:
+            return (v - x0) / k0 + th0
+        if v > x2:
+            return (v - x2) / k2 + th2
+        return v / k1 + th1
+
+    def wrap(self, inner: str) -> str:
+        return f"f({inner})"
+
+    def describe(self, p: dict, se: dict) -> str:
+        return "f = envelope" + self._bracket(p, se)
+
+    def is_zero(self, p: dict) -> bool:
+        return False

@@ -1,0 +1,283 @@
+"""``pi``: the Prandtl–Ishlinskii model (play operators) and its analytic inverse.
+
+Duodenoscope paper (Cheng et al., Machines 2024), section 2.3:
+
+- eq. 5, play operator: ``Phi_i(t_0) = max(f(θ_0) - r_i, min(f(θ_0) + r_i, 0))``,
+  ``Phi_i(t_k) = max(f(θ_k) - r_i, min(f(θ_k) + r_i, Phi_i(t_{k-1})))``;
+- eq. 7, output: ``θ_out(t_k) = sum_{i=0}^{n} ω_i Phi_i[θ_in](t_k)`` (n + 1 operators, r_0 = 0);
+- eq. 8, ``r_i = r·i`` and ``ω_i = ω·exp(-β r_i)`` (``weights="exponential"``);
+- eq. 9, inverse: ``θ_in = f⁻¹( sum_i ω'_i Phi'_i[θ_out](t_k) )`` with plays of threshold r'_i on θ_out;
+- eq. 11, ``ω'_0 = 1/ω_0``, ``ω'_i = -ω_i / ((ω_0+...+ω_i)(ω_0+...+ω_{i-1}))``,
+  ``r'_i = sum_{j=0}^{i} ω_j (r_i - r_j)``, and the initial loading
+  ``Phi'_i(t_0) = sum_{j=0}^{i} ω_j Phi_i(t_0) + sum_{j=i+1}^{n} ω_j Phi_j(t_0)``.
+
+Without effects the envelope is linear (``f(θ) = θ``): the classic PI, with free
+non-negative weights by default. With the ``envelope`` effect (eqs. 6, 10) it is the
+paper's modified PI, with the exponential weights of eq. 8 by default.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+from scipy.optimize import lsq_linear
+
+from endocal.errors import ModelError
+from endocal.models._kernels import play_bank_forward, play_bank_states, play_bank_step
+from endocal.models.base import HysteresisModel
+from endocal.models.data import HysteresisData
+from endocal.models.effects.base import Effect
+from endocal.models.params import Parameter, fmt_value
+
+WEIGHT_CHOICES = ("auto", "free", "exponential")
+
+
+def pi_thresholds(r: float, n_operators: int) -> np.ndarray:
+    """``r_i = r·i`` for ``i = 0..n`` (duodenoscope paper, eq. 8)."""
+    return r * np.arange(n_operators + 1, dtype=float)
+
+
+def pi_exp_weights(w: float, beta: float, thresholds: np.ndarray) -> np.ndarray:
+    """``ω_i = ω·exp(-β r_i)`` (duodenoscope paper, eq. 8)."""
+    return w * np.exp(-beta * thresholds)
+
+
+def pi_inverse_parameters(thresholds: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Thresholds ``r'_i`` and weights ``ω'_i`` of the inverse PI (duodenoscope paper, eq. 11).
+
+    Parameters
+    ----------
+    thresholds : ndarray (n+1,)
+        Increasing forward thresholds, ``r_0 = 0``.
+    weights : ndarray (n+1,)
+        Forward weights; ``ω_0 > 0`` and all partial sums positive.
+
+    Returns
+    -------
+    r_inv, w_inv : ndarray (n+1,)
+    """
+    w = np.asarray(weights, dtype=float)
+    r = np.asarray(thresholds, dtype=float)
+    csum = np.cumsum(w)
+    if not w[0] > 0 or np.any(csum <= 0):
+        raise ModelError(f"the PI model cannot be inverted: the weight of its linear operator is {w[0]:.3g} "
+                         "(it must be positive, and every partial sum of weights too)")
+    w_inv = np.empty_like(w)
+    w_inv[0] = 1.0 / w[0]
+    w_inv[1:] = -w[1:] / (csum[1:] * csum[:-1])
+    # r'_i = sum_{j<=i} ω_j (r_i - r_j) = r_i * csum_i - sum_{j<=i} ω_j r_j
+    r_inv = r * csum - np.cumsum(w * r)
+    return r_inv, w_inv
+
+
+def pi_inverse_initial_state(weights: np.ndarray, forward_state: np.ndarray) -> np.ndarray:
+    """Initial loading of the inverse plays from the forward plays' state (duodenoscope paper, eq. 11).
+
+    ``Phi'_i = sum_{j=0}^{i} ω_j Phi_i + sum_{j=i+1}^{n} ω_j Phi_j``.
+    """
+    w = np.asarray(weights, dtype=float)
+    z = np.asarray(forward_state, dtype=float)
+    csum = np.cumsum(w)
+    tail = np.concatenate([np.cumsum((w * z)[::-1])[::-1][1:], [0.0]])
+    return csum * z + tail
+
+
+class _PIStepper:
+    """One-sample analytic inverse: holds the inverse plays' state."""
+
+    def __init__(self, r_inv, w_inv, offset):
+        self.r_inv = np.ascontiguousarray(r_inv)
+        self.w_inv = np.ascontiguousarray(w_inv)
+        self.offset = float(offset)
+        self.state = np.zeros_like(self.r_inv)
+
+    def reset(self) -> None:
+        self.state[:] = 0.0
+
+    def prime(self, v_history: np.ndarray, thresholds: np.ndarray, weights: np.ndarray) -> None:
+        """Load the inverse plays from the forward plays after ``v_history`` (eq. 11, initial loading)."""
+        z = np.zeros_like(thresholds)
+        for x in np.asarray(v_history, dtype=float):
+            play_bank_step(float(x), thresholds, weights, z)
+        self.state[:] = pi_inverse_initial_state(weights, z)
+
+    def step(self, y: float) -> float:
+        return play_bank_step(y - self.offset, self.r_inv, self.w_inv, self.state)
+
+
+class PIModel(HysteresisModel):
+    """Prandtl–Ishlinskii hysteresis model (duodenoscope paper, eqs. 5, 7, 8; inverse eqs. 9, 11).
+
+    Parameters
+    ----------
+    n_operators : int
+        ``n`` of the paper: operators ``i = 0..n`` (``n + 1`` plays, the first with
+        threshold 0). Default 20, as in the paper.
+    weights : {"auto", "free", "exponential"}
+        ``free``: one non-negative weight per operator (``pi_w0``…``pi_wn``), thresholds
+        ``r·i`` with ``r`` chosen from the data; ``exponential``: eq. 8 with fitted
+        ``pi_r``, ``pi_w``, ``pi_beta``. ``auto``: exponential with the envelope effect
+        (the modified PI), free otherwise. Resolved into ``structure_["weights"]``.
+    offset : {"auto", True, False}
+        Add a constant ``pi_offset_deg`` to the output. ``auto``: only without the
+        envelope (whose θ1 already places the neutral). Resolved into ``structure_``.
+    effects, fixed, axis, out_of_range
+        See :class:`~endocal.models.base.HysteresisModel`.
+
+    Notes
+    -----
+    The inverse is analytic (eqs. 9-11): exact to rounding for any sequence the model
+    can produce, no iteration.
+    """
+
+    base_name = "pi"
+    inverse_kind: ClassVar[str] = "analytic (duodenoscope paper, eqs. 9-11)"
+
+    def __init__(self, n_operators: int = 20, weights: str = "auto", offset="auto", *, effects=(),
+                 fixed=None, axis=None, out_of_range="error"):
+        self.n_operators = n_operators
+        self.weights = weights
+        self.offset = offset
+        self.effects = effects
+        self.fixed = fixed
+        self.axis = axis
+        self.out_of_range = out_of_range
+
+    # ------------------------------------------------------------------ structure
+    def _resolve_structure(self, effects: list[Effect], v, data) -> dict:
+        if not isinstance(self.n_operators, (int, np.integer)) or isinstance(self.n_operators, bool) \
+                or not 1 <= self.n_operators <= 500:
+            raise ModelError(f"n_operators must be an integer in 1..500, got {self.n_operators!r}")
+        if self.weights not in WEIGHT_CHOICES:
+            raise ModelError(f"weights must be one of {WEIGHT_CHOICES}, got {self.weights!r}")
+        if self.offset not in ("auto", True, False):
+            raise ModelError(f"offset must be 'auto', True or False, got {self.offset!r}")
+        has_env = any(e.name == "envelope" for e in effects)
+        weights = self.weights if self.weights != "auto" else ("exponential" if has_env else "free")
+        offset = self.offset if self.offset != "auto" else (not has_env)
+        st = {"n_operators": int(self.n_operators), "weights": weights, "offset": bool(offset)}
+        if weights == "free":
+            st["threshold_step"] = None if v is None else self._choose_step(v, data, st)[0]
+        return st
+
+    def _base_names(self, structure: dict) -> list[str]:
+        n = structure["n_operators"]
+        names = ["r", "w", "beta"] if structure["weights"] == "exponential" else [f"w{i}" for i in range(n + 1)]
+        if structure["offset"]:
+            names.append("offset_deg")
+        return names
+
+    def _thresholds_weights(self, structure: dict, p: dict) -> tuple[np.ndarray, np.ndarray]:
+        n = structure["n_operators"]
+        if structure["weights"] == "exponential":
+            r = pi_thresholds(p["r"], n)
+            return r, pi_exp_weights(p["w"], p["beta"], r)
+        step = structure.get("threshold_step")
+        if step is None:
+            raise ModelError("a PI model with free weights needs structure={'threshold_step': r} in set_parameters")
+        return pi_thresholds(step, n), np.array([p[f"w{i}"] for i in range(n + 1)])
+
+    # ------------------------------------------------------------------ start values
+    def _choose_step(self, v: np.ndarray, data: HysteresisData, st: dict, steps=None) -> tuple[float, np.ndarray, float]:
+        """Pick the threshold step r on a small grid by bounded linear least squares on free weights.
+
+        The plays' span must cover the input's half range (larger thresholds never move);
+        the grid tries several fractions of it. Returns ``(r, weights[, offset], cost)``.
+        """
+        n = st["n_operators"]
+        y = data.meas_deg
+        half_span = 0.5 * float(np.ptp(v))
+        if half_span <= 0:
+            raise ModelError("the command reaching the PI model is constant: nothing to fit")
+        stride = max(1, v.size // 5000)
+        best = None
+        if steps is None:
+            steps = [frac * half_span / n for frac in (0.15, 0.3, 0.5, 0.8, 1.2)]
+        for r in steps:
+            phi = play_bank_states(v, pi_thresholds(r, n), data.run_starts)[::stride]
+            A = phi if not st["offset"] else np.column_stack([phi, np.ones(phi.shape[0])])
+            lb = np.zeros(A.shape[1])
+            ub = np.full(A.shape[1], np.inf)
+            if st["offset"]:
+                lb[-1] = -np.inf
+            sol = lsq_linear(A, y[::stride], bounds=(lb, ub), method="bvls")
+            cost = float(np.sum((A @ sol.x - y[::stride]) ** 2))
+            if best is None or cost < best[2]:
+                best = (r, sol.x, cost)
+        return best
+
+    def _base_initial(self, structure: dict, v: np.ndarray, data: HysteresisData) -> list[Parameter]:
+        n = structure["n_operators"]
+        steps = [structure["threshold_step"]] if structure["weights"] == "free" else None
+        r, x, _ = self._choose_step(v, data, structure, steps)
+        w = x[: n + 1]
+        out: list[Parameter] = []
+        if structure["weights"] == "free":
+            scale = max(float(w.sum()), 1e-12)
+            out += [Parameter(f"w{i}", float(w[i]), 1e-9 * scale if i == 0 else 0.0, np.inf) for i in range(n + 1)]
+        else:
+            ri = pi_thresholds(r, n)
+            good = w > 1e-6 * max(w.max(), 1e-300)
+            if good.sum() >= 3:
+                slope, icpt = np.polyfit(ri[good], np.log(w[good]), 1, w=np.sqrt(w[good]))
+                beta = float(-slope)
+                w0 = float(np.exp(icpt))
+            else:
+                beta = 3.0 / (n * r)
+                w0 = float(w.sum() / np.exp(-beta * ri).sum())
+            out += [Parameter("r", r, 1e-12 * max(r, 1e-300), np.inf), Parameter("w", w0, 1e-12 * max(w0, 1e-300), np.inf),
+                    Parameter("beta", beta)]
+        if structure["offset"]:
+            out.append(Parameter("offset_deg", float(x[-1])))
+        return out
+
+    # ------------------------------------------------------------------ forward / inverse
+    def _base_forward(self, structure: dict, p: dict, v: np.ndarray, run_starts: np.ndarray) -> np.ndarray:
+        r, w = self._thresholds_weights(structure, p)
+        y = play_bank_forward(np.ascontiguousarray(v, dtype=float), r, w, run_starts)
+        if structure["offset"]:
+            y += p["offset_deg"]
+        return y
+
+    def _base_inverse(self, structure: dict, p: dict, y: np.ndarray, run_starts: np.ndarray, v_range) -> np.ndarray:
+        r, w = self._thresholds_weights(structure, p)
+        r_inv, w_inv = pi_inverse_parameters(r, w)
+        if structure["offset"]:
+            y = y - p["offset_deg"]
+        return play_bank_forward(np.ascontiguousarray(y, dtype=float), r_inv, w_inv, run_starts)
+
+    def _base_stepper(self, structure: dict, p: dict, v_range):
+        r, w = self._thresholds_weights(structure, p)
+        r_inv, w_inv = pi_inverse_parameters(r, w)
+        stepper = _PIStepper(r_inv, w_inv, p["offset_deg"] if structure["offset"] else 0.0)
+        stepper.forward = (r, w)
+        return stepper
+
+    def thresholds_weights(self) -> tuple[np.ndarray, np.ndarray]:
+        """Fitted thresholds ``r_i`` (input units of the plays) and weights ``ω_i``, each (n+1,)."""
+        self._require_fitted()
+        base_p, _ = self._grouped(self.params_)
+        return self._thresholds_weights(self.structure_, base_p)
+
+    # ------------------------------------------------------------------ printing
+    def _base_describe(self, structure: dict, p: dict, se: dict, inner: str) -> str:
+        n = structure["n_operators"]
+        if structure["weights"] == "exponential":
+            parts = [f"{k}={fmt_value(p[k], se.get(k))}" for k in ("r", "w", "beta")]
+        else:
+            parts = [f"r={fmt_value(structure['threshold_step'])} (fixed)"]
+            parts += [f"w{i}={fmt_value(p[f'w{i}'], se.get(f'w{i}'))}" for i in range(n + 1) if p[f"w{i}"] != 0.0]
+        out = f"PI{n}({inner}) [{', '.join(parts)}]"
+        if structure["offset"] and p["offset_deg"] != 0.0:
+            out += f" + {fmt_value(p['offset_deg'], se.get('offset_deg'), 'deg')}"
+        return out
+
+    def _gauge(self, effects: list[Effect]) -> dict[str, float]:
+        # The play operator is homogeneous (Phi_{c r}[c x] = c Phi_r[x]): with exponential
+        # weights the envelope's scale trades off exactly against r, ω and β, so one
+        # scale parameter must be fixed. k1 = 1 makes f read in degrees around neutral.
+        for e in effects:
+            if e.name == "envelope":
+                return {f"{e.prefix}_k1": 1.0}
+        return {}
