@@ -20,6 +20,7 @@ test: $(STAMP)
 
 demo: $(STAMP)
 	$(BIN)/endocal excite damped-sine --out $(DEMO)/damped-sine --force
+	$(BIN)/endocal excite planes --out $(DEMO)/planes --force
 	@echo
 	@echo "Results are in $(DEMO)/: run.json, motor/, tracker/, truth/ and aligned.parquet per run."
 

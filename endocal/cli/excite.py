@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import sys
-import tomllib
 from pathlib import Path
 from typing import Optional
 
@@ -12,28 +11,9 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from endocal.backends.registry import make_backend
 from endocal.cli._common import cli_errors, err, fail, out
-from endocal.errors import ProtocolError
 from endocal.excite import run_excitation
 from endocal.probe import load_probe
-from endocal.protocols import load_protocol
-
-
-def parse_overrides(pairs: list[str]) -> dict:
-    """``["amplitude_deg=40", "axes=['ml']"]`` -> ``{"amplitude_deg": 40, "axes": ["ml"]}``.
-
-    Values are read as TOML values (numbers, lists, booleans, quoted strings); anything
-    that is not valid TOML is taken as a plain string.
-    """
-    overrides: dict = {}
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep or not key.strip():
-            raise ProtocolError(f"--set expects key=value, got '{pair}'")
-        try:
-            overrides[key.strip()] = tomllib.loads(f"v = {value.strip()}")["v"]
-        except tomllib.TOMLDecodeError:
-            overrides[key.strip()] = value.strip()
-    return overrides
+from endocal.protocols import load_protocol, parse_overrides
 
 
 @cli_errors
@@ -72,12 +52,7 @@ def excite(
     trajectory = proto.trajectory(probe_cfg, seed=seed)
     trajectory.check_limits(probe_cfg)  # before any backend is built or anything moves
     be = make_backend(backend, probe_cfg, seed=seed, sim_config=sim_config, hardware_config=hardware_config)
-    protocol_info = {
-        "name": proto.name,
-        "params": proto.params,
-        "source": str(proto.source_path),
-        "sha256": proto.sha256,
-    }
+    protocol_info = proto.to_dict()
     command = "endocal " + " ".join(sys.argv[1:])
 
     show = not quiet and err.is_terminal
