@@ -61,7 +61,7 @@ def _check_deviations(deviation_signed_deg: Mapping[str, float]) -> dict[str, fl
     gaps = [(az[(i + 1) % 4] - az[i]) % 360.0 for i in range(4)]
     if not all(0.0 < g < 180.0 for g in gaps):
         raise CalibrationError(
-            "the four half-plane directions do not alternate around the probe axis "
+            "the four half-plane directions do not alternate around the probe axis with gaps under 180 deg "
             f"(azimuths x+ {az[0]:.1f}, y+ {az[1]:.1f}, x- {az[2]:.1f}, y- {az[3]:.1f} deg): no orthogonal compensation exists"
         )
     return dev

@@ -27,7 +27,6 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from endocal.kinematics.bending import bending_angles_deg
 from endocal.planes.halfplanes import CalibrationError
 from endocal.planes.segment import Sweep
 
@@ -54,13 +53,6 @@ class DeltaFit:
     crosstalk_first_rms_deg: float
     crosstalk_second_rms_deg: float
     ml_asymmetry_deg: float
-
-
-def _rotated_angles(tip_in_base_mm: np.ndarray, delta_deg: float) -> tuple[np.ndarray, np.ndarray]:
-    c, s = np.cos(np.radians(delta_deg)), np.sin(np.radians(delta_deg))
-    p = tip_in_base_mm
-    rotated = np.stack([c * p[:, 0] + s * p[:, 1], -s * p[:, 0] + c * p[:, 1], p[:, 2]], axis=1)  # Rz(-delta) p
-    return bending_angles_deg(rotated)  # thesis eq. 1 in the twisted frame
 
 
 def fit_delta(
@@ -103,14 +95,22 @@ def fit_delta(
     if symmetry_weight > 0 and not (groups["x+"] and groups["x-"]):
         raise CalibrationError("the delta fit's symmetric-ML-range term needs sweeps of both x+ and x-")
     p_first, p_second = np.concatenate(first), np.concatenate(second)
+    p_plus = np.concatenate(groups["x+"]) if groups["x+"] else np.zeros((0, 3))
+    p_minus = np.concatenate(groups["x-"]) if groups["x-"] else np.zeros((0, 3))
+    starts_plus = np.cumsum([0] + [len(p) for p in groups["x+"]])[:-1]
+    starts_minus = np.cumsum([0] + [len(p) for p in groups["x-"]])[:-1]
+
+    def second_angle(p: np.ndarray, c: float, s: float) -> np.ndarray:
+        return np.degrees(np.arctan2(c * p[:, 0] + s * p[:, 1], p[:, 2]))  # thesis eq. 1 (x-z) of Rz(-delta) p
 
     def terms(delta: float) -> tuple[float, float, float]:
-        _, cross_first = _rotated_angles(p_first, delta)
-        cross_second, _ = _rotated_angles(p_second, delta)
+        c, s = np.cos(np.radians(delta)), np.sin(np.radians(delta))
+        cross_first = second_angle(p_first, c, s)
+        cross_second = np.degrees(np.arctan2(-s * p_second[:, 0] + c * p_second[:, 1], p_second[:, 2]))  # eq. 1 (y-z)
         asym = 0.0
         if symmetry_weight > 0:
-            peak = np.mean([_rotated_angles(p, delta)[1].max() for p in groups["x+"]])
-            trough = np.mean([_rotated_angles(p, delta)[1].min() for p in groups["x-"]])
+            peak = np.mean(np.maximum.reduceat(second_angle(p_plus, c, s), starts_plus))
+            trough = np.mean(np.minimum.reduceat(second_angle(p_minus, c, s), starts_minus))
             asym = float(peak + trough)
         return float(np.mean(cross_first**2)), float(np.mean(cross_second**2)), asym
 
