@@ -78,6 +78,7 @@ class Simulator:
         )
         self._setup_physics(rng_load)
         # State carried across chunks.
+        self._held_goal = np.zeros(tendon.N_DOF)  # the probe starts at home: knobs neutral, no translation/rotation
         self._pos = np.zeros(tendon.N_DOF)
         self._vel = np.zeros(tendon.N_DOF)
         self._prof = np.zeros((2, 2, self._w.size))
@@ -214,7 +215,7 @@ class Simulator:
             ten.pulley_radius_mm, ten.offset_mm, self._e0, ten.mu, self._rate_gain, self._coupling,
             self.config.bending.stiffness_nmm_per_rad, self._inv_bs2, self.config.bending.friction_nmm,
             self._wall_axis, self._wall_rad, self._wall_sign, self._k_wall,
-            self._pos, self._vel, self._prof, self._d_mm, self._beta_qs,
+            self._held_goal, self._pos, self._vel, self._prof, self._d_mm, self._beta_qs,
             out_pos, out_vel, out_t0, out_beta, out_mwall,
         )
         cr = self.config.creep

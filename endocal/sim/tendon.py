@@ -139,17 +139,17 @@ def _apply_clamp(old, lo_f, hi_f, t_end, out):
 
 
 @njit(cache=True)
-def _moment_residual(beta, mid, w, lo_d, hi_d, swlo_d, swhi_d, base, r_t, c_other, k_bend, inv_bs2,
+def _moment_residual(beta, mid, w, lo_d, hi_d, swlo_d, swhi_d, base_ag, base_an, r_t, c_other, k_bend, inv_bs2,
                      wall, wall_sign, k_wall, guess_ag, guess_ant):
     """Moment balance ``R(beta)`` (N*mm), ``dR/dbeta`` and the two distal tensions (N).
 
-    ``base[k]`` is tendon ``k``'s stretch before the distal anchor displacement
+    ``base_ag``, ``base_an`` are the tendons' stretches before the distal anchor displacement
     ``d = r_t (beta + c beta_other)`` is taken off (agonist) or added (antagonist).
     ``R`` is strictly decreasing in ``beta``.
     """
     d = r_t * (beta + c_other)
-    t_ag, g_ag = end_tension(mid[0], w, lo_d, hi_d, swlo_d, swhi_d, base[0] - d, guess_ag)
-    t_an, g_an = end_tension(mid[1], w, lo_d, hi_d, swlo_d, swhi_d, base[1] + d, guess_ant)
+    t_ag, g_ag = end_tension(mid[0], w, lo_d, hi_d, swlo_d, swhi_d, base_ag - d, guess_ag)
+    t_an, g_an = end_tension(mid[1], w, lo_d, hi_d, swlo_d, swhi_d, base_an + d, guess_ant)
     m_bend = k_bend * beta * (1.0 + inv_bs2 * beta * beta)
     dm = k_bend * (1.0 + 3.0 * inv_bs2 * beta * beta)
     pen = wall_sign * (beta - wall)
@@ -220,18 +220,17 @@ def axis_step(prof, mid, w, lo_p, hi_p, lo_d, hi_d, q_rad, d_old, beta_prev, bet
         swlo_d += w[j] * lo_d[j]
         swhi_d += w[j] * hi_d[j]
     pull = r_p * q_rad
-    base = np.empty(2)
-    base[0] = e0 + pull  # agonist stretch before the distal displacement is subtracted
-    base[1] = e0 - pull  # antagonist stretch before the distal displacement is added
+    base_ag = e0 + pull  # agonist stretch before the distal displacement is subtracted
+    base_an = e0 - pull  # antagonist stretch before the distal displacement is added
     # Sub-step 1: the knob moves, the distal anchors stay where they were.
-    for k in range(2):
-        target = base[k] - d_old if k == 0 else base[k] + d_old
-        t0, _ = end_tension(prof[k], w, lo_p, hi_p, swlo_p, swhi_p, target, prof[k, 0])
-        _apply_clamp(prof[k], lo_p, hi_p, t0, mid[k])
+    t0, _ = end_tension(prof[0], w, lo_p, hi_p, swlo_p, swhi_p, base_ag - d_old, prof[0, 0])
+    _apply_clamp(prof[0], lo_p, hi_p, t0, mid[0])
+    t0, _ = end_tension(prof[1], w, lo_p, hi_p, swlo_p, swhi_p, base_an + d_old, prof[1, 0])
+    _apply_clamp(prof[1], lo_p, hi_p, t0, mid[1])
     # Sub-step 2: the bend settles, the knob stays where it is.
     c_other = c_couple * beta_other
     b = beta_prev
-    r, dr, t_ag, t_an = _moment_residual(b, mid, w, lo_d, hi_d, swlo_d, swhi_d, base, r_t, c_other, k_bend,
+    r, dr, t_ag, t_an = _moment_residual(b, mid, w, lo_d, hi_d, swlo_d, swhi_d, base_ag, base_an, r_t, c_other, k_bend,
                                          inv_bs2, wall, wall_sign, k_wall, mid[0, n - 1], mid[1, n - 1])
     # Joint friction: stick inside the friction cone, else slide to its edge on the side of the imbalance.
     slide = 0.0
@@ -263,14 +262,14 @@ def axis_step(prof, mid, w, lo_p, hi_p, lo_d, hi_d, q_rad, d_old, beta_prev, bet
             b = bn
             break
         b = bn
-        r, dr, t_ag, t_an = _moment_residual(b, mid, w, lo_d, hi_d, swlo_d, swhi_d, base, r_t, c_other, k_bend,
+        r, dr, t_ag, t_an = _moment_residual(b, mid, w, lo_d, hi_d, swlo_d, swhi_d, base_ag, base_an, r_t, c_other, k_bend,
                                              inv_bs2, wall, wall_sign, k_wall, t_ag, t_an)
         r -= slide
         if abs(r) <= 1e-11 * (1.0 + k_bend):
             break
     d_new = r_t * (b + c_other)
-    t_ag, _ = end_tension(mid[0], w, lo_d, hi_d, swlo_d, swhi_d, base[0] - d_new, t_ag)
-    t_an, _ = end_tension(mid[1], w, lo_d, hi_d, swlo_d, swhi_d, base[1] + d_new, t_an)
+    t_ag, _ = end_tension(mid[0], w, lo_d, hi_d, swlo_d, swhi_d, base_ag - d_new, t_ag)
+    t_an, _ = end_tension(mid[1], w, lo_d, hi_d, swlo_d, swhi_d, base_an + d_new, t_an)
     _apply_clamp(mid[0], lo_d, hi_d, t_ag, prof[0])
     _apply_clamp(mid[1], lo_d, hi_d, t_an, prof[1])
     pen = wall_sign * (b - wall)
@@ -318,7 +317,7 @@ def _motor(pos, vel, goal, tau, vmax, dt):
 @njit(cache=True)
 def simulate_ticks(dt_s, goal, wrap_rad, w, tau_s, vmax, r_p, r_t, e0, mu, rate_gain_s_per_rad, coupling,
                    k_bend, inv_bs2, m_fric, wall_axis, wall_rad, wall_sign, k_wall,
-                   pos, vel, prof, d_mm, beta_qs, out_pos, out_vel, out_t0, out_beta, out_mwall):
+                   held, pos, vel, prof, d_mm, beta_qs, out_pos, out_vel, out_t0, out_beta, out_mwall):
     """Run a chunk of motor ticks; every state array is updated in place.
 
     Parameters
@@ -347,6 +346,9 @@ def simulate_ticks(dt_s, goal, wrap_rad, w, tau_s, vmax, r_p, r_t, e0, mu, rate_
         Axis the wall blocks (0, 1) or -1 for none.
     wall_rad, wall_sign, k_wall : float
         Wall bend (rad), half-plane sign, rotational stiffness (N*mm/rad).
+    held : (4,) array
+        Goal of the previous tick, held by the servos over the current tick (a goal written at
+        tick ``i`` acts from ``t_i`` on; the position read at ``t_i`` has not seen it yet).
     pos, vel : (4,) arrays
         Motor states (goal units, per s).
     prof : (2, 2, N+1) array
@@ -371,7 +373,8 @@ def simulate_ticks(dt_s, goal, wrap_rad, w, tau_s, vmax, r_p, r_t, e0, mu, rate_
     last_mu_theta = -1.0
     for i in range(dt_s.size):
         for dof in range(4):
-            pos[dof], vel[dof] = _motor(pos[dof], vel[dof], goal[i, dof], tau_s[dof], vmax[dof], dt_s[i])
+            pos[dof], vel[dof] = _motor(pos[dof], vel[dof], held[dof], tau_s[dof], vmax[dof], dt_s[i])
+            held[dof] = goal[i, dof]
         m_wall_tick = 0.0
         for ax in range(2):
             mu_theta = mu * wrap_rad[i] * (1.0 + rate_gain_s_per_rad * abs(vel[ax]))  # [rate]: mu_eff

@@ -31,22 +31,50 @@ def frame_indices(k_next: int, t_end_s: float, rate_hz: float) -> np.ndarray:
     return np.arange(k_next, k_max + 1, dtype=np.int64)
 
 
-def slip_rotation(t_s: np.ndarray, drift_deg_per_min: tuple[float, float]) -> Rotation:
-    """Base-sensor slip at times ``t_s`` that shifts the measured eq.-1 angles by ``rate * t``.
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product of scalar-first quaternions, broadcast over leading axes."""
+    aw, ax, ay, az = np.moveaxis(np.asarray(a, float), -1, 0)
+    bw, bx, by, bz = np.moveaxis(np.asarray(b, float), -1, 0)
+    return np.stack([aw * bw - ax * bx - ay * by - az * bz,
+                     aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw], axis=-1)
+
+
+def quat_from_rotvec(rotvec: np.ndarray) -> np.ndarray:
+    """Scalar-first unit quaternions of rotation vectors (n, 3) (rad), exact near zero."""
+    v = np.asarray(rotvec, float)
+    angle = np.linalg.norm(v, axis=-1)
+    half = 0.5 * angle
+    small = angle < 1e-6
+    # sin(a/2)/a with its series where a -> 0.
+    k = np.where(small, 0.5 - angle**2 / 48.0, np.sin(half) / np.where(small, 1.0, angle))
+    return np.concatenate([np.cos(half)[..., None], v * k[..., None]], axis=-1)
+
+
+def quat_apply(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors ``v`` (n, 3) by unit quaternions ``q`` (n, 4), scalar first."""
+    w = q[..., :1]
+    u = q[..., 1:]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def slip_quat(t_s: np.ndarray, drift_deg_per_min: tuple[float, float]) -> np.ndarray:
+    """Base-sensor slip (scalar-first quaternions) at times ``t_s`` that shifts the measured
+    eq.-1 angles by ``rate * t``.
 
     A rotation of the tip-in-base vector by ``-delta_1`` about ``x`` adds ``delta_1`` to the
     first axis' angle ``atan2(y, z)``; one by ``+delta_2`` about ``y`` adds ``delta_2`` to the
     second's ``atan2(x, z)``. The sensor reports ``base2tracker * slip``, so the measured
-    tip-in-base is ``slip^-1 tip_in_base`` and ``slip^-1 = Rx(-delta_1) Ry(delta_2)``.
+    tip-in-base is ``slip^-1 tip_in_base`` and ``slip^-1 = Rx(-delta_1) Ry(delta_2)``, i.e.
+    ``slip = Ry(-delta_2) Rx(delta_1)``.
     """
     minutes = np.asarray(t_s, float) / 60.0
     d1 = np.radians(drift_deg_per_min[0] * minutes)
     d2 = np.radians(drift_deg_per_min[1] * minutes)
-    zeros = np.zeros_like(d1)
-    slip_inv = Rotation.from_rotvec(np.column_stack([-d1, zeros, zeros])) * Rotation.from_rotvec(
-        np.column_stack([zeros, d2, zeros])
-    )
-    return slip_inv.inv()
+    z = np.zeros_like(d1)
+    return quat_mul(quat_from_rotvec(np.column_stack([z, -d2, z])), quat_from_rotvec(np.column_stack([d1, z, z])))
 
 
 def sensor_frames(
@@ -91,19 +119,20 @@ def sensor_frames(
     rot_noise = rng_rot.standard_normal((m, 2, 3)) * (np.radians(cfg.orientation_noise_deg) / np.sqrt(3.0))
     valid = rng_valid.random((m, 2)) >= cfg.invalid_rate
 
-    tip_in_base, tip2base = tip_pose_in_base(state[:, 0], state[:, 1], length_mm)
-    mount = Rotation.from_euler("xyz", cfg.mount_rpy_deg, degrees=True)
-    spin = Rotation.from_rotvec(np.column_stack([np.zeros(m), np.zeros(m), state[:, 3]]))
-    base2tracker = mount * spin
-    base_mm = np.asarray(cfg.mount_xyz_mm, float) + mount.apply(np.column_stack([np.zeros(m), np.zeros(m), state[:, 2]]))
-    tip_mm = base_mm + base2tracker.apply(tip_in_base)
-    tip2tracker = base2tracker * tip2base
-    base_reported = base2tracker if drift_deg_per_min is None else base2tracker * slip_rotation(t_source_s, drift_deg_per_min)
+    tip_in_base, tip2base = tip_pose_in_base(state[:, 0], state[:, 1], length_mm)  # constant curvature
+    mount_q = Rotation.from_euler("xyz", cfg.mount_rpy_deg, degrees=True).as_quat(scalar_first=True)
+    zeros = np.zeros(m)
+    spin_q = np.column_stack([np.cos(0.5 * state[:, 3]), zeros, zeros, np.sin(0.5 * state[:, 3])])
+    base2tracker = quat_mul(mount_q, spin_q)
+    base_mm = np.asarray(cfg.mount_xyz_mm, float) + quat_apply(
+        np.broadcast_to(mount_q, (m, 4)), np.column_stack([zeros, zeros, state[:, 2]]))
+    tip_mm = base_mm + quat_apply(base2tracker, tip_in_base)
+    tip2tracker = quat_mul(base2tracker, tip2base.as_quat(scalar_first=True))
+    base_reported = base2tracker if drift_deg_per_min is None else quat_mul(base2tracker, slip_quat(t_source_s, drift_deg_per_min))
 
     pos = np.stack([tip_mm, base_mm], axis=1) + pos_noise  # (m, 2, 3)
-    quat = np.empty((m, 2, 4))
-    quat[:, 0] = (Rotation.from_rotvec(rot_noise[:, 0]) * tip2tracker).as_quat(scalar_first=True)
-    quat[:, 1] = (Rotation.from_rotvec(rot_noise[:, 1]) * base_reported).as_quat(scalar_first=True)
+    quat = np.stack([quat_mul(quat_from_rotvec(rot_noise[:, 0]), tip2tracker),
+                     quat_mul(quat_from_rotvec(rot_noise[:, 1]), base_reported)], axis=1)
     pos[~valid] = np.nan
     quat[~valid] = np.nan
     pos = pos.reshape(2 * m, 3)
