@@ -69,6 +69,10 @@ def slip_quat(t_s: np.ndarray, drift_deg_per_min: tuple[float, float]) -> np.nda
     second's ``atan2(x, z)``. The sensor reports ``base2tracker * slip``, so the measured
     tip-in-base is ``slip^-1 tip_in_base`` and ``slip^-1 = Rx(-delta_1) Ry(delta_2)``, i.e.
     ``slip = Ry(-delta_2) Rx(delta_1)``.
+
+    The shift is exact for a straight tip and for a tip bent in the first axis' plane; a tip
+    bent out of that plane by ``x`` also sees ``delta_2`` change its first angle by about
+    ``delta_2 * x / z`` (the second rotation tilts the tip vector before the first).
     """
     minutes = np.asarray(t_s, float) / 60.0
     d1 = np.radians(drift_deg_per_min[0] * minutes)
