@@ -35,7 +35,7 @@ from scipy import stats
 from endocal.kinematics.bending import bending_angles_deg
 from endocal.planes.compensation import COMBINE, OrthogonalCompensator, residual_deviation
 from endocal.planes.delta import fit_delta
-from endocal.planes.halfplanes import HALF_PLANES, CalibrationError, HalfPlaneFit, fit_half_plane
+from endocal.planes.halfplanes import HALF_PLANES, MODELS, CalibrationError, HalfPlaneFit, fit_half_plane
 from endocal.planes.segment import Segmentation, Sweep
 
 SOURCES = ("direction", "position", "both")
@@ -51,14 +51,14 @@ def _interval(value: float, boot: np.ndarray, k: int, confidence: float) -> tupl
     return float(value - half), float(value + half)
 
 
-def _vectors(sweeps: Sequence[Sweep], source: str) -> tuple[np.ndarray, str]:
-    if source == "direction":
-        return np.concatenate([s.tip_dir_in_base for s in sweeps]), "tip directions"
-    return np.concatenate([s.tip_in_base_mm for s in sweeps]), "tip positions"
-
-
-def fit_pooled(sweeps: Sequence[Sweep], half_plane: str, source: str = "direction", min_excursion_deg: float = 5.0) -> HalfPlaneFit:
-    """Fit one half-plane's plane from all its sweeps pooled (duodenoscope eqs. 1-2).
+def fit_pooled(
+    sweeps: Sequence[Sweep],
+    half_plane: str,
+    source: str = "direction",
+    min_excursion_deg: float = 5.0,
+    model: str = "bend_line",
+) -> HalfPlaneFit:
+    """Fit one half-plane from all its sweeps pooled (duodenoscope eqs. 1-2).
 
     Parameters
     ----------
@@ -66,29 +66,35 @@ def fit_pooled(sweeps: Sequence[Sweep], half_plane: str, source: str = "directio
         Sweeps of ``half_plane``.
     half_plane : str
     source : {"direction", "position", "both"}
-        Fit the tip directions (the paper's distal-end vectors), the tip positions, or both:
-        unit chords and directions stacked, each set weighted by the inverse square of its
-        own out-of-plane scatter from a first fit.
+        Fit the tip directions (the paper's distal-end vectors), the tip positions, or both
+        stacked (positions as unit chords), each set weighted by the inverse square of its own
+        scatter about a first fit.
     min_excursion_deg : float
+        See :func:`endocal.planes.halfplanes.fit_half_plane`.
+    model : {"bend_line", "plane"}
         See :func:`endocal.planes.halfplanes.fit_half_plane`.
     """
     if source not in SOURCES:
         raise CalibrationError(f"unknown source '{source}': use one of {', '.join(SOURCES)}")
     if not sweeps:
         raise CalibrationError(f"half-plane '{half_plane}': no sweep found")
-    if source != "both":
-        v, what = _vectors(sweeps, source)
-        return fit_half_plane(v, half_plane, min_excursion_deg=min_excursion_deg, what=what)
-    d, _ = _vectors(sweeps, "direction")
-    fit_d = fit_half_plane(d, half_plane, min_excursion_deg=min_excursion_deg, what="tip directions")
-    p, _ = _vectors(sweeps, "position")
+    d = np.concatenate([s.tip_dir_in_base for s in sweeps])
+    if source == "direction":
+        return fit_half_plane(d, half_plane, model=model, min_excursion_deg=min_excursion_deg, what="tip directions")
+    p = np.concatenate([s.tip_in_base_mm for s in sweeps])
     chords = p / np.linalg.norm(p, axis=1, keepdims=True)
-    fit_p = fit_half_plane(chords, half_plane, min_excursion_deg=0.0, what="tip chords")
+    if source == "position":
+        # a constant-curvature chord leaves the base at half the bend
+        return fit_half_plane(chords, half_plane, model=model, angle_scale=2.0, min_excursion_deg=min_excursion_deg,
+                              what="tip positions")
+    fit_d = fit_half_plane(d, half_plane, model=model, min_excursion_deg=min_excursion_deg, what="tip directions")
+    fit_p = fit_half_plane(chords, half_plane, model=model, angle_scale=2.0, min_excursion_deg=0.0, what="tip positions")
     floor = 1e-12
     w = np.concatenate([np.full(len(d), 1.0 / max(fit_d.rms_out_of_plane, floor) ** 2),
                         np.full(len(chords), 1.0 / max(fit_p.rms_out_of_plane, floor) ** 2)])
-    return fit_half_plane(np.concatenate([d, chords]), half_plane, weights=w / w.max(), min_excursion_deg=0.0,
-                          what="tip directions and chords")
+    scale = np.concatenate([np.ones(len(d)), np.full(len(chords), 2.0)])
+    return fit_half_plane(np.concatenate([d, chords]), half_plane, model=model, weights=w / w.max(), angle_scale=scale,
+                          min_excursion_deg=0.0, what="tip directions and positions")
 
 
 @dataclass
@@ -102,8 +108,10 @@ class PlanesCalibration:
         unsigned angle to the standard plane (duodenoscope eq. 2) and its confidence interval, deg.
     deviation_signed_deg, deviation_signed_ci_deg : dict
         Signed deviation (counter-clockwise about +z) and its interval, deg; the compensator uses these.
-    tilt_deg : dict
-        Angle between the probe axis and each fitted plane (0 under the paper's hypothesis), deg.
+    tilt_deg, offset_deg : dict
+        Per half-plane diagnostics of the paper's hypothesis: tilt of the fitted plane from the
+        probe axis (``model="plane"``), and the other knob's residual bend across the sweep's
+        line (``model="bend_line"``), deg. Both are 0 when the hypothesis holds.
     delta_deg, delta_ci_deg : float, (float, float)
         The thesis's plane twist and its interval, deg.
     residual_deviation_deg, residual_deviation_signed_deg : dict
@@ -115,8 +123,8 @@ class PlanesCalibration:
         Run, index, half-plane, frames, time span and excursion of every sweep fitted.
     dropped_frames : dict
         Frames dropped, per reason (see :class:`endocal.planes.segment.Segmentation`).
-    source, combine : str
-        What was fitted and how the compensator adds angles.
+    source, model, combine : str
+        What was fitted, with which half-plane model, and how the compensator adds angles.
     confidence : float
     ci_method : dict
         Per half-plane and for ``delta``: ``sweeps`` or ``frames`` (what the bootstrap resampled).
@@ -128,6 +136,7 @@ class PlanesCalibration:
     deviation_signed_deg: dict[str, float]
     deviation_signed_ci_deg: dict[str, tuple[float, float]]
     tilt_deg: dict[str, float]
+    offset_deg: dict[str, float]
     delta_deg: float
     delta_ci_deg: tuple[float, float]
     residual_deviation_deg: dict[str, float]
@@ -136,6 +145,7 @@ class PlanesCalibration:
     sweeps_used: list[dict] = field(default_factory=list)
     dropped_frames: dict[str, int] = field(default_factory=dict)
     source: str = "direction"
+    model: str = "bend_line"
     combine: str = "bend_vector"
     confidence: float = 0.95
     ci_method: dict[str, str] = field(default_factory=dict)
@@ -192,6 +202,7 @@ class PlanesCalibration:
             "deviation_signed_deg": floats(self.deviation_signed_deg),
             "deviation_signed_ci_deg": pairs(self.deviation_signed_ci_deg),
             "tilt_deg": floats(self.tilt_deg),
+            "offset_deg": floats(self.offset_deg),
             "delta_deg": float(self.delta_deg),
             "delta_ci_deg": [float(self.delta_ci_deg[0]), float(self.delta_ci_deg[1])],
             "residual_deviation_deg": floats(self.residual_deviation_deg),
@@ -201,6 +212,7 @@ class PlanesCalibration:
             "ci_method": dict(self.ci_method),
             "n_bootstrap": int(self.n_bootstrap),
             "source": self.source,
+            "model": self.model,
             "combine": self.combine,
             "sweeps_used": [dict(s) for s in self.sweeps_used],
             "dropped_frames": {k: int(v) for k, v in self.dropped_frames.items()},
@@ -232,6 +244,7 @@ class PlanesCalibration:
                 deviation_signed_deg=half("deviation_signed_deg", float),
                 deviation_signed_ci_deg=half("deviation_signed_ci_deg", pair),
                 tilt_deg=half("tilt_deg", float),
+                offset_deg=half("offset_deg", float),
                 delta_deg=float(d["delta_deg"]),
                 delta_ci_deg=pair(d["delta_ci_deg"]),
                 residual_deviation_deg=half("residual_deviation_deg", float),
@@ -240,6 +253,7 @@ class PlanesCalibration:
                 sweeps_used=[dict(s) for s in d["sweeps_used"]],
                 dropped_frames={str(k): int(v) for k, v in d["dropped_frames"].items()},
                 source=str(d["source"]),
+                model=str(d["model"]),
                 combine=str(d["combine"]),
                 confidence=float(d["confidence"]),
                 ci_method={str(k): str(v) for k, v in d["ci_method"].items()},
@@ -253,8 +267,8 @@ class PlanesCalibration:
             raise CalibrationError(f"planes calibration has a malformed value: {exc}") from None
         if out.residual_source not in RESIDUAL_SOURCES:
             raise CalibrationError(f"unknown residual_source '{out.residual_source}' (use {', '.join(RESIDUAL_SOURCES)})")
-        if out.combine not in COMBINE or out.source not in SOURCES:
-            raise CalibrationError(f"unknown combine '{out.combine}' or source '{out.source}'")
+        if out.combine not in COMBINE or out.source not in SOURCES or out.model not in MODELS:
+            raise CalibrationError(f"unknown combine '{out.combine}', source '{out.source}' or model '{out.model}'")
         out.compensator  # noqa: B018 -- validates the deviations (ordering, range) at load time
         return out
 
@@ -272,6 +286,7 @@ def fit_planes(
     segmentation: Segmentation,
     *,
     source: str = "direction",
+    model: str = "bend_line",
     combine: str = "bend_vector",
     min_excursion_deg: float = 5.0,
     symmetry_weight: float = 1.0,
@@ -289,6 +304,10 @@ def fit_planes(
         Single-knob sweeps of one or more ``planes`` runs (add Segmentations with ``+``).
     source : {"direction", "position", "both"}
         What is fitted (see :func:`fit_pooled`); the paper fits distal-end directions.
+    model : {"bend_line", "plane"}
+        Half-plane model (see :func:`endocal.planes.halfplanes.fit_half_plane`): the paper's
+        plane through the probe axis, or the default line in bend space that tolerates the
+        other knob's residual bend.
     combine : {"bend_vector", "direction_sine"}
         How the compensator adds the two knobs (see :mod:`endocal.planes.compensation`).
     min_excursion_deg : float
@@ -322,6 +341,8 @@ def fit_planes(
         raise CalibrationError(f"unknown combine '{combine}': use one of {', '.join(COMBINE)}")
     if source not in SOURCES:
         raise CalibrationError(f"unknown source '{source}': use one of {', '.join(SOURCES)}")
+    if model not in MODELS:
+        raise CalibrationError(f"unknown model '{model}': use one of {', '.join(MODELS)}")
     if not 0 < confidence < 1:
         raise CalibrationError(f"confidence must lie in (0, 1), got {confidence}")
     if n_bootstrap < 0:
@@ -334,7 +355,7 @@ def fit_planes(
             f"no sweep of half-plane(s) {', '.join(empty)} (sweeps found per half-plane: {found}); a planes run must "
             "move each knob both ways from rest while the other stays near zero"
         )
-    fits = {h: fit_pooled(groups[h], h, source, min_excursion_deg) for h in HALF_PLANES}
+    fits = {h: fit_pooled(groups[h], h, source, min_excursion_deg, model) for h in HALF_PLANES}
     sweeps = [s for h in HALF_PLANES for s in groups[h]]
     delta = fit_delta(sweeps, symmetry_weight=symmetry_weight)
 
@@ -346,7 +367,7 @@ def fit_planes(
     for b in range(n_bootstrap):
         replicate = {h: _resample(groups[h], rng) for h in HALF_PLANES}
         for h in HALF_PLANES:
-            f = fit_pooled(replicate[h], h, source, 0.0)
+            f = fit_pooled(replicate[h], h, source, 0.0, model)
             boot_signed[h][b], boot_unsigned[h][b] = f.deviation_signed_deg, f.deviation_deg
         boot_delta[b] = fit_delta([s for h in HALF_PLANES for s in replicate[h]], symmetry_weight=symmetry_weight,
                                   around_deg=delta.delta_deg).delta_deg
@@ -366,7 +387,7 @@ def fit_planes(
     signed = {h: fits[h].deviation_signed_deg for h in HALF_PLANES}
     compensator = OrthogonalCompensator(signed, combine=combine)
     residual, residual_signed, residual_source = _residuals(
-        compensator, signed, groups, source, combine, compensated, residual_amplitude_deg
+        compensator, signed, groups, source, model, combine, compensated, residual_amplitude_deg
     )
 
     used = []
@@ -383,6 +404,7 @@ def fit_planes(
         deviation_signed_deg=signed,
         deviation_signed_ci_deg=ci_signed,
         tilt_deg={h: fits[h].tilt_deg for h in HALF_PLANES},
+        offset_deg={h: fits[h].offset_deg for h in HALF_PLANES},
         delta_deg=delta.delta_deg,
         delta_ci_deg=delta_ci,
         residual_deviation_deg=residual,
@@ -391,6 +413,7 @@ def fit_planes(
         sweeps_used=used,
         dropped_frames=dict(segmentation.dropped),
         source=source,
+        model=model,
         combine=combine,
         confidence=confidence,
         ci_method=ci_method,
@@ -398,13 +421,13 @@ def fit_planes(
     )
 
 
-def _residuals(compensator, signed, groups, source, combine, compensated, amplitude_deg):
+def _residuals(compensator, signed, groups, source, model, combine, compensated, amplitude_deg):
     if compensated is not None:
         after = compensated.by_half_plane()
         missing = [h for h in HALF_PLANES if not after[h]]
         if missing:
             raise CalibrationError(f"the compensated sweeps lack half-plane(s) {', '.join(missing)}")
-        fits = {h: fit_pooled(after[h], h, source, 0.0) for h in HALF_PLANES}
+        fits = {h: fit_pooled(after[h], h, source, 0.0, model) for h in HALF_PLANES}
         return ({h: fits[h].deviation_deg for h in HALF_PLANES},
                 {h: fits[h].deviation_signed_deg for h in HALF_PLANES}, "measured")
     if all(len(groups[h]) >= 2 for h in HALF_PLANES):
@@ -413,8 +436,8 @@ def _residuals(compensator, signed, groups, source, combine, compensated, amplit
             unsigned, signed_r = [], []
             for k in range(len(groups[h])):
                 rest = groups[h][:k] + groups[h][k + 1:]
-                trained = dict(signed, **{h: fit_pooled(rest, h, source, 0.0).deviation_signed_deg})
-                truth = dict(signed, **{h: fit_pooled([groups[h][k]], h, source, 0.0).deviation_signed_deg})
+                trained = dict(signed, **{h: fit_pooled(rest, h, source, 0.0, model).deviation_signed_deg})
+                truth = dict(signed, **{h: fit_pooled([groups[h][k]], h, source, 0.0, model).deviation_signed_deg})
                 f = residual_deviation(OrthogonalCompensator(trained, combine), truth, amplitude_deg)[h]
                 unsigned.append(f.deviation_deg)
                 signed_r.append(f.deviation_signed_deg)

@@ -7,10 +7,12 @@ encode as follows (the summary states them in prose only):
 * the AP and ML planes stay *perpendicular*: one rotation ``delta`` about the probe axis turns
   both standard planes, ``p' = Rz(-delta) p`` (counter-clockwise about +z positive, the sign
   convention of the half-plane deviations);
-* the tendons act *independently*: in the rotated frame a sweep of one knob leaves the other
-  axis's eq. 1 angle at zero, so we minimise the mean squared cross-talk
-  ``mean(theta_second'^2)`` over first-knob sweeps plus ``mean(theta_first'^2)`` over
-  second-knob sweeps (eq. 1 angles, thesis eq. 1, of the rotated tip positions);
+* the tendons act *independently*: in the rotated frame a sweep of one knob does not move the
+  other axis's eq. 1 angle, so we minimise the cross-talk: the within-sweep variance of
+  ``theta_second'`` over first-knob sweeps plus that of ``theta_first'`` over second-knob sweeps
+  (eq. 1 angles, thesis eq. 1, of the rotated tip positions). Variance about each sweep's mean
+  rather than the mean square, so that a bend the other knob keeps from backlash (constant
+  during the sweep) is not mistaken for cross-talk;
 * the *ML range is symmetric*: the mean peak of ``theta_second'`` over ``x+`` sweeps and the
   mean trough over ``x-`` sweeps cancel. With a single unknown a hard constraint would fix
   ``delta`` by itself, so it enters as a penalty ``symmetry_weight * (peak + trough)^2``.
@@ -42,8 +44,8 @@ class DeltaFit:
     cost_deg2 : float
         Objective at the optimum, deg^2.
     crosstalk_first_rms_deg, crosstalk_second_rms_deg : float
-        RMS of the other axis's eq. 1 angle during first-knob / second-knob sweeps, after
-        rotating by ``delta``, degrees.
+        Within-sweep standard deviation of the other axis's eq. 1 angle during first-knob /
+        second-knob sweeps, after rotating by ``delta``, degrees.
     ml_asymmetry_deg : float
         Mean ``x+`` peak plus mean ``x-`` trough of the second-axis angle after rotation, degrees.
     """
@@ -95,6 +97,9 @@ def fit_delta(
     if symmetry_weight > 0 and not (groups["x+"] and groups["x-"]):
         raise CalibrationError("the delta fit's symmetric-ML-range term needs sweeps of both x+ and x-")
     p_first, p_second = np.concatenate(first), np.concatenate(second)
+    starts_first = np.cumsum([0] + [len(p) for p in first])[:-1]
+    starts_second = np.cumsum([0] + [len(p) for p in second])[:-1]
+    n_first, n_second = np.diff(np.r_[starts_first, len(p_first)]), np.diff(np.r_[starts_second, len(p_second)])
     p_plus = np.concatenate(groups["x+"]) if groups["x+"] else np.zeros((0, 3))
     p_minus = np.concatenate(groups["x-"]) if groups["x-"] else np.zeros((0, 3))
     starts_plus = np.cumsum([0] + [len(p) for p in groups["x+"]])[:-1]
@@ -102,6 +107,10 @@ def fit_delta(
 
     def second_angle(p: np.ndarray, c: float, s: float) -> np.ndarray:
         return np.degrees(np.arctan2(c * p[:, 0] + s * p[:, 1], p[:, 2]))  # thesis eq. 1 (x-z) of Rz(-delta) p
+
+    def within_sweep_variance(angle: np.ndarray, starts: np.ndarray, counts: np.ndarray) -> float:
+        mean = np.repeat(np.add.reduceat(angle, starts) / counts, counts)
+        return float(np.mean((angle - mean) ** 2))
 
     def terms(delta: float) -> tuple[float, float, float]:
         c, s = np.cos(np.radians(delta)), np.sin(np.radians(delta))
@@ -112,7 +121,8 @@ def fit_delta(
             peak = np.mean(np.maximum.reduceat(second_angle(p_plus, c, s), starts_plus))
             trough = np.mean(np.minimum.reduceat(second_angle(p_minus, c, s), starts_minus))
             asym = float(peak + trough)
-        return float(np.mean(cross_first**2)), float(np.mean(cross_second**2)), asym
+        return (within_sweep_variance(cross_first, starts_first, n_first),
+                within_sweep_variance(cross_second, starts_second, n_second), asym)
 
     def cost(delta: float) -> float:
         a, b, asym = terms(delta)

@@ -18,6 +18,10 @@ with ``n_std = x`` for the first-axis half-planes ``y+``/``y-`` (standard plane 
 ``n_X`` and ``n_Y`` in one sentence; what matters, and what is coded, is that each half-plane
 is compared with the standard plane its knob is meant to bend in.
 
+The paper's plane must contain the probe axis, which only holds while the other knob's bend is
+exactly zero; a backlash-held residual bend tilts it. :func:`fit_half_plane` therefore also
+offers (and defaults to) the same SVD on centred bending vectors, see its ``model``.
+
 Besides the paper's unsigned angle we keep a *signed* deviation: the azimuth of the
 half-plane's trace on the base ``x-y`` plane minus its nominal azimuth (``y+`` 90, ``y-`` -90,
 ``x+`` 0, ``x-`` 180 deg), counter-clockwise about ``+z`` positive. The compensator needs the
@@ -78,12 +82,19 @@ class HalfPlaneFit:
     deviation_signed_deg : float
         ``azimuth_deg`` minus the nominal azimuth, wrapped, counter-clockwise about +z, deg.
     tilt_deg : float
-        Angle between the probe axis ``z`` and the fitted plane (0 when the plane contains it).
+        ``"plane"`` model: angle between the probe axis and the fitted plane (0 when the plane
+        contains it, as the paper assumes), deg.
+    offset_deg : float
+        ``"bend_line"`` model: distance of the sweep's line from zero bend (the other knob's
+        residual bend), deg.
     excursion_deg : float
         Largest angle of the vectors from the probe axis, deg.
     rms_out_of_plane : float
-        Root mean square of ``n . v`` over the vectors (their units).
+        Scatter about the fit: RMS of ``n . v`` (vector units) for ``"plane"``, RMS distance
+        from the line (deg of bend) for ``"bend_line"``.
     n_samples : int
+    model : str
+        ``"bend_line"`` or ``"plane"``.
     """
 
     half_plane: str
@@ -92,9 +103,11 @@ class HalfPlaneFit:
     deviation_deg: float
     deviation_signed_deg: float
     tilt_deg: float
+    offset_deg: float
     excursion_deg: float
     rms_out_of_plane: float
     n_samples: int
+    model: str
 
 
 def excursion_deg(vectors: np.ndarray) -> float:
@@ -105,15 +118,60 @@ def excursion_deg(vectors: np.ndarray) -> float:
     return float(np.degrees(np.max(np.arctan2(np.hypot(v[:, 0], v[:, 1]), v[:, 2]))))
 
 
+MODELS = ("bend_line", "plane")
+
+
+def bend_deg_from_vectors(vectors: np.ndarray, angle_scale=1.0) -> np.ndarray:
+    """Bending vectors (deg) that point each vector away from the probe axis (constant curvature).
+
+    A vector at angle ``theta`` from ``+z`` towards azimuth ``phi`` maps to
+    ``angle_scale * theta * (cos phi, sin phi)``: for tip directions (``angle_scale=1``) that is
+    the constant-curvature bending vector ``b``; a tip position's chord leaves the base at half
+    the bend, so positions take ``angle_scale=2``.
+
+    Parameters
+    ----------
+    vectors : (n, 3) array
+    angle_scale : float or (n,) array
+
+    Returns
+    -------
+    (n, 2) array
+        ``(b_x, b_y)`` in degrees.
+    """
+    v = np.asarray(vectors, float)
+    rho = np.hypot(v[:, 0], v[:, 1])
+    theta = np.degrees(np.arctan2(rho, v[:, 2])) * np.asarray(angle_scale, float)
+    safe = np.where(rho > 0, rho, 1.0)
+    return np.where(rho[:, None] > 0, theta[:, None] * v[:, :2] / safe[:, None], 0.0)
+
+
 def fit_half_plane(
     vectors_in_base: np.ndarray,
     half_plane: str,
     *,
+    model: str = "bend_line",
     weights: np.ndarray | None = None,
+    angle_scale=1.0,
     min_excursion_deg: float = 5.0,
     what: str = "vectors",
 ) -> HalfPlaneFit:
     """Fit the motion plane of one half-plane sweep (duodenoscope paper, eqs. 1-2).
+
+    Two models:
+
+    ``"plane"``
+        The paper's eq. 1 as printed: SVD of the stacked vectors, no centring, so the plane
+        passes through the base and contains the probe axis exactly when the other knob's
+        bend is zero.
+    ``"bend_line"`` (default)
+        The same SVD on the *centred* bending vectors (:func:`bend_deg_from_vectors`): the
+        sweep is a straight line ``b = beta u(psi) + b0`` in bend space and ``u(psi)`` its
+        principal direction. With ``b0 = 0`` this is the paper's plane (a plane through
+        ``z`` maps to a line through 0), but it also holds when the other knob keeps a
+        residual bend ``b0`` (backlash: the knob is back at 0, the bend is not), which tilts
+        the paper's plane and biases its deviation by degrees. ``offset_deg`` reports
+        ``|b0|`` across the line.
 
     Parameters
     ----------
@@ -121,12 +179,15 @@ def fit_half_plane(
         In-plane vectors in the base frame: tip directions (unit) or tip positions (mm).
     half_plane : str
         Which half-plane the vectors sweep (``y+``, ``y-``, ``x+``, ``x-``).
+    model : {"bend_line", "plane"}
     weights : (n,) array, optional
-        Non-negative row weights (e.g. inverse noise), applied as ``sqrt(w) v`` in the SVD.
+        Non-negative row weights (e.g. inverse noise variance) for the SVD.
+    angle_scale : float or (n,) array
+        ``"bend_line"`` only: 1 for tip directions, 2 for tip positions (chords).
     min_excursion_deg : float
         Smallest largest-angle-from-the-axis that still defines a plane, degrees.
     what : str
-        Word naming the vectors in error messages (``tip directions``, ``tip positions``).
+        Words naming the vectors in error messages (``tip directions``, ``tip positions``).
 
     Returns
     -------
@@ -139,6 +200,8 @@ def fit_half_plane(
         the half-plane and the excursion seen).
     """
     check_half_plane(half_plane)
+    if model not in MODELS:
+        raise CalibrationError(f"unknown half-plane model '{model}': use one of {', '.join(MODELS)}")
     v = np.asarray(vectors_in_base, float)
     if v.ndim != 2 or v.shape[1] != 3:
         raise CalibrationError(f"half-plane '{half_plane}': {what} must have shape (n, 3), got {v.shape}")
@@ -150,26 +213,44 @@ def fit_half_plane(
             f"half-plane '{half_plane}': the {what} move only {seen:.2f} deg from the probe axis, too little to fit "
             f"its plane (need at least {min_excursion_deg:g} deg); sweep that knob further"
         )
-    rows = v if weights is None else v * np.sqrt(np.asarray(weights, float))[:, None]
-    _, _, wt = np.linalg.svd(rows, full_matrices=False)  # duodenoscope eq. 1
-    n = wt[-1]
-    # Trace of the plane on the base x-y plane, pointing to the side the sweep went.
-    trace = np.array([-n[1], n[0], 0.0])
-    if not np.linalg.norm(trace) > 1e-9:
-        raise CalibrationError(f"half-plane '{half_plane}': the fitted plane is perpendicular to the probe axis")
-    trace /= np.linalg.norm(trace)
-    if trace @ v.sum(axis=0) < 0:
-        trace, n = -trace, -n
+    sqrt_w = np.ones(len(v)) if weights is None else np.sqrt(np.asarray(weights, float))
+    nominal = np.radians(NOMINAL_AZIMUTH_DEG[half_plane])
+    if model == "plane":
+        _, _, wt = np.linalg.svd(v * sqrt_w[:, None], full_matrices=False)  # duodenoscope eq. 1
+        n = wt[-1]
+        trace = np.array([-n[1], n[0]])  # the plane's trace on the base x-y plane
+        if not np.linalg.norm(trace) > 1e-9:
+            raise CalibrationError(f"half-plane '{half_plane}': the fitted plane is perpendicular to the probe axis")
+        trace /= np.linalg.norm(trace)
+        if trace @ v[:, :2].sum(axis=0) < 0:  # point it to the side the sweep went
+            trace, n = -trace, -n
+        deviation = float(np.degrees(np.arccos(min(1.0, abs(float(n @ _STANDARD_NORMAL[half_plane]))))))  # eq. 2
+        tilt, offset = float(np.degrees(np.arcsin(min(1.0, abs(n[2]))))), 0.0
+        rms = float(np.sqrt(np.mean((v @ n) ** 2)))
+    else:
+        b = bend_deg_from_vectors(v, angle_scale)
+        w = sqrt_w**2
+        centre = (w[:, None] * b).sum(axis=0) / w.sum()
+        _, _, wt = np.linalg.svd((b - centre) * sqrt_w[:, None], full_matrices=False)  # eq. 1, centred, in bend space
+        trace = wt[0]
+        if trace @ [np.cos(nominal), np.sin(nominal)] < 0:  # deviations are within +-90 deg of nominal
+            trace = -trace
+        n = np.array([trace[1], -trace[0], 0.0])  # normal of the plane through z along the trace
+        deviation = float(np.degrees(np.arccos(min(1.0, abs(float(n @ _STANDARD_NORMAL[half_plane]))))))  # eq. 2
+        tilt = 0.0
+        offset = float(abs(centre[0] * trace[1] - centre[1] * trace[0]))
+        rms = float(np.sqrt(np.mean(((b - centre) @ wt[1]) ** 2)))
     azimuth = float(np.degrees(np.arctan2(trace[1], trace[0])))
-    deviation = float(np.degrees(np.arccos(min(1.0, abs(float(n @ _STANDARD_NORMAL[half_plane]))))))  # duodenoscope eq. 2
     return HalfPlaneFit(
         half_plane=half_plane,
         normal=n,
         azimuth_deg=azimuth,
         deviation_deg=deviation,
         deviation_signed_deg=float(wrap_deg(azimuth - NOMINAL_AZIMUTH_DEG[half_plane])),
-        tilt_deg=float(np.degrees(np.arcsin(min(1.0, abs(n[2]))))),
+        tilt_deg=tilt,
+        offset_deg=offset,
         excursion_deg=seen,
-        rms_out_of_plane=float(np.sqrt(np.mean((v @ n) ** 2))),
+        rms_out_of_plane=rms,
         n_samples=len(v),
+        model=model,
     )
