@@ -133,22 +133,14 @@ def backlash_inverse(v, width, run_starts):
 
 
 @njit(cache=True)
-def bspline_eval(t, c, deg, x):
-    """Value of the B-spline (knots ``t``, coefficients ``c``, degree ``deg``) at ``x``.
-
-    Beyond the base interval the end polynomial pieces are extended (as scipy's
-    ``BSpline(extrapolate=True)``). de Boor's algorithm.
-    """
+def _bspline_inside(t, c, deg, x):
+    """de Boor's algorithm for ``t[deg] <= x <= t[nc]``."""
     nc = c.shape[0]
-    # interval index ell with t[ell] <= x < t[ell+1], restricted to deg <= ell <= nc-1
     lo = deg
     hi = nc - 1
-    if x <= t[lo]:
-        ell = lo
-    elif x >= t[hi]:
+    if x >= t[hi]:
         ell = hi
     else:
-        # binary search
         a = lo
         b = hi
         while b - a > 1:
@@ -169,6 +161,35 @@ def bspline_eval(t, c, deg, x):
             alpha = 0.0 if den == 0.0 else (x - left) / den
             d[j] = (1.0 - alpha) * d[j - 1] + alpha * d[j]
     return d[deg]
+
+
+@njit(cache=True)
+def bspline_eval(t, c, deg, x):
+    """Clamped B-spline (knots ``t``, coefficients ``c``, degree ``deg``) at ``x``, extended linearly.
+
+    Beyond the base interval the spline continues along its end tangent (a cubic
+    extrapolated as a polynomial can turn back, which would break the monotone
+    inverse). Matches :func:`bspline_eval_array`.
+    """
+    nc = c.shape[0]
+    a = t[deg]
+    b = t[nc]
+    if x < a:
+        slope = deg * (c[1] - c[0]) / (t[deg + 1] - t[1])
+        return c[0] + slope * (x - a)
+    if x > b:
+        slope = deg * (c[nc - 1] - c[nc - 2]) / (t[nc + deg - 1] - t[nc - 1])
+        return c[nc - 1] + slope * (x - b)
+    return _bspline_inside(t, c, deg, x)
+
+
+@njit(cache=True)
+def bspline_eval_array(t, c, deg, x):
+    """:func:`bspline_eval` over an array ``x`` (n,)."""
+    out = np.empty(x.shape[0])
+    for i in range(x.shape[0]):
+        out[i] = bspline_eval(t, c, deg, x[i])
+    return out
 
 
 @njit(cache=True)
@@ -351,3 +372,68 @@ def count_reversals(u, tol):
                 extreme = x
                 total += 1
     return total
+
+
+@njit(cache=True)
+def pi_exp_forward_jac(x, r, w, beta, n_ops, G, run_starts):
+    """PI with ``r_i = r·i``, ``ω_i = ω e^{-β r_i}`` (eqs. 5, 7, 8) and its exact Jacobian.
+
+    ``G`` (n, q) is the Jacobian of the input ``x`` w.r.t. q upstream parameters (the
+    envelope's, eq. 6). A play output equals ``x_a ∓ r_i`` with ``a`` the last sample at
+    which it was pushed, so its sensitivities are those of that anchor sample.
+
+    Returns ``y`` (n,) and ``J`` (n, q + 3): columns q upstream, then r, ω, β.
+    """
+    n = x.shape[0]
+    q = G.shape[1]
+    m = n_ops + 1
+    y = np.empty(n)
+    J = np.zeros((n, q + 3))
+    idx = np.arange(m) * 1.0
+    thr = r * idx
+    wi = w * np.exp(-beta * thr)
+    z = np.zeros(m)
+    anchor = np.full(m, -1)
+    cr = np.zeros(m)
+    gacc = np.zeros(q)
+    n_runs = run_starts.shape[0]
+    for qq in range(n_runs):
+        a = run_starts[qq]
+        b = run_starts[qq + 1] if qq + 1 < n_runs else n
+        for i in range(m):
+            z[i] = 0.0
+            anchor[i] = -1
+            cr[i] = 0.0
+        for k in range(a, b):
+            xk = x[k]
+            acc = 0.0
+            d_r = 0.0
+            d_b = 0.0
+            for i in range(m):
+                lo = xk - thr[i]
+                hi = xk + thr[i]
+                if z[i] < lo:
+                    z[i] = lo
+                    anchor[i] = k
+                    cr[i] = -idx[i]
+                elif z[i] > hi:
+                    z[i] = hi
+                    anchor[i] = k
+                    cr[i] = idx[i]
+                wz = wi[i] * z[i]
+                acc += wz
+                d_r += wi[i] * cr[i] - beta * idx[i] * wz
+                d_b -= thr[i] * wz
+                ai = anchor[i]
+                if ai >= 0:
+                    wgt = wi[i]
+                    for j in range(q):
+                        gacc[j] += wgt * G[ai, j]
+            for j in range(q):
+                J[k, j] = gacc[j]
+                gacc[j] = 0.0
+            y[k] = acc
+            J[k, q] = d_r
+            J[k, q + 1] = acc / w
+            J[k, q + 2] = d_b
+    return y, J

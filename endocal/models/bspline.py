@@ -2,7 +2,7 @@
 
 Thesis, section 2.3: the loop is modelled by one B-spline for increasing and one for
 decreasing command (:class:`scipy.interpolate.BSpline`, shared knots at quantiles of
-the command, extrapolated beyond them). At a reversal the output leaves the branch it
+the command, continued along their end tangents beyond them). At a reversal the output leaves the branch it
 was on along a backlash transition of slope ``s`` until it meets the other branch
 (:mod:`endocal.models._directional`), so the switch is continuous. Fitting adjusts
 both splines' coefficients and ``s`` jointly by least squares, from per-direction
@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.interpolate import BSpline
+from scipy.sparse import csr_matrix
 
 from endocal.errors import ModelError
 from endocal.models._directional import DirectionalModel, direction_masks
@@ -114,7 +115,41 @@ class BSplineModel(DirectionalModel):
         t = np.asarray(structure["knots"], dtype=float)
         c_up, c_dn = self._coefs(structure, p)
         k = structure["degree"]
-        return BSpline(t, c_up, k, extrapolate=True)(v), BSpline(t, c_dn, k, extrapolate=True)(v)
+        B, ext = self._design(t, k, v)
+        C = B @ np.column_stack([c_up, c_dn])
+        if ext is not None:
+            C += ext @ np.column_stack([c_up, c_dn])
+        return np.ascontiguousarray(C[:, 0]), np.ascontiguousarray(C[:, 1])
+
+    def _design(self, t: np.ndarray, k: int, v: np.ndarray):
+        """Design matrix at ``v`` (clipped to the base interval) and the linear-extension correction.
+
+        Cached for the last ``v``: during a fit without input effects every evaluation
+        sees the same command, and the branches are linear in their coefficients.
+        """
+        cache = getattr(self, "_design_cache", None)
+        if cache is not None and cache[0] is not None and cache[0].shape == v.shape and np.array_equal(cache[0], v) \
+                and np.array_equal(cache[1], t):
+            return cache[2], cache[3]
+        a, b = t[k], t[-k - 1]
+        vc = np.clip(v, a, b)
+        B = BSpline.design_matrix(vc, t, k).tocsr()
+        m = len(t) - k - 1
+        # end tangents: f'(a) = k (c1 - c0)/(t[k+1] - t[1]),  f'(b) = k (c[m-1] - c[m-2])/(t[m+k-1] - t[m-1])
+        ext = np.zeros((v.size, m))
+        lo = v < a
+        hi = v > b
+        if lo.any():
+            g = k / (t[k + 1] - t[1]) * (v[lo] - a)
+            ext[lo, 0] -= g
+            ext[lo, 1] += g
+        if hi.any():
+            g = k / (t[m + k - 1] - t[m - 1]) * (v[hi] - b)
+            ext[hi, m - 2] -= g
+            ext[hi, m - 1] += g
+        ext = csr_matrix(ext) if (lo.any() or hi.any()) else None
+        self._design_cache = (v.copy(), t.copy(), B, ext)
+        return B, ext
 
     def _base_describe(self, structure: dict, p: dict, se: dict, inner: str) -> str:
         t = structure["knots"]

@@ -142,6 +142,18 @@ class HysteresisData:
         """Cut a concatenated (n,) array into per-run arrays."""
         return [values[s] for s in self.run_slices()]
 
+    def decimate(self, step: int) -> HysteresisData:
+        """Every ``step``-th sample of each run (each run keeps its first sample)."""
+        idx = np.concatenate([np.arange(sl.start, sl.stop, step) for sl in self.run_slices()])
+        starts = np.concatenate([[0], np.cumsum([len(range(sl.start, sl.stop, step)) for sl in self.run_slices()])[:-1]])
+        return HysteresisData(
+            cmd_deg=self.cmd_deg[idx],
+            meas_deg=None if self.meas_deg is None else self.meas_deg[idx],
+            t_s=None if self.t_s is None else self.t_s[idx],
+            extras={k: v[idx] for k, v in self.extras.items()},
+            run_starts=starts,
+        )
+
     def with_cmd(self, cmd_deg: np.ndarray) -> HysteresisData:
         """Same time base, extras and runs, another command (and no measurement)."""
         return HysteresisData(cmd_deg=cmd_deg, t_s=self.t_s, extras=self.extras, run_starts=self.run_starts)

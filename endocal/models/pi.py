@@ -24,7 +24,7 @@ import numpy as np
 from scipy.optimize import lsq_linear
 
 from endocal.errors import ModelError
-from endocal.models._kernels import play_bank_forward, play_bank_states, play_bank_step
+from endocal.models._kernels import pi_exp_forward_jac, play_bank_forward, play_bank_states, play_bank_step
 from endocal.models.base import HysteresisModel
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import Effect
@@ -239,6 +239,23 @@ class PIModel(HysteresisModel):
         if structure["offset"]:
             y += p["offset_deg"]
         return y
+
+    def _base_forward_jac(self, structure: dict, p: dict, v: np.ndarray, run_starts: np.ndarray, M: np.ndarray):
+        """Output, its Jacobian w.r.t. the base parameters (n, n_base) and w.r.t. upstream ones (n, q).
+
+        Analytic for exponential weights (eq. 8) via :func:`pi_exp_forward_jac`; None
+        for free weights (the fit then differentiates numerically).
+        """
+        if structure["weights"] != "exponential":
+            return None
+        y, J = pi_exp_forward_jac(np.ascontiguousarray(v, dtype=float), p["r"], p["w"], p["beta"],
+                                  structure["n_operators"], np.ascontiguousarray(M), run_starts)
+        q = M.shape[1]
+        Jb = J[:, q:]
+        if structure["offset"]:
+            y += p["offset_deg"]
+            Jb = np.column_stack([Jb, np.ones(y.size)])
+        return y, Jb, J[:, :q]
 
     def _base_inverse(self, structure: dict, p: dict, y: np.ndarray, run_starts: np.ndarray, v_range) -> np.ndarray:
         r, w = self._thresholds_weights(structure, p)

@@ -132,6 +132,21 @@ class Envelope(InputEffect):
     def invert(self, p: dict, v: np.ndarray, data: HysteresisData) -> np.ndarray:
         return envelope_inverse(v, *self._args(p))
 
+    def apply_jac(self, p: dict, u: np.ndarray, data: HysteresisData, M: np.ndarray):
+        """``f(u)``, its derivatives w.r.t. (θ0, θ1, θ2, k0, k1, k2) (n, 6), and ``f'(u)·M`` (chain rule)."""
+        th0, th1, th2, k0, k1, k2 = self._args(p)
+        lo = np.minimum(u - th0, 0.0)
+        hi = np.maximum(u - th2, 0.0)
+        below = u < th0
+        above = u > th2
+        v = k1 * (u - th1) + (k0 - k1) * lo + (k2 - k1) * hi
+        own = np.column_stack([
+            -(k0 - k1) * below, np.full(u.shape, -k1), -(k2 - k1) * above,
+            lo, (u - th1) - lo - hi, hi,
+        ])
+        slope = np.where(below, k0, np.where(above, k2, k1))
+        return v, own, slope[:, None] * M
+
     def invert_step(self, p: dict, v: float, state: np.ndarray) -> float:
         # scalar form of eq. 10 (a numpy call per sample would dominate a 1 kHz loop)
         th0, th1, th2, k0, k1, k2 = self._args(p)

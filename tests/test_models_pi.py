@@ -1,0 +1,138 @@
+"""PI model: the paper's equations 5-11 with its table 1, ground truth recovery, eq. 11 loading."""
+
+import numpy as np
+import pytest
+
+from endocal.models import PIModel
+from endocal.models.effects.envelope import envelope, envelope_inverse
+from endocal.models.pi import pi_exp_weights, pi_inverse_initial_state, pi_inverse_parameters, pi_thresholds
+from tests._models_signals import PAPER_TABLE1, chirp, damped_sine, non_periodic, triangle
+
+
+def paper_model():
+    return PIModel(effects=["envelope"], axis="lr").set_parameters(PAPER_TABLE1)
+
+
+@pytest.mark.parametrize("signal", [damped_sine, triangle, chirp, non_periodic])
+def test_table1_forward_then_analytic_inverse_is_identity(signal):
+    # eqs. 9-11 invert eqs. 5-8 exactly; only rounding remains (~1e-13 deg on 60 deg inputs)
+    _, u = signal()
+    m = paper_model()
+    y = m.predict(u)
+    assert np.ptp(y) > 40.0  # the input really drives the loops
+    assert np.max(np.abs(m.inverse(y) - u)) < 1e-6
+
+
+def test_table1_inverse_then_forward_is_identity():
+    _, u = damped_sine()
+    m = paper_model()
+    y_des = 0.8 * m.predict(u)  # reachable: produced by the model
+    assert np.max(np.abs(m.predict(m.inverse(y_des)) - y_des)) < 1e-9
+
+
+def test_envelope_inverse_eq10_matches_eq6():
+    p = [PAPER_TABLE1[f"envelope_{k}"] for k in ("theta0_deg", "theta1_deg", "theta2_deg", "k0", "k1", "k2")]
+    th = np.linspace(-90, 90, 2001)
+    x = envelope(th, *p)
+    assert np.all(np.diff(x) > 0)
+    # eq. 6 branches by hand at three points
+    assert envelope(-20.0, *p) == pytest.approx(0.02846 * (-20 + 8.174) + 0.01111 * (-8.174 - 3.731))
+    assert envelope(0.0, *p) == pytest.approx(0.01111 * (0 - 3.731))
+    assert envelope(30.0, *p) == pytest.approx(0.03495 * (30 - 7.27) + 0.01111 * (7.27 - 3.731))
+    assert np.max(np.abs(envelope_inverse(x, *p) - th)) < 1e-10
+
+
+def test_inverse_weights_eq11_by_hand():
+    r = pi_thresholds(0.5, 2)
+    w = np.array([2.0, 1.0, 0.5])
+    r_inv, w_inv = pi_inverse_parameters(r, w)
+    assert w_inv == pytest.approx([0.5, -1.0 / (3.0 * 2.0), -0.5 / (3.5 * 3.0)])
+    assert r_inv == pytest.approx([0.0, 2.0 * 0.5, 2.0 * 1.0 + 1.0 * 0.5])
+
+
+def test_initial_loading_eq11_continues_the_inverse():
+    # Run the forward plays over a prefix, load the inverse plays by eq. 11, then the
+    # inverse of the suffix must give back the suffix commands.
+    _, u = non_periodic(duration_s=30.0)
+    m = paper_model()
+    y = m.predict(u)
+    comp = m.compensator()
+    k = 1234
+    comp.reset(history_cmd_deg=u[:k])
+    out = np.array([comp.step(v) for v in y[k:k + 500]])
+    assert np.max(np.abs(out - u[k:k + 500])) < 1e-9
+
+
+def test_initial_loading_formula_against_hand_sum():
+    w = np.array([1.0, 0.5, 0.25])
+    z = np.array([3.0, 2.0, 1.0])
+    # Phi'_i = sum_{j<=i} w_j z_i + sum_{j>i} w_j z_j
+    expect = [1.0 * 3 + (0.5 * 2 + 0.25 * 1), 1.5 * 2 + 0.25 * 1, 1.75 * 1]
+    assert pi_inverse_initial_state(w, z) == pytest.approx(expect)
+
+
+def test_ground_truth_modified_pi_recovered_within_standard_errors():
+    # Data from table 1 + 0.3 deg white noise. The fit fixes the gauge k1 = 1, so
+    # compare with the table mapped to that gauge (play operators are homogeneous:
+    # k -> k/k1, r -> r/k1, w -> w k1, beta -> beta k1).
+    rng = np.random.default_rng(7)
+    _, u = damped_sine(dt_s=0.02)
+    truth = paper_model()
+    y = truth.predict(u) + 0.3 * rng.standard_normal(u.size)
+    m = PIModel(effects=["envelope"], axis="lr").fit(u, y)
+    k1 = PAPER_TABLE1["envelope_k1"]
+    expect = {
+        "pi_r": PAPER_TABLE1["pi_r"] / k1, "pi_w": PAPER_TABLE1["pi_w"] * k1, "pi_beta": PAPER_TABLE1["pi_beta"] * k1,
+        "envelope_theta0_deg": -8.174, "envelope_theta1_deg": 3.731, "envelope_theta2_deg": 7.27,
+        "envelope_k0": 0.02846 / k1, "envelope_k2": 0.03495 / k1,
+    }
+    assert m.fixed_ == {"envelope_k1": 1.0}
+    for name, val in expect.items():
+        z = (m.params_[name] - val) / m.stderr_[name]
+        assert abs(z) < 4.0, (name, m.params_[name], val, m.stderr_[name])
+    # residual at the noise floor: sqrt(1 - p/n) * 0.3 deg, sampling error ~ 0.3/sqrt(2n)
+    assert m.fit_report_.rmse_deg == pytest.approx(0.3, abs=0.015)
+    assert m.fit_report_.success and not m.fit_report_.rank_deficient
+    # predictions match the noise-free truth far below the noise
+    assert np.sqrt(np.mean((m.predict(u) - truth.predict(u)) ** 2)) < 0.1
+    # correlation matrix is a proper correlation matrix over the free parameters
+    assert m.correlation_.shape == (8, 8)
+    assert np.allclose(np.diag(m.correlation_), 1.0)
+
+
+def test_user_fixed_gauge_reproduces_paper_scale():
+    rng = np.random.default_rng(1)
+    _, u = damped_sine(dt_s=0.05)
+    y = paper_model().predict(u) + 0.3 * rng.standard_normal(u.size)
+    m = PIModel(effects=["envelope"], fixed={"envelope_k1": 0.01111}).fit(u, y)
+    assert m.params_["envelope_k1"] == 0.01111
+    assert m.params_["pi_r"] == pytest.approx(0.1183, rel=0.03)
+    assert m.params_["pi_w"] == pytest.approx(13.35, rel=0.03)
+
+
+def test_classic_pi_fits_symmetric_backlash_and_inverts():
+    # A classic PI (linear envelope) fitted on data from a classic PI with known weights.
+    rng = np.random.default_rng(2)
+    _, u = damped_sine(dt_s=0.05)
+    r = pi_thresholds(3.0, 20)
+    w = pi_exp_weights(0.5, 0.08, r)
+    truth = PIModel(weights="exponential", offset=False).set_parameters({"pi_r": 3.0, "pi_w": 0.5, "pi_beta": 0.08})
+    y = truth.predict(u) + 0.3 * rng.standard_normal(u.size)
+    m = PIModel(n_operators=20).fit(u, y)
+    assert m.structure_["weights"] == "free" and m.structure_["offset"] is True
+    assert m.fit_report_.rmse_deg < 0.33
+    assert np.all(np.array([m.params_[f"pi_w{i}"] for i in range(21)]) >= 0)
+    y_des = truth.predict(0.9 * u)
+    assert np.max(np.abs(m.predict(m.inverse(y_des)) - y_des)) < 1e-8
+    assert w.sum() > 0
+
+
+def test_equation_prints_values_with_standard_errors():
+    rng = np.random.default_rng(4)
+    _, u = damped_sine(dt_s=0.05)
+    y = paper_model().predict(u) + 0.3 * rng.standard_normal(u.size)
+    m = PIModel(effects=["envelope"], axis="lr").fit(u, y)
+    text = str(m)
+    assert text.startswith("lr_deg = PI20(f(cmd)) [r=")
+    assert "+-" in text and "f = envelope[theta0_deg=" in text and "analytic" in text
+    assert "unfitted" in repr(PIModel())
