@@ -477,3 +477,10 @@ def test_simulator_planes_run():
         assert abs(cal.deviation_signed_deg[h] - truth[h]) < 0.5
         assert after[h].deviation_deg < 1.0
         assert cal.residual_deviation_deg[h] < 1.0
+
+
+def test_calibration_prints_as_a_report(paper_cal):
+    _, cal = paper_cal
+    text = str(cal)
+    assert "alpha_y- =  20.1" in text or "alpha_y- =  20.2" in text
+    assert "16 sweeps" in text and "cross-validated" in text

@@ -151,6 +151,17 @@ class PlanesCalibration:
     ci_method: dict[str, str] = field(default_factory=dict)
     n_bootstrap: int = 0
 
+    def __str__(self) -> str:
+        pct = round(100 * self.confidence)
+        lines = [f"bending planes ({self.source}, {self.model}; {pct} % CI, {len(self.sweeps_used)} sweeps)"]
+        for h in HALF_PLANES:
+            lo, hi = self.deviation_signed_ci_deg[h]
+            lines.append(f"  alpha_{h} = {self.deviation_deg[h]:6.2f} deg (signed {self.deviation_signed_deg[h]:+.2f}, "
+                         f"CI {lo:+.2f}..{hi:+.2f}) -> after compensation {self.residual_deviation_deg[h]:.2f} deg")
+        lines.append(f"  delta    = {self.delta_deg:6.2f} deg (CI {self.delta_ci_deg[0]:.2f}..{self.delta_ci_deg[1]:.2f}); "
+                     f"residuals {self.residual_source}")
+        return "\n".join(lines)
+
     @property
     def compensator(self) -> OrthogonalCompensator:
         """The orthogonal compensator (duodenoscope eqs. 3-4) built from the signed deviations."""
@@ -289,7 +300,7 @@ def fit_planes(
     model: str = "bend_line",
     combine: str = "bend_vector",
     min_excursion_deg: float = 5.0,
-    symmetry_weight: float = 1.0,
+    symmetry_weight: float = 0.1,
     n_bootstrap: int = 200,
     confidence: float = 0.95,
     seed: int = 0,
