@@ -1,0 +1,106 @@
+"""Contract run against every model and model+effect: fit, predict, inverse, stream, save, load."""
+
+import json
+
+import numpy as np
+import pytest
+
+from endocal.errors import ModelError
+from endocal.models import BASES, HysteresisData, load_model, make_model
+from tests._models_signals import PAPER_TABLE1, damped_sine
+
+CASES = [(b, e) for b in ("linear", "bspline", "pi") for e in ((), ("envelope",))]
+
+
+@pytest.fixture(scope="module")
+def data():
+    rng = np.random.default_rng(11)
+    t, u = damped_sine(dt_s=0.05)
+    truth = make_model("pi", ["envelope"]).set_parameters(PAPER_TABLE1)
+    y = truth.predict(u) + 0.3 * rng.standard_normal(u.size)
+    # two runs fitted together: the second a smaller sine
+    t2 = np.arange(0, 40, 0.05)
+    u2 = 30 * np.sin(2 * np.pi * 0.1 * t2)
+    y2 = truth.predict(u2) + 0.3 * rng.standard_normal(u2.size)
+    return [HysteresisData(cmd_deg=u, meas_deg=y, t_s=t), HysteresisData(cmd_deg=u2, meas_deg=y2, t_s=t2)], truth
+
+
+@pytest.fixture(scope="module")
+def fitted(data):
+    runs, _ = data
+    return {case: make_model(case[0], list(case[1]), axis="lr").fit(runs) for case in CASES}
+
+
+@pytest.mark.parametrize("case", CASES, ids=lambda c: "+".join((c[0],) + c[1]))
+def test_contract(case, data, fitted, tmp_path):
+    runs, truth = data
+    m = fitted[case]
+    # fitted attributes and report
+    assert set(m.params_) == set(m.parameter_names())
+    assert m.fit_report_.n_runs == 2 and m.fit_report_.nfev > 0
+    assert len(m.training_data_) == 2
+    # predictions: per run when given a list; every model explains most of the motion
+    # (a classic PI lacks the dead band of the modified-PI data, so no tighter common bound)
+    pred = m.predict([r.cmd_deg for r in runs])
+    assert isinstance(pred, list) and len(pred) == 2
+    rmse = np.sqrt(np.mean(np.concatenate([p - r.meas_deg for p, r in zip(pred, runs)]) ** 2))
+    assert rmse == pytest.approx(m.fit_report_.rmse_deg, rel=1e-9)
+    assert rmse < 0.15 * np.std(np.concatenate([r.meas_deg for r in runs]))
+    # inverse: predict(inverse(y)) == y for a reachable y (the model's own output of a smaller motion)
+    y_des = m.predict(0.8 * runs[0].cmd_deg)
+    u = m.inverse(y_des)
+    assert np.max(np.abs(m.predict(u) - y_des)) < 1e-8
+    # the streaming compensator gives the batch inverse sample by sample
+    comp = m.compensator()
+    streamed = np.array([comp.step(v) for v in y_des[:400]])
+    assert np.max(np.abs(streamed - u[:400])) < 1e-9
+    # save / load: exact round trip of predictions and inverse
+    path = tmp_path / "model.json"
+    m.save(path)
+    d = json.loads(path.read_text())
+    assert d["format"] == "endocal-model" and d["version"] == 1 and d["base"] == case[0]
+    assert [e["name"] for e in d["effects"]] == list(case[1])
+    m2 = load_model(path)
+    for r in runs:
+        assert np.max(np.abs(m2.predict(r.cmd_deg) - m.predict(r.cmd_deg))) <= 1e-12
+    assert np.max(np.abs(m2.inverse(y_des) - u)) <= 1e-12
+    assert str(m2) == str(m)
+    # unfitted model refuses
+    with pytest.raises(ModelError, match="not fitted"):
+        make_model(case[0], list(case[1])).predict(runs[0].cmd_deg)
+    with pytest.raises(ModelError, match="not fitted"):
+        make_model(case[0], list(case[1])).inverse(runs[0].cmd_deg)
+
+
+def test_every_base_is_in_the_contract():
+    assert {c[0] for c in CASES} == set(BASES)
+
+
+def test_settings_are_not_touched_by_fit(fitted):
+    m = fitted[("pi", ("envelope",))]
+    assert m.weights == "auto" and m.offset == "auto" and m.fixed is None
+    assert m.structure_["weights"] == "exponential" and m.fixed_ == {"envelope_k1": 1.0}
+
+
+def test_linear_falls_short_at_reversals_bspline_does_not():
+    # The thesis: the piecewise-linear model fails at direction changes, B-splines do not.
+    # Backlash-like data with gradual take-up after each reversal (a classic PI: plays
+    # with spread thresholds), straight far from reversals, plus 0.3 deg noise.
+    rng = np.random.default_rng(5)
+    t = np.arange(0, 120, 0.05)
+    u = 50 * np.sin(2 * np.pi * 0.05 * t) * (1 - 0.5 * (t > 60))
+    truth = make_model("pi", weights="exponential", offset=False).set_parameters(
+        {"pi_r": 1.5, "pi_w": 0.4, "pi_beta": 0.15})
+    y_true = truth.predict(u)
+    y = y_true + 0.3 * rng.standard_normal(u.size)
+    du = np.diff(u, prepend=u[0])
+    rev = np.flatnonzero(np.sign(du[2:]) * np.sign(du[1:-1]) < 0) + 1
+    near_rev = np.zeros(u.size, dtype=bool)
+    for k in rev:
+        near_rev[k:k + 60] = True  # 3 s after each reversal: the take-up
+    err = {b: np.abs(make_model(b).fit(u, y).predict(u) - y_true) for b in ("linear", "bspline")}
+    rms = {b: (np.sqrt(np.mean(e[near_rev] ** 2)), np.sqrt(np.mean(e[~near_rev] ** 2))) for b, e in err.items()}
+    # linear is worse at reversals (its straight branches and sharp switch miss the
+    # curved take-up; measured ratio 1.6 with this seed), and worse overall
+    assert rms["linear"][0] > 1.3 * rms["bspline"][0]
+    assert np.sqrt(np.mean(err["bspline"] ** 2)) < np.sqrt(np.mean(err["linear"] ** 2))
