@@ -67,7 +67,7 @@ def test_excite_on_the_simulator_writes_a_complete_run(tmp_path):
 
 def test_same_seed_same_run_other_seed_other_noise(tmp_path):
     for name, seed in (("a", 1), ("b", 1), ("c", 2)):
-        assert endocal("excite", "triangle", "--out", tmp_path / name, "--seed", seed, "--duration", "20").returncode == 0
+        assert endocal("excite", "triangle", "--out", tmp_path / name, "--seed", seed, "--set", "cycles=1").returncode == 0
     a, b, c = (load_aligned(tmp_path / n).table for n in "abc")
     pd.testing.assert_frame_equal(a, b)
     assert not np.allclose(a["ap_meas_deg"], c["ap_meas_deg"])
@@ -103,11 +103,11 @@ def test_bad_input_gets_one_line_and_exit_2(tmp_path, args, fragments):
 
 def test_existing_output_is_kept_unless_forced(tmp_path):
     run = tmp_path / "r"
-    assert endocal("excite", "triangle", "--out", run, "--duration", "10").returncode == 0
+    assert endocal("excite", "triangle", "--out", run, "--set", "cycles=1").returncode == 0
     before = (run / "run.json").read_text()
-    one_line_error(endocal("excite", "triangle", "--out", run, "--duration", "10"), "already exists", "--force")
+    one_line_error(endocal("excite", "triangle", "--out", run, "--set", "cycles=1"), "already exists", "--force")
     assert (run / "run.json").read_text() == before
-    assert endocal("excite", "triangle", "--out", run, "--duration", "10", "--force").returncode == 0
+    assert endocal("excite", "triangle", "--out", run, "--set", "cycles=1", "--force").returncode == 0
 
 
 def test_kill_9_loses_at_most_two_seconds(tmp_path):

@@ -30,7 +30,7 @@ def excite(
     sets: list[str] = typer.Option([], "--set", help="Override a protocol parameter, e.g. --set frequency_hz=0.1 (repeatable)."),
     amplitude: Optional[float] = typer.Option(None, "--amplitude", help="Shortcut for --set amplitude_deg=VALUE."),
     offset: Optional[float] = typer.Option(None, "--offset", help="Shortcut for --set offset_deg=VALUE."),
-    duration: Optional[float] = typer.Option(None, "--duration", help="Shortcut for --set duration_s=VALUE."),
+    duration: Optional[float] = typer.Option(None, "--duration", help="Shortcut for --set duration_s=VALUE (protocols with a free duration; periodic ones take --set cycles=N)."),
     sample_rate: Optional[float] = typer.Option(None, "--sample-rate", help="Shortcut for --set sample_rate_hz=VALUE (motor clock)."),
     axes: Optional[str] = typer.Option(None, "--axes", help="Comma-separated axes to drive, e.g. `ml` or `ap,ml`."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
