@@ -296,21 +296,26 @@ class HysteresisModel(ABC):
         fixed = dict(self.fixed) if self.fixed is not None else self._gauge(effects)
         # Start values: input effects in chain order (each sees the command the chain gives it).
         start: dict[str, Parameter] = {}
-        u = d.cmd_deg
+        # Long records: start values and the first convergence use a decimated copy
+        # (every s-th sample; the knob moves little between samples, so loops keep
+        # their shape); the final iterations and the covariance use every sample.
+        stride = d.n_samples // 20000
+        dd = d.decimate(stride) if stride >= 2 else d
+        u = dd.cmd_deg
         for e in effects:
             if isinstance(e, InputEffect):
-                for prm in e.initial(d, u):
+                for prm in e.initial(dd, u):
                     start[prm.name] = prm
                 e.adapt_start(start, fixed)
                 self._apply_fixed(start, fixed, e)
-                u = e.apply({s: start[f].value for s, f in zip(e.param_names(), e.full_names())}, u, d)
-        structure = self._resolve_structure(effects, u, d)
+                u = e.apply({s: start[f].value for s, f in zip(e.param_names(), e.full_names())}, u, dd)
+        structure = self._resolve_structure(effects, u, dd)
         owners = self._owners(effects, structure)
-        for prm in self._base_initial(structure, u, d):
+        for prm in self._base_initial(structure, u, dd):
             start[f"{self.base_name}_{prm.name}"] = Parameter(f"{self.base_name}_{prm.name}", prm.value, prm.lower, prm.upper)
         for e in effects:
             if isinstance(e, OutputEffect):
-                for prm in e.initial(d, d.cmd_deg):
+                for prm in e.initial(dd, dd.cmd_deg):
                     start[prm.name] = prm
                 e.adapt_start(start, fixed)
         unknown = set(fixed) - set(owners)
@@ -352,13 +357,8 @@ class HysteresisModel(ABC):
                 base_p, eff_p = self._grouped(values)
                 return self._forward_jac(d, base_p, eff_p, structure, effects)[1][:, free_cols]
 
-        # Long records: first converge on a decimated copy of the data (every s-th sample;
-        # the knob moves little between samples so the loops keep their shape), then
-        # polish on all samples so the optimum and the covariance use every sample.
-        stride = d.n_samples // 20000
         nfev = njev = 0
         if stride >= 2:
-            dd = d.decimate(stride)
             meas_d = dd.meas_deg
 
             def residual_d(x):

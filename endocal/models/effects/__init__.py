@@ -10,9 +10,10 @@ from collections.abc import Iterable
 
 from endocal.errors import ModelError
 from endocal.models.effects.base import Effect, InputEffect, OutputEffect
+from endocal.models.effects.drift import Drift
 from endocal.models.effects.envelope import Envelope
 
-EFFECTS: dict[str, type[Effect]] = {"envelope": Envelope}
+EFFECTS: dict[str, type[Effect]] = {"envelope": Envelope, "drift": Drift}
 
 
 def register(cls: type[Effect]) -> type[Effect]:
@@ -57,4 +58,4 @@ def resolve_effects(specs: Iterable[str | Effect] | None) -> list[Effect]:
     return out
 
 
-__all__ = ["EFFECTS", "Effect", "Envelope", "InputEffect", "OutputEffect", "make_effect", "register", "resolve_effects"]
+__all__ = ["EFFECTS", "Drift", "Effect", "Envelope", "InputEffect", "OutputEffect", "make_effect", "register", "resolve_effects"]
