@@ -145,13 +145,6 @@ def run_excitation(
     out = Path(out)
     trajectory.check_limits(probe)  # refuse before anything moves
     prepare_output(out, force)
-    if out.exists():
-        shutil.rmtree(out)
-    try:
-        out.mkdir(parents=True)
-    except OSError as exc:
-        raise OutputPathError(f"cannot create {out}: {exc.strerror}") from None
-
     meta = {
         "format": FORMAT_NAME,
         "version": FORMAT_VERSION,
@@ -168,11 +161,24 @@ def run_excitation(
         "units": UNITS,
         "streams": {"motor": MOTOR + "/", "tracker": TRACKER + "/", "aligned": ALIGNED},
     }
+    # Connect first: a rig that fails to open leaves no run folder behind.
+    try:
+        backend.open()
+    except BaseException:
+        backend.close()
+        raise
+    try:
+        if out.exists():
+            shutil.rmtree(out)
+        out.mkdir(parents=True)
+    except OSError as exc:
+        backend.close()
+        raise OutputPathError(f"cannot create {out}: {exc.strerror}") from None
+
     logger = StreamLogger(out, flush_interval_s=flush_interval_s)
     status, error = "running", None
     wall0 = time.monotonic()
     try:
-        backend.open()
         meta["backend"] = {"name": backend.name, **backend.describe()}
         meta["started_utc"] = utc_now()
         write_json(out / RUN_JSON, meta)

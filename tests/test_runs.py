@@ -194,3 +194,17 @@ def test_user_tables_in_csv_and_parquet(tmp_path):
     (tmp_path / "x.json").write_text("{}")
     with pytest.raises(RunFormatError, match="expected a run folder"):
         load_aligned(tmp_path / "x.json")
+
+
+def test_backend_that_fails_to_open_leaves_no_run_folder(tmp_path, tee):
+    from endocal.errors import HardwareError
+
+    class Unplugged(GeometryBackend):
+        def open(self):
+            raise HardwareError("no servo answers on /dev/ttyUSB0")
+
+    backend = Unplugged(tee)
+    with pytest.raises(HardwareError):
+        excite(tmp_path, tee, backend=backend)
+    assert backend.closed == 1  # torque-off path runs even when open fails
+    assert not (tmp_path / "run").exists()
