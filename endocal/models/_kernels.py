@@ -89,50 +89,6 @@ def play_bank_step(xk, thresholds, weights, state):
 
 
 @njit(cache=True)
-def play_single(x, width, x0_state, run_starts):
-    """One play (backlash) operator of half-width ``width`` with initial state ``x0_state`` per run."""
-    n = x.shape[0]
-    y = np.empty(n)
-    n_runs = run_starts.shape[0]
-    for q in range(n_runs):
-        a = run_starts[q]
-        b = run_starts[q + 1] if q + 1 < n_runs else n
-        s = x0_state[q]
-        for k in range(a, b):
-            if s < x[k] - width:
-                s = x[k] - width
-            elif s > x[k] + width:
-                s = x[k] + width
-            y[k] = s
-    return y
-
-
-@njit(cache=True)
-def backlash_inverse(v, width, run_starts):
-    """Right inverse of :func:`play_single` started at the run's first value: ``u = v + width*direction``.
-
-    The direction is that of the last non-zero change of ``v``; before any motion the
-    command equals ``v`` (the play's state starts at the first input).
-    """
-    n = v.shape[0]
-    u = np.empty(n)
-    n_runs = run_starts.shape[0]
-    for q in range(n_runs):
-        a = run_starts[q]
-        b = run_starts[q + 1] if q + 1 < n_runs else n
-        d = 0.0
-        for k in range(a, b):
-            if k > a:
-                dv = v[k] - v[k - 1]
-                if dv > 0.0:
-                    d = 1.0
-                elif dv < 0.0:
-                    d = -1.0
-            u[k] = v[k] + width * d
-    return u
-
-
-@njit(cache=True)
 def _bspline_inside(t, c, deg, x):
     """de Boor's algorithm for ``t[deg] <= x <= t[nc]``."""
     nc = c.shape[0]
@@ -321,24 +277,6 @@ def gplay_inverse(y, slope, t_up, c_up, t_dn, c_dn, deg, u_min, u_max, run_start
             uk, yk = gplay_inverse_step(y[k], uk, yk, slope, t_up, c_up, t_dn, c_dn, deg, u_min, u_max)
             u[k] = uk
     return u
-
-
-@njit(cache=True)
-def lowpass_first_order(x, t, tau, run_starts):
-    """First-order low-pass ``tau*dz/dt = x - z`` (exact for piecewise-constant input), z=x at each run start."""
-    n = x.shape[0]
-    z = np.empty(n)
-    n_runs = run_starts.shape[0]
-    for q in range(n_runs):
-        a = run_starts[q]
-        b = run_starts[q + 1] if q + 1 < n_runs else n
-        zk = x[a]
-        z[a] = zk
-        for k in range(a + 1, b):
-            alpha = np.exp(-(t[k] - t[k - 1]) / tau) if tau > 0.0 else 0.0
-            zk = alpha * zk + (1.0 - alpha) * x[k - 1]
-            z[k] = zk
-    return z
 
 
 @njit(cache=True)

@@ -84,15 +84,6 @@ class FitReport:
         return asdict(self)
 
 
-def _split_params(names: list[str], values, owners: dict[str, tuple[object, str]]) -> dict:
-    """Group full-named values by owner (``"base"`` or an effect) with short names."""
-    out: dict = {}
-    for n, v in zip(names, values):
-        owner, short = owners[n]
-        out.setdefault(id(owner), {})[short] = float(v)
-    return out
-
-
 class HysteresisModel(ABC):
     """Common machinery of the hysteresis models (not used directly).
 
