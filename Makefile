@@ -21,6 +21,7 @@ test: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/endocal excite damped-sine --out $(DEMO)/damped-sine --force
 	$(BIN)/endocal excite planes --out $(DEMO)/planes --force
+	$(BIN)/endocal fit planes $(DEMO)/planes --out $(DEMO)/planes.json --force
 	@echo
 	@echo "Results are in $(DEMO)/: run.json, motor/, tracker/, truth/ and aligned.parquet per run."
 

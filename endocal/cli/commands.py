@@ -1,6 +1,7 @@
 """Registers every subcommand on the root app (kept apart so importing the app stays cheap)."""
 
 from endocal.cli import app
+from endocal.cli import fit as _fit
 from endocal.cli import protocols as _protocols
 from endocal.cli.excite import excite
 from endocal.cli.info import info
@@ -8,3 +9,4 @@ from endocal.cli.info import info
 app.command("excite")(excite)
 app.command("info")(info)
 app.add_typer(_protocols.app, name="protocols")
+app.add_typer(_fit.app, name="fit")

@@ -1,0 +1,64 @@
+"""Bending-plane calibration straight from run folders (what `endocal fit planes` calls)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from endocal.errors import RunFormatError
+from endocal.planes.calibration import PlanesCalibration, fit_planes
+from endocal.planes.segment import Segmentation, segment_planes_run
+from endocal.probe import ProbeConfig
+from endocal.runs.aligned import load_aligned, read_stream
+from endocal.runs.format import RUN_JSON, TRACKER
+
+
+def segment_runs(runs: list[Path], *, compensated: bool = False) -> tuple[Segmentation, ProbeConfig]:
+    """Segment every run folder into half-plane sweeps and add them up.
+
+    Raises
+    ------
+    RunFormatError
+        A path that is not a run folder (a bare aligned table has no tracker poses, and the
+        plane fit needs the tip direction), or runs recorded on different probes.
+    """
+    total: Segmentation | None = None
+    probe: ProbeConfig | None = None
+    for run in map(Path, runs):
+        if not run.is_dir():
+            raise RunFormatError(
+                f"{run}: fit planes needs run folders (the half-plane fit uses the tracker's tip poses), "
+                "not an aligned table; record one with `endocal excite planes --out RUN`"
+            )
+        data = load_aligned(run)
+        run_probe = ProbeConfig.from_dict(data.meta["probe"], where=str(run / RUN_JSON))
+        if probe is not None and run_probe.bending_axes != probe.bending_axes:
+            raise RunFormatError(f"{run}: recorded on probe '{run_probe.name}', the others on '{probe.name}'")
+        probe = run_probe
+        seg = segment_planes_run(
+            data.table, read_stream(run, TRACKER), run_probe, run=run.name, other_max_deg=None if compensated else 1.0
+        )
+        total = seg if total is None else total + seg
+    if total is None:
+        raise RunFormatError("fit planes needs at least one run folder")
+    return total, probe
+
+
+def calibrate_planes(
+    runs: list[Path], *, after: list[Path] | None = None, n_bootstrap: int = 200, seed: int = 0
+) -> tuple[PlanesCalibration, ProbeConfig]:
+    """Fit deviation angles, delta and the orthogonal compensator from ``planes`` runs.
+
+    Parameters
+    ----------
+    runs : list of Path
+        Run folders of the ``planes`` protocol (single-knob sweeps of each half-plane).
+    after : list of Path, optional
+        Runs recorded with the compensator on; their deviations become the measured residuals.
+    n_bootstrap : int
+        Bootstrap replicates over sweeps for the 95 % confidence intervals.
+    seed : int
+        Seed of the bootstrap.
+    """
+    seg, probe = segment_runs(runs)
+    comp = segment_runs(after, compensated=True)[0] if after else None
+    return fit_planes(seg, n_bootstrap=n_bootstrap, seed=seed, compensated=comp), probe

@@ -1,0 +1,54 @@
+"""`endocal fit planes` end to end on the simulator, whose deviation angles are known."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from endocal.planes import load_planes
+from endocal.sim import SimConfig
+from tests.test_cli_excite import endocal, one_line_error
+
+
+@pytest.fixture(scope="module")
+def planes_run(tmp_path_factory):
+    run = tmp_path_factory.mktemp("planes") / "planes"
+    proc = endocal("excite", "planes", "--out", run, "--seed", "11", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    return run
+
+
+def test_deviation_angles_recovered_and_compensated(planes_run, tmp_path):
+    truth = SimConfig.default().to_dict()["deviation_deg"]
+    assert truth == {"y+": 12.7, "y-": 20.2, "x+": 2.3, "x-": 15.6}  # the paper's measured values
+    proc = endocal("fit", "planes", planes_run, "--out", tmp_path / "planes.json", "--json", "--bootstrap", "50")
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads(proc.stdout)
+    for half, alpha in truth.items():
+        # 0.5 mm tracker noise over ~100 deg sweeps of 3 x 900 frames: the issue's 0.5 deg bound.
+        assert result["deviation_deg"][half] == pytest.approx(alpha, abs=0.5), half
+        # The paper still had 13.8 deg on y-; compensation must leave under 1 deg everywhere.
+        assert result["residual_deviation_deg"][half] < 1.0, half
+    assert isinstance(result["delta_deg"], float)
+    cal = load_planes(tmp_path / "planes.json")
+    assert cal.deviation_deg == pytest.approx(result["deviation_deg"])
+
+
+def test_human_output_names_angles_cis_and_sweeps(planes_run, tmp_path):
+    proc = endocal("fit", "planes", planes_run, "--out", tmp_path / "p.json", "--bootstrap", "20")
+    assert proc.returncode == 0, proc.stderr
+    for text in ("alpha_y+", "alpha_x-", "CI", "after compensation", "delta", "sweeps used: x+: planes#"):
+        assert text in proc.stdout
+    one_line_error(endocal("fit", "planes", planes_run, "--out", tmp_path / "p.json"), "already exists")
+
+
+def test_too_little_excursion_and_missing_sweeps_are_named(tmp_path):
+    small, tri = tmp_path / "small", tmp_path / "tri"
+    assert endocal("excite", "planes", "--out", small, "--amplitude", "4", "--set", "repetitions=1", "--quiet").returncode == 0
+    one_line_error(endocal("fit", "planes", small, "--out", tmp_path / "a.json"), "half-plane 'y+'", "sweep that knob further")
+    assert endocal("excite", "triangle", "--out", tri, "--set", "cycles=1", "--quiet").returncode == 0
+    one_line_error(endocal("fit", "planes", tri, "--out", tmp_path / "b.json"), "no sweep of half-plane(s) x+, x-")
+    (tmp_path / "t.csv").write_text("t_s,ap_cmd_deg,ap_meas_deg\n0,0,0\n0.1,1,1\n")
+    one_line_error(endocal("fit", "planes", tmp_path / "t.csv", "--out", tmp_path / "c.json"), "needs run folders")
+    assert not any((tmp_path / n).exists() for n in ("a.json", "b.json", "c.json"))
