@@ -47,3 +47,61 @@ def planes(
         by_half.setdefault(sweep["half_plane"], []).append(f"{sweep['run']}#{sweep['index']}")
     out.print("sweeps used: " + "; ".join(f"{h}: {', '.join(v)}" for h, v in sorted(by_half.items())), markup=False)
     err.print(f"wrote {out_path}")
+
+
+@app.command("hysteresis")
+@cli_errors
+def hysteresis(
+    data: list[Path] = typer.Argument(..., help="Run folders or aligned tables (.parquet / .csv); fitted together."),
+    axis: str = typer.Option(..., "--axis", "-a", help="Bending axis to model, e.g. ap, ml, ud, lr."),
+    model: str = typer.Option("pi", "--model", "-m", help="Base model: linear, bspline or pi."),
+    effects: str = typer.Option("", "--effects", "-e", help="Comma-separated effects, e.g. envelope,delay (see `endocal effects`)."),
+    planes_file: Optional[Path] = typer.Option(None, "--planes", help="planes.json: fit against the twisted planes the knob drives."),
+    out_path: Path = typer.Option(..., "--out", "-o", help="Model file to write (versioned JSON)."),
+    force: bool = typer.Option(False, "--force", help="Overwrite --out."),
+    as_json: bool = typer.Option(False, "--json", help="Print the model file's content as JSON."),
+) -> None:
+    """Fit a hysteresis model (knob command -> bending angle) of one axis.
+
+    `--model pi --effects envelope` is the duodenoscope paper's modified Prandtl-Ishlinskii
+    model (eqs. 5-8, analytic inverse eqs. 9-11); `bspline` is the thesis's direction-dependent
+    B-splines; `linear` the piecewise-linear model in the spirit of Lee et al. The fitted
+    model prints as its equation with standard errors, and the fit report says how the
+    optimiser stopped.
+    """
+    import sys
+
+    from endocal.fitting import fit_hysteresis
+    from endocal.models import model_to_dict, save_model
+    from endocal.runs.format import software_versions, utc_now
+
+    if out_path.exists() and not force:
+        raise OutputExistsError(f"{out_path} already exists: choose another --out or pass --force")
+    planes = None
+    if planes_file is not None:
+        from endocal.planes import load_planes
+
+        planes = load_planes(planes_file)
+    effect_list = [e.strip() for e in effects.split(",") if e.strip()]
+    result = fit_hysteresis(data, axis, model, effect_list, planes=planes)
+    provenance = {
+        "software": software_versions(),
+        "created_utc": utc_now(),
+        "command": "endocal " + " ".join(sys.argv[1:]),
+        "data": [{"path": str(p), "sha256": h} for p, h in zip(result.sources, result.hashes)],
+        "planes": None if planes_file is None else str(planes_file),
+    }
+    save_model(result.model, out_path, provenance=provenance)
+    if as_json:
+        d = model_to_dict(result.model)
+        d["provenance"] = provenance
+        out.print_json(json.dumps(d))
+        return
+    rep = result.model.fit_report_
+    out.print(str(result.model), markup=False)
+    out.print(
+        f"fit: {result.samples} samples from {len(result.sources)} source(s); RMSE {rep.rmse_deg:.3f} deg; "
+        f"{rep.nfev} evaluations; {rep.message}",
+        markup=False,
+    )
+    err.print(f"wrote {out_path}")

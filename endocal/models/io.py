@@ -29,6 +29,8 @@ from endocal.models.effects import EFFECTS
 
 FORMAT = "endocal-model"
 VERSION = 1
+#: Optional top-level fields: who made the file, from what (endocal version, data files and hashes, command).
+_OPTIONAL = {"provenance"}
 _KEYS = {"format", "version", "axis", "base", "settings", "out_of_range", "fixed", "effects", "structure",
          "parameters", "cmd_range_deg", "correlation", "fit", "training_data"}
 
@@ -83,7 +85,7 @@ def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
     if d.get("version") != VERSION:
         raise ModelError(f"{where}: unknown model file version {d.get('version')!r}; this endocal reads version "
                          f"{VERSION} (upgrade endocal or refit the model)")
-    unknown = set(d) - _KEYS
+    unknown = set(d) - _KEYS - _OPTIONAL
     missing = _KEYS - set(d)
     if unknown or missing:
         raise ModelError(f"{where}: wrong fields for a version-1 model file (unknown {sorted(unknown)}, "
@@ -122,6 +124,7 @@ def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
         model.covariance_ = model.correlation_ * np.outer(se, se)
         model.fit_report_ = None if d["fit"] is None else FitReport(**d["fit"])
         model.training_data_ = list(d["training_data"])
+        model.provenance_ = dict(d.get("provenance") or {})
     except ModelError:
         raise
     except (KeyError, TypeError, ValueError) as exc:
@@ -129,15 +132,22 @@ def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
     return model
 
 
-def save_model(model: HysteresisModel, path) -> None:
+def save_model(model: HysteresisModel, path, provenance: dict | None = None) -> None:
     """Write ``model`` to ``path`` as indented JSON.
+
+    ``provenance`` (endocal version, data files and their SHA-256, command, time) is stored
+    under ``"provenance"`` and comes back as ``model.provenance_``.
 
     Raises
     ------
     OutputPathError
         The file cannot be written.
     """
-    text = json.dumps(model_to_dict(model), indent=2, allow_nan=False)
+    d = model_to_dict(model)
+    prov = provenance if provenance is not None else getattr(model, "provenance_", None)
+    if prov:
+        d["provenance"] = prov
+    text = json.dumps(d, indent=2, allow_nan=False)
     try:
         Path(path).write_text(text + "\n")
     except OSError as exc:

@@ -1,0 +1,220 @@
+"""Feedforward compensation on a backend: play desired angles through the inverse model.
+
+This is the thesis's first experiment and the duodenoscope paper's fig. 9b: a protocol now
+describes *desired bending angles* of one axis; the inverse hysteresis model (after the
+orthogonal compensator, when bending planes are given) turns them into knob commands; the
+backend plays them; the tracker measures what the tip reached. The same protocol is also
+played *uncompensated* (knob command = desired angle, what a robot without a model does),
+so the gain is measured in the same run.
+
+The error is ``reached - desired`` per sample (thesis eq. 2), summarised by
+:func:`endocal.validation.metrics.error_metrics`.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from endocal.backends.base import Backend
+from endocal.errors import ModelError
+from endocal.excite import run_excitation
+from endocal.models.base import HysteresisModel
+from endocal.probe import ProbeConfig
+from endocal.protocols import Protocol, Trajectory
+from endocal.runs.aligned import load_aligned
+from endocal.validation.metrics import ErrorMetrics, error_metrics
+
+
+@dataclass
+class PlaybackResult:
+    """Desired vs reached angles of one axis, compensated and not.
+
+    Attributes
+    ----------
+    axis : str
+    protocol : str
+    metrics, uncompensated : ErrorMetrics
+        Error of the compensated and of the uncompensated playback.
+    t_s, desired_deg, reached_deg, uncompensated_deg, command_deg : (n,) arrays
+        On the compensated run's aligned clock (the uncompensated reach is interpolated
+        onto it).
+    runs : dict
+        ``{"compensated": Path, "uncompensated": Path}`` of the played runs.
+    """
+
+    axis: str
+    protocol: str
+    metrics: ErrorMetrics
+    uncompensated: ErrorMetrics
+    t_s: np.ndarray
+    desired_deg: np.ndarray
+    reached_deg: np.ndarray
+    uncompensated_deg: np.ndarray
+    command_deg: np.ndarray
+    runs: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return {
+            "axis": self.axis,
+            "protocol": self.protocol,
+            "metrics": self.metrics.to_dict(),
+            "uncompensated": self.uncompensated.to_dict(),
+            "improvement_pct": 100.0 * (1 - self.metrics.rmse_deg / self.uncompensated.rmse_deg)
+            if self.uncompensated.rmse_deg > 0
+            else 0.0,
+            "runs": {k: str(v) for k, v in self.runs.items()},
+        }
+
+
+#: Seconds of smooth ramp from rest to the first command, played before the protocol starts.
+PREROLL_S = 2.0
+
+
+def _with_goal(traj: Trajectory, dof: str, goal: np.ndarray, preroll_s: float = PREROLL_S) -> Trajectory:
+    """A copy of ``traj`` whose ``dof`` follows ``goal``, after a pre-roll of ``preroll_s``.
+
+    The inverse model's first command is generally not zero (the dead band and the initial
+    loading of eq. 11 put it elsewhere); a probe at rest cannot jump there, so it is reached
+    by a raised-cosine ramp before the protocol's ``t = 0``. Every other DoF holds its first
+    value during the pre-roll. The protocol's samples are shifted by ``preroll_s``.
+    """
+    from dataclasses import replace
+
+    fs = traj.sample_rate_hz
+    n_pre = int(round(preroll_s * fs))
+    ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(n_pre) / n_pre)
+    goals = {}
+    for d, g in traj.goal.items():
+        g = np.asarray(goal if d == dof else g, float)
+        goals[d] = np.concatenate([g[0] * ramp, g])
+    t = np.concatenate([np.arange(n_pre) / fs, traj.t_s + n_pre / fs])
+    return replace(traj, t_s=t, goal=goals)
+
+
+def slew_limit(cmd_deg: np.ndarray, t_s: np.ndarray, max_speed_dps: float) -> np.ndarray:
+    """Follow ``cmd_deg`` as closely as a knob limited to ``max_speed_dps`` can.
+
+    Inverting backlash asks for a jump of the knob across the dead band at every reversal
+    (the inverse of a flat branch is a step); no motor can jump, so the command is taken
+    across at the probe's top speed, which is what the servo would do anyway, and the
+    played command stays inside the limits that are checked before motion.
+    """
+    out = np.asarray(cmd_deg, float).copy()
+    max_step = max_speed_dps * np.diff(t_s)
+    for i in range(1, out.size):
+        step = out[i] - out[i - 1]
+        if abs(step) > max_step[i - 1]:
+            out[i] = out[i - 1] + np.sign(step) * max_step[i - 1]
+    return out
+
+
+def compensated_commands(
+    model: HysteresisModel, traj: Trajectory, probe: ProbeConfig, axis: str, planes=None
+) -> np.ndarray:
+    """Knob commands (deg) for ``axis`` so that the tip follows ``traj``'s desired angles.
+
+    With ``planes`` the desired standard-plane angles of both axes first go through the
+    orthogonal compensator (duodenoscope eqs. 3-4), then through the inverse hysteresis
+    model of ``axis`` (duodenoscope eqs. 9-11 for ``pi``; numerical for the others).
+    """
+    desired = traj.goal[axis]
+    if planes is not None:
+        first, second = probe.bending_axes
+        comp_first, comp_second = planes.compensate(traj.goal[first], traj.goal[second])
+        desired = comp_first if axis == first else comp_second
+    other = probe.bending_axes[1] if axis == probe.bending_axes[0] else probe.bending_axes[0]
+    cmd = np.asarray(model.inverse(desired, t_s=traj.t_s, extras={"other_cmd_deg": traj.goal[other]}), float)
+    # 0.99: stay strictly inside the speed limit that check_limits enforces.
+    return slew_limit(cmd, traj.t_s, 0.99 * probe.max_knob_speed_dps)
+
+
+def validate_on_backend(
+    model: HysteresisModel,
+    protocol: Protocol,
+    backend_factory,
+    probe: ProbeConfig,
+    *,
+    planes=None,
+    seed: int = 0,
+    out_dir: Path | None = None,
+    progress=None,
+) -> PlaybackResult:
+    """Play ``protocol`` as desired angles of the model's axis, compensated and uncompensated.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        A fitted model of one axis (``model.axis`` names it).
+    protocol : Protocol
+        Its goal on the model's axis is read as the desired bending angle, degrees.
+    backend_factory : callable
+        ``backend_factory() -> Backend``; called once per playback so each run starts
+        from rest (the simulator's state, the rig's homing).
+    probe : ProbeConfig
+    planes : PlanesCalibration, optional
+        Orthogonal compensator applied before the hysteresis inverse.
+    seed : int
+        Seed of the protocol and backend.
+    out_dir : Path, optional
+        Where the two runs are kept (``compensated/``, ``uncompensated/``); a temporary
+        folder when omitted.
+
+    Raises
+    ------
+    ModelError
+        The model has no axis, or an axis the probe lacks.
+    LimitError
+        The compensated commands leave the knob limits (before anything moves).
+    """
+    axis = model.axis
+    if axis not in probe.bending_axes:
+        raise ModelError(
+            f"the model is for axis {axis!r}, but probe '{probe.name}' has {', '.join(probe.bending_axes)}: "
+            "use --probe to pick the probe the model was fitted on"
+        )
+    proto = protocol.with_overrides({"axes": [axis]}) if "axes" in protocol.params else protocol
+    desired_traj = proto.trajectory(probe, seed=seed)
+    command = compensated_commands(model, desired_traj, probe, axis, planes)
+    comp_traj = _with_goal(desired_traj, axis, command)
+    uncomp_traj = _with_goal(desired_traj, axis, desired_traj.goal[axis])
+    comp_traj.check_limits(probe)  # both refused before anything moves
+    uncomp_traj.check_limits(probe)
+
+    root = Path(out_dir) if out_dir is not None else Path(tempfile.mkdtemp(prefix="endocal-validate-"))
+    runs = {"compensated": root / "compensated", "uncompensated": root / "uncompensated"}
+    reached = {}
+    for name, traj in (("compensated", comp_traj), ("uncompensated", uncomp_traj)):
+        run_excitation(
+            traj,
+            backend_factory(),
+            probe,
+            runs[name],
+            protocol_info={**proto.to_dict(), "playback": name, "model_axis": axis},
+            seed=seed,
+            force=True,
+            progress=progress,
+        )
+        data = load_aligned(runs[name])
+        keep = data.t_s >= PREROLL_S - 1e-9  # metrics over the protocol only, on its own clock
+        reached[name] = (data.t_s[keep] - PREROLL_S, data.meas_deg(axis)[keep])
+
+    t, reach = reached["compensated"]
+    desired = np.interp(t, desired_traj.t_s, desired_traj.goal[axis])
+    reach_uncomp = np.interp(t, *reached["uncompensated"])
+    cmd = np.interp(t, desired_traj.t_s, command)
+    return PlaybackResult(
+        axis=axis,
+        protocol=proto.name,
+        metrics=error_metrics(desired, reach, seed=seed),
+        uncompensated=error_metrics(desired, reach_uncomp, seed=seed),
+        t_s=t,
+        desired_deg=desired,
+        reached_deg=reach,
+        uncompensated_deg=reach_uncomp,
+        command_deg=cmd,
+        runs=runs,
+    )
