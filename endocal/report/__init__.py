@@ -1,0 +1,20 @@
+"""Error reports: models compared on records with statistics done right for time series.
+
+``build_report(models, datas, planes=None, out="report.html")`` scores every model on every
+record of its axis with :func:`endocal.validation.metrics.error_metrics`, compares the models
+on per-half-cycle errors (Wilcoxon signed-rank for two, Friedman + Holm-corrected pairwise
+Wilcoxon for more; :mod:`endocal.report.stats`), draws the figures
+(:mod:`endocal.report.figures`) and returns a :class:`Report` that renders as terminal text,
+``report.json``, ``report_metrics.csv`` and one self-contained HTML page.
+"""
+
+from endocal.report.build import build_report, model_ladder
+from endocal.report.evaluate import DataEntry, Evaluation, Finding, Group, ModelEntry, NotEvaluated, evaluate, load_inputs
+from endocal.report.result import CSV_NAME, JSON_NAME, Report, ReportFigure
+from endocal.report.stats import Comparison, PairTest, Units, compare_models, make_units
+
+__all__ = [
+    "CSV_NAME", "Comparison", "DataEntry", "Evaluation", "Finding", "Group", "JSON_NAME", "ModelEntry", "NotEvaluated",
+    "PairTest", "Report", "ReportFigure", "Units", "build_report", "compare_models", "evaluate", "load_inputs",
+    "make_units", "model_ladder",
+]

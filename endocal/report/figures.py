@@ -1,0 +1,354 @@
+"""The report's figures, drawn with matplotlib's object API and returned as PNG bytes.
+
+No ``pyplot``: each function builds its own :class:`matplotlib.figure.Figure` on an Agg
+canvas, so nothing leaks into a global figure registry and the functions are safe to call
+from any thread or from a program that has its own pyplot state. Inputs are plain arrays and
+result objects; every number drawn was computed elsewhere (the figures compute nothing the
+tables do not show, except bin means that only guide the eye in residual plots).
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from endocal.report.stats import Comparison, stars
+
+DPI = 110
+_PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#7f7f7f")
+MEAS_COLOR = "#222222"
+CMD_COLOR = "#9a9a9a"
+
+
+def palette(labels: Sequence[str]) -> dict[str, str]:
+    """One fixed colour per model label, the same in every figure."""
+    return {lbl: _PALETTE[i % len(_PALETTE)] for i, lbl in enumerate(labels)}
+
+
+def _new(width_in: float, height_in: float) -> Figure:
+    fig = Figure(figsize=(width_in, height_in), dpi=DPI, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _png(fig: Figure) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI)
+    return buf.getvalue()
+
+
+def _thin(n: int, keep: int = 4000) -> np.ndarray:
+    """Indices of at most ``keep`` evenly spread samples (scatter plots stay light)."""
+    return np.unique(np.linspace(0, n - 1, min(n, keep)).round().astype(int)) if n else np.zeros(0, int)
+
+
+def time_series(t_s: np.ndarray, cmd_deg: np.ndarray, meas_deg: np.ndarray, predicted: Mapping[str, np.ndarray],
+                colors: Mapping[str, str], title: str) -> bytes:
+    """Command, measured and predicted bending angle over time, and each model's error below.
+
+    Parameters
+    ----------
+    t_s, cmd_deg, meas_deg : (n,) arrays
+        Time (s), knob command and measured bending angle (deg).
+    predicted : mapping of label to (n,) array
+        Each model's predicted angle (deg).
+    colors : mapping of label to colour
+    title : str
+    """
+    fig = _new(10.5, 5.2)
+    ax, ax_e = fig.subplots(2, 1, sharex=True, height_ratios=[2, 1])
+    ax.plot(t_s, cmd_deg, color=CMD_COLOR, lw=1.0, ls="--", label="knob command")
+    ax.plot(t_s, meas_deg, color=MEAS_COLOR, lw=1.6, label="measured")
+    for lbl, y in predicted.items():
+        ax.plot(t_s, y, color=colors[lbl], lw=1.0, label=lbl)
+        ax_e.plot(t_s, y - meas_deg, color=colors[lbl], lw=0.8, label=lbl)
+    ax_e.axhline(0, color="k", lw=0.6)
+    ax.set_ylabel("angle (deg)")
+    ax_e.set_ylabel("error (deg)\npredicted - measured")
+    ax_e.set_xlabel("time (s)")
+    ax.set_title(title, loc="left", fontsize=11)
+    ax.legend(loc="upper right", fontsize=8, ncols=min(4, 2 + len(predicted)))
+    for a in (ax, ax_e):
+        a.grid(alpha=0.3)
+    return _png(fig)
+
+
+def loops(cmd_deg: np.ndarray, meas_deg: np.ndarray, predicted: Mapping[str, np.ndarray], colors: Mapping[str, str],
+          title: str) -> bytes:
+    """Hysteresis loops: measured angle against command, then each model's over the measured one."""
+    n = 1 + len(predicted)
+    ncols = min(n, 4)
+    nrows = int(np.ceil(n / ncols))
+    fig = _new(2.75 * ncols + 0.5, 2.7 * nrows + 0.4)
+    axes = np.atleast_1d(fig.subplots(nrows, ncols, sharex=True, sharey=True, squeeze=False)).ravel()
+    axes[0].plot(cmd_deg, meas_deg, color=MEAS_COLOR, lw=0.9)
+    axes[0].set_title("measured", fontsize=10)
+    for ax, (lbl, y) in zip(axes[1:], predicted.items()):
+        ax.plot(cmd_deg, meas_deg, color="#c8c8c8", lw=1.6, label="measured")
+        ax.plot(cmd_deg, y, color=colors[lbl], lw=0.9, label=lbl)
+        ax.set_title(lbl, fontsize=10, color=colors[lbl])
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    for i, ax in enumerate(axes[:n]):
+        ax.grid(alpha=0.3)
+        if i % ncols == 0:
+            ax.set_ylabel("bending angle (deg)")
+        if i >= n - ncols:
+            ax.set_xlabel("knob command (deg)")
+    fig.suptitle(title, x=0.01, ha="left", fontsize=11)
+    return _png(fig)
+
+
+def error_boxes(unit_rmse_deg: Mapping[str, np.ndarray], comparison: Comparison, colors: Mapping[str, str],
+                title: str) -> bytes:
+    """Per-unit RMSE of each model as box plots, with significance brackets (thesis fig. 7 style).
+
+    A bracket joins two models whose paired Wilcoxon test (Holm-adjusted when more than two
+    models) gives p < 0.05; stars: ``*`` < 0.05, ``**`` < 0.01, ``***`` < 0.001. With two
+    models the bracket is drawn either way, marked ``ns`` when not significant.
+    """
+    labels = list(unit_rmse_deg)
+    fig = _new(max(4.5, 1.3 * len(labels) + 2.0), 4.2)
+    ax = fig.subplots()
+    data = [np.asarray(unit_rmse_deg[m], float) for m in labels]
+    bp = ax.boxplot(data, tick_labels=labels, widths=0.55, patch_artist=True, showfliers=False,
+                    medianprops={"color": "k"})
+    for patch, lbl in zip(bp["boxes"], labels):
+        patch.set_facecolor(colors[lbl])
+        patch.set_alpha(0.35)
+    rng = np.random.default_rng(0)
+    for i, (lbl, y) in enumerate(zip(labels, data), start=1):
+        ax.scatter(i + rng.uniform(-0.12, 0.12, y.size), y, s=12, color=colors[lbl], zorder=3)
+    top = max((float(np.max(y)) for y in data if y.size), default=1.0)
+    step = 0.09 * top if top > 0 else 0.1
+    level = top + 0.5 * step
+    pairs = [p for p in comparison.pairs if p.significant(comparison.alpha) or len(labels) == 2]
+    pairs.sort(key=lambda p: abs(labels.index(p.a) - labels.index(p.b)))
+    for p in pairs:
+        i, j = sorted((labels.index(p.a) + 1, labels.index(p.b) + 1))
+        ax.plot([i, i, j, j], [level, level + 0.3 * step, level + 0.3 * step, level], color="k", lw=0.9)
+        ax.text((i + j) / 2, level + 0.35 * step, stars(p.p_adjusted), ha="center", va="bottom", fontsize=10)
+        level += step
+    ax.set_ylim(0, level + 0.6 * step)
+    ax.set_ylabel(f"RMSE per {comparison.unit_kind} (deg)")
+    test = {"wilcoxon": "Wilcoxon signed-rank", "friedman": "Friedman + Holm-corrected Wilcoxon",
+            "none": "no test"}[comparison.test]
+    ax.set_title(f"{title}\n{comparison.n_units} {comparison.unit_kind}s; {test}", loc="left", fontsize=10)
+    ax.grid(axis="y", alpha=0.3)
+    ax.tick_params(axis="x", labelrotation=15 if len(labels) > 3 else 0)
+    return _png(fig)
+
+
+def residuals(t_s: np.ndarray, cmd_deg: np.ndarray, other: tuple[str, np.ndarray] | None,
+              errors: Mapping[str, np.ndarray], colors: Mapping[str, str], title: str) -> bytes:
+    """Each model's error (predicted - measured) against knob speed, command, other axis and time.
+
+    Dots are a thinned sample of the error; lines are the mean error in 20 bins, which is where
+    a missing effect shows: a slope against speed (rate), a step at zero speed (dead zone), a
+    trend over time (drift), a slope against the other axis (coupling).
+
+    Parameters
+    ----------
+    other : (name, (n,) array) or None
+        The other axis's command to plot against (None: that panel says the axis did not move).
+    """
+    speed = np.gradient(cmd_deg, t_s) if cmd_deg.size > 1 else np.zeros_like(cmd_deg)
+    xs = [("knob speed (deg/s)", speed), ("knob command (deg)", cmd_deg),
+          (f"{other[0]} (deg)" if other else "other axis", other[1] if other else None), ("time (s)", t_s)]
+    fig = _new(10.5, 6.2)
+    axes = fig.subplots(2, 2, sharey=True).ravel()
+    idx = _thin(cmd_deg.size, 3000)
+    for ax, (xlabel, x) in zip(axes, xs):
+        ax.axhline(0, color="k", lw=0.6)
+        ax.set_xlabel(xlabel)
+        ax.grid(alpha=0.3)
+        if x is None:
+            ax.text(0.5, 0.5, "the other axis does not move in this record", ha="center", va="center",
+                    transform=ax.transAxes, fontsize=9, color="#555")
+            continue
+        edges = np.linspace(float(np.min(x)), float(np.max(x)), 21)
+        which = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, 19)
+        centres = 0.5 * (edges[1:] + edges[:-1])
+        for lbl, e in errors.items():
+            ax.scatter(x[idx], e[idx], s=2, color=colors[lbl], alpha=0.12, rasterized=True, linewidths=0)
+            counts = np.bincount(which, minlength=20)
+            sums = np.bincount(which, weights=e, minlength=20)
+            ok = counts >= 5
+            ax.plot(centres[ok], sums[ok] / counts[ok], color=colors[lbl], lw=1.6, label=lbl)
+    for ax in axes[::2]:
+        ax.set_ylabel("error (deg)")
+    axes[0].legend(fontsize=8, loc="upper left")
+    fig.suptitle(title, x=0.01, ha="left", fontsize=11)
+    return _png(fig)
+
+
+def regimes(rows: Mapping[str, Sequence], colors: Mapping[str, str], title: str) -> bytes:
+    """RMSE per regime of motion, one bar per model (rows: label -> list of RegimeError)."""
+    labels = list(rows)
+    keys: list[tuple[str, str]] = []
+    for lbl in labels:
+        for r in rows[lbl]:
+            if (r.family, r.regime) not in keys:
+                keys.append((r.family, r.regime))
+    fig = _new(10.5, 0.32 * len(keys) * max(1, len(labels)) ** 0.5 + 1.6)
+    ax = fig.subplots()
+    h = 0.8 / max(1, len(labels))
+    for j, lbl in enumerate(labels):
+        by = {(r.family, r.regime): r for r in rows[lbl]}
+        y = [i + (j - (len(labels) - 1) / 2) * h for i in range(len(keys))]
+        v = [by[k].rmse_deg if k in by else np.nan for k in keys]
+        ax.barh(y, v, height=h, color=colors[lbl], label=lbl)
+    ax.set_yticks(range(len(keys)), [f"{f}: {r}" for f, r in keys], fontsize=8)
+    ax.invert_yaxis()
+    fam = [k[0] for k in keys]
+    for i in range(1, len(keys)):
+        if fam[i] != fam[i - 1]:
+            ax.axhline(i - 0.5, color="#999", lw=0.6)
+    ax.set_xlabel("RMSE (deg)")
+    ax.grid(axis="x", alpha=0.3)
+    ax.legend(fontsize=8, loc="lower right")
+    ax.set_title(title, loc="left", fontsize=10)
+    return _png(fig)
+
+
+def ladder(steps: Sequence[dict], colors_by_data: Mapping[str, str], title: str) -> bytes:
+    """The model ladder: RMSE of base, base+effect, ... for each record, with 95 % intervals.
+
+    Parameters
+    ----------
+    steps : sequence of dict
+        Keys ``model`` (x label, in ladder order), ``data``, ``rmse_deg``, ``ci`` ((lo, hi) or
+        None) and ``in_sample`` (hollow marker: fitted on this record, not held out).
+    colors_by_data : mapping of record label to colour
+    """
+    order: list[str] = []
+    for s in steps:
+        if s["model"] not in order:
+            order.append(s["model"])
+    fig = _new(max(5.0, 1.5 * len(order) + 2.5), 4.2)
+    ax = fig.subplots()
+    datas = list(dict.fromkeys(s["data"] for s in steps))
+    for k, d in enumerate(datas):
+        pts = [s for s in steps if s["data"] == d]
+        x = np.array([order.index(s["model"]) for s in pts], float) + (k - (len(datas) - 1) / 2) * 0.06
+        y = np.array([s["rmse_deg"] for s in pts])
+        c = colors_by_data[d]
+        ax.plot(x, y, color=c, lw=1.2, label=d)
+        for xi, s in zip(x, pts):
+            if s.get("ci"):
+                lo, hi = s["ci"]
+                ax.plot([xi, xi], [lo, hi], color=c, lw=1.0)
+            ax.scatter([xi], [s["rmse_deg"]], s=36, color="white" if s["in_sample"] else c, edgecolors=c, zorder=3)
+    ax.set_xticks(range(len(order)), order, rotation=12 if len(order) > 3 else 0)
+    ax.set_ylim(bottom=0)
+    ax.set_ylabel("RMSE (deg)")
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=8, title="record (hollow: in-sample)", title_fontsize=8)
+    ax.set_title(title, loc="left", fontsize=10)
+    return _png(fig)
+
+
+def parameters(params: Mapping[str, tuple[float, float | None, bool]], title: str, color: str) -> bytes:
+    """Fitted parameters with 95 % intervals, each relative to its own estimate.
+
+    Parameters have different units, so each row shows ``(value +- 1.96 SE) / |value|``: a bar
+    that stays clear of 0 is a well-identified parameter, one that crosses 0 is not
+    distinguishable from zero, an absent bar means an infinite (unidentified) or unknown error.
+
+    Parameters
+    ----------
+    params : mapping of name to (value, stderr or None, fixed)
+    """
+    names = list(params)
+    fig = _new(7.8, 0.26 * len(names) + 1.2)
+    ax = fig.subplots()
+    for i, n in enumerate(names):
+        v, se, fixed = params[n]
+        if fixed:
+            ax.scatter([1.0], [i], marker="s", color="#999", s=18)
+            continue
+        if v == 0:
+            ax.scatter([0.0], [i], marker="o", color=color, s=14)
+            if se is not None and np.isfinite(se):
+                ax.text(0.05, i, f"0 +- {se:.2g}", va="center", fontsize=7, color="#555")
+            continue
+        rel = 1.96 * se / abs(v) if se is not None and np.isfinite(se) else None
+        centre = np.sign(v)
+        if rel is not None:
+            lo, hi = centre - rel, centre + rel
+            crosses = lo <= 0 <= hi
+            ax.plot([max(lo, -3), min(hi, 3)], [i, i], color="#d62728" if crosses else color, lw=2)
+        ax.scatter([centre], [i], color=color, s=14, zorder=3)
+    ax.set_yticks(range(len(names)), [f"{n} = {params[n][0]:.4g}" + (" (fixed)" if params[n][2] else
+                                      f" +- {params[n][1]:.2g}" if params[n][1] is not None else " +- ?")
+                                      for n in names], fontsize=7)
+    ax.invert_yaxis()
+    ax.axvline(0, color="k", lw=0.6)
+    ax.set_xlim(-3.1, 3.1)
+    ax.set_xlabel("estimate with 95 % interval, relative to |estimate| (red: interval includes 0)")
+    ax.grid(axis="x", alpha=0.3)
+    ax.set_title(title, loc="left", fontsize=10)
+    return _png(fig)
+
+
+def planes(deviation_signed_deg: Mapping[str, float], deviation_ci_deg: Mapping[str, tuple[float, float]],
+           residual_signed_deg: Mapping[str, float], nominal_azimuth_deg: Mapping[str, float], title: str,
+           amplitude_deg: float = 30.0) -> bytes:
+    """Bending-plane traces seen from the base, before and after orthogonal compensation (paper fig. 8).
+
+    Each half-plane sweep is drawn as the bend-direction trace of a single-knob sweep of
+    ``amplitude_deg``: before compensation it leaves along its fitted (signed) deviation, with
+    the 95 % interval as a wedge; after compensation along the residual deviation. Dashed lines
+    are the standard planes.
+    """
+    fig = _new(10.0, 4.9)
+    axes = fig.subplots(1, 2)
+    ramp = np.linspace(0, amplitude_deg, 16)
+    cols = {"y+": "#1f77b4", "y-": "#2ca02c", "x+": "#d62728", "x-": "#ff7f0e"}
+    for ax, (name, dev, ci) in zip(axes, (("before compensation", deviation_signed_deg, deviation_ci_deg),
+                                          ("after compensation", residual_signed_deg, None))):
+        lim = amplitude_deg * 1.25
+        ax.plot([-lim, lim], [0, 0], color="#999", ls="--", lw=0.8)
+        ax.plot([0, 0], [-lim, lim], color="#999", ls="--", lw=0.8)
+        for h, nom in nominal_azimuth_deg.items():
+            az = np.radians(nom + dev[h])
+            ax.scatter(ramp * np.cos(az), ramp * np.sin(az), s=10, color=cols.get(h, "k"), label=f"{h}: {dev[h]:+.1f} deg")
+            if ci is not None:
+                lo, hi = np.radians(nom + np.array(ci[h]))
+                a = np.linspace(lo, hi, 20)
+                ax.fill(np.r_[0, amplitude_deg * np.cos(a), 0], np.r_[0, amplitude_deg * np.sin(a), 0],
+                        color=cols.get(h, "k"), alpha=0.15, lw=0)
+        ax.set_aspect("equal")
+        ax.set_xlim(-lim, lim)
+        ax.set_ylim(-lim, lim)
+        ax.set_xlabel("bend toward +x (deg)")
+        ax.set_ylabel("bend toward +y (deg)")
+        ax.set_title(name, fontsize=10)
+        ax.legend(fontsize=7, loc="lower left")
+        ax.grid(alpha=0.3)
+    fig.suptitle(title, x=0.01, ha="left", fontsize=11)
+    return _png(fig)
+
+
+def tip_paths(paths_mm: Mapping[str, np.ndarray], title: str) -> bytes:
+    """Measured tip trajectories in the base sensor's frame: top view (x-y) and side view (x-z, y-z)."""
+    fig = _new(10.5, 3.8)
+    axes = fig.subplots(1, 3)
+    views = (("x_mm", "y_mm", 0, 1), ("x_mm", "z_mm", 0, 2), ("y_mm", "z_mm", 1, 2))
+    cols = _PALETTE
+    for k, (lbl, p) in enumerate(paths_mm.items()):
+        idx = _thin(p.shape[0], 6000)
+        for ax, (xl, yl, i, j) in zip(axes, views):
+            ax.plot(p[idx, i], p[idx, j], lw=0.7, color=cols[k % len(cols)], label=lbl)
+    for ax, (xl, yl, _, _) in zip(axes, views):
+        ax.set_xlabel(xl.replace("_mm", " (mm)"))
+        ax.set_ylabel(yl.replace("_mm", " (mm)"))
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.suptitle(title, x=0.01, ha="left", fontsize=11)
+    return _png(fig)
