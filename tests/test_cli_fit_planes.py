@@ -52,3 +52,26 @@ def test_too_little_excursion_and_missing_sweeps_are_named(tmp_path):
     (tmp_path / "t.csv").write_text("t_s,ap_cmd_deg,ap_meas_deg\n0,0,0\n0.1,1,1\n")
     one_line_error(endocal("fit", "planes", tmp_path / "t.csv", "--out", tmp_path / "c.json"), "needs run folders")
     assert not any((tmp_path / n).exists() for n in ("a.json", "b.json", "c.json"))
+
+
+def test_invalid_frames_dropped_and_counted_missing_base_named(tmp_path):
+    cfg = tmp_path / "flaky.toml"
+    cfg.write_text("[tracker]\ninvalid_rate = 0.05\n")  # 5 % of sensor frames flagged invalid
+    run = tmp_path / "flaky"
+    assert endocal("excite", "planes", "--out", run, "--sim-config", cfg, "--set", "repetitions=2", "--quiet").returncode == 0
+    proc = endocal("fit", "planes", run, "--out", tmp_path / "p.json", "--json", "--bootstrap", "20")
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads(proc.stdout)
+    dropped = result["dropped_frames"]
+    # 216 s at 40 Hz = 8640 frames per sensor, each invalid with p = 0.05: 432 +- 20 expected.
+    assert 330 < dropped["tip_invalid"] < 540 and 330 < dropped["base_invalid"] < 540
+    truth = {"y+": 12.7, "y-": 20.2, "x+": 2.3, "x-": 15.6}
+    for half, alpha in truth.items():
+        assert result["deviation_deg"][half] == pytest.approx(alpha, abs=0.5)
+
+    import pandas as pd
+
+    for part in (run / "tracker").glob("part-*.parquet"):
+        df = pd.read_parquet(part)
+        df[df["sensor"] == "tip"].to_parquet(part)
+    one_line_error(endocal("fit", "planes", run, "--out", tmp_path / "q.json"), "base")

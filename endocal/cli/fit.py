@@ -46,6 +46,8 @@ def planes(
     for sweep in cal.sweeps_used:
         by_half.setdefault(sweep["half_plane"], []).append(f"{sweep['run']}#{sweep['index']}")
     out.print("sweeps used: " + "; ".join(f"{h}: {', '.join(v)}" for h, v in sorted(by_half.items())), markup=False)
+    dropped = {k: v for k, v in cal.dropped_frames.items() if v}
+    out.print("tracker frames dropped: " + (", ".join(f"{k}={v}" for k, v in dropped.items()) if dropped else "none"), markup=False)
     err.print(f"wrote {out_path}")
 
 
