@@ -33,6 +33,7 @@ def excite(
     duration: Optional[float] = typer.Option(None, "--duration", help="Shortcut for --set duration_s=VALUE (protocols with a free duration; periodic ones take --set cycles=N)."),
     sample_rate: Optional[float] = typer.Option(None, "--sample-rate", help="Shortcut for --set sample_rate_hz=VALUE (motor clock)."),
     axes: Optional[str] = typer.Option(None, "--axes", help="Comma-separated axes to drive, e.g. `ml` or `ap,ml`."),
+    planes_file: Optional[Path] = typer.Option(None, "--planes", help="planes.json from `endocal fit planes`: pass the knob goals through the orthogonal compensator."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
 ) -> None:
     """Run an excitation protocol and log motor and tracker streams to a run folder.
@@ -50,9 +51,15 @@ def excite(
     probe_cfg = load_probe(probe)
     proto = load_protocol(protocol, overrides=overrides or None)
     trajectory = proto.trajectory(probe_cfg, seed=seed)
+    protocol_info = proto.to_dict()
+    if planes_file is not None:
+        from endocal.planes import load_planes
+        from endocal.planes.from_runs import compensate_trajectory
+
+        trajectory = compensate_trajectory(trajectory, probe_cfg, load_planes(planes_file))
+        protocol_info["orthogonal_compensation"] = str(planes_file)
     trajectory.check_limits(probe_cfg)  # before any backend is built or anything moves
     be = make_backend(backend, probe_cfg, seed=seed, sim_config=sim_config, hardware_config=hardware_config)
-    protocol_info = proto.to_dict()
     command = "endocal " + " ".join(sys.argv[1:])
 
     show = not quiet and err.is_terminal

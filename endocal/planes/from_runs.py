@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from endocal.errors import RunFormatError
 from endocal.planes.calibration import PlanesCalibration, fit_planes
 from endocal.planes.segment import Segmentation, segment_planes_run
@@ -62,3 +64,19 @@ def calibrate_planes(
     seg, probe = segment_runs(runs)
     comp = segment_runs(after, compensated=True)[0] if after else None
     return fit_planes(seg, n_bootstrap=n_bootstrap, seed=seed, compensated=comp), probe
+
+
+def compensate_trajectory(traj, probe: ProbeConfig, calibration: PlanesCalibration):
+    """A copy of ``traj`` whose two knob goals pass through the orthogonal compensator.
+
+    The protocol's goals are read as desired angles in the standard planes; the compensator
+    (duodenoscope eqs. 3-4) turns them into the angles to command along the twisted planes.
+    Recording the ``planes`` protocol this way and fitting it with ``--after`` measures the
+    residual deviation, the paper's fig. 8 before/after.
+    """
+    from dataclasses import replace
+
+    first, second = probe.bending_axes
+    goal = dict(traj.goal)
+    goal[first], goal[second] = (np.asarray(g, float) for g in calibration.compensate(traj.goal[first], traj.goal[second]))
+    return replace(traj, goal=goal)
