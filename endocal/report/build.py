@@ -97,6 +97,7 @@ def build_report(
     *,
     force: bool = False,
     n_boot: int = 400,
+    regime_boot: int = 200,
     seed: int = 0,
     progress: Progress | None = None,
     command: str | None = None,
@@ -118,6 +119,8 @@ def build_report(
     n_boot, seed : int
         Bootstrap replicates and seed of the metric intervals (the defaults of
         :func:`endocal.validation.metrics.error_metrics`, so the numbers equal ``validate``'s).
+    regime_boot : int
+        Bootstrap replicates of the per-regime intervals (``validate``'s default: 200).
     progress : callable, optional
         ``progress(step, done, total)``.
     command : str, optional
@@ -153,7 +156,7 @@ def build_report(
     n_groups = sum(1 for d in data_entries for a in d.aligned.axes if any(m.axis == a for m in model_entries))
     n_fig_est = 5 * n_groups + len(model_entries) + 2 + (planes is not None)
     total = n_eval + n_fig_est
-    groups, skipped = evaluate(model_entries, data_entries, n_boot=n_boot, seed=seed, progress=stage(0, total))
+    groups, skipped = evaluate(model_entries, data_entries, n_boot=n_boot, regime_boot=regime_boot, seed=seed, progress=stage(0, total))
     if not groups:
         reasons = "; ".join(f"{s.model} on {s.data}: {s.reason}" for s in skipped)
         raise RunFormatError(f"no model could be evaluated on any record ({reasons})")
@@ -193,8 +196,9 @@ def build_report(
                           "a trend in time to drift or creep, a slope against the other axis to coupling.", b"", key),
              lambda g=g, t=t, cmd=cmd, errs=errs, head=head: F.residuals(t, cmd, _other_axis(g), errs, colors, head)),
             (ReportFigure(f"regime-{_slug(g.data, g.axis)}", "records", f"{head}: error by regime",
-                          "RMSE of each model near reversals vs in steady motion and holds, by speed, amplitude and "
-                          "other-axis band (terciles) and over time (quarters).", b"", key),
+                          "RMSE of each model by regime of the motion, as `endocal validate` breaks it down: near "
+                          "reversals vs steady motion and holds, by speed band (terciles), by amplitude (thirds of "
+                          "the half-span), by the other knob's position and over time (quarters).", b"", key),
              lambda g=g, head=head: F.regimes({e.model: e.regimes for e in g.evaluations}, colors, head)),
         ]
     for axis in dict.fromkeys(s["axis"] for s in ladder):
@@ -246,7 +250,7 @@ def build_report(
         "software": software_versions(),
         "created_utc": utc_now(),
         "command": command,
-        "bootstrap": {"n_boot": n_boot, "seed": seed, "confidence": 0.95},
+        "bootstrap": {"n_boot": n_boot, "regime_boot": regime_boot, "seed": seed, "confidence": 0.95},
         "models": [{"label": m.label, "path": None if m.path is None else str(m.path), "sha256": m.sha256,
                     "axis": m.axis, "model": m.name,
                     "training_data": list(getattr(m.model, "training_data_", []) or [])} for m in model_entries],

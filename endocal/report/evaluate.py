@@ -11,7 +11,6 @@ record becomes a :class:`NotEvaluated` entry that says why; nothing is dropped s
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,8 +19,8 @@ import numpy as np
 
 from endocal.errors import EndocalError, ModelError, RunFormatError
 from endocal.models import HysteresisData, HysteresisModel, load_model
-from endocal.report.adapters import RegimeError, axis_data, regime_errors
-from endocal.report.stats import Comparison, Units, compare_models, make_units, reversal_indices, unit_rmse
+from endocal.report.adapters import RegimeBreakdown, axis_data, error_by_regime, predict_clamped
+from endocal.report.stats import Comparison, Units, compare_models, make_units, unit_rmse
 from endocal.runs.aligned import AlignedData, load_aligned
 from endocal.runs.format import sha256_of
 from endocal.validation.metrics import ErrorMetrics, error_metrics
@@ -128,11 +127,12 @@ class Evaluation:
         The record is one the model was fitted on (its fingerprint is in the model file).
     unit_rmse_deg : (n_units,) array
         Per-unit RMSE on the group's units.
-    regimes : list of RegimeError
+    regimes : RegimeBreakdown
+        Error by regime of the motion (:func:`endocal.validation.regimes.error_by_regime`).
     predicted_deg : (n,) array
         The prediction (for figures; not serialised).
     notes : list of str
-        Warnings raised while predicting (e.g. clamped commands).
+        What the reader should know (e.g. commands clamped to the fitted range).
     """
 
     model: str
@@ -141,14 +141,14 @@ class Evaluation:
     metrics: ErrorMetrics
     in_sample: bool
     unit_rmse_deg: np.ndarray
-    regimes: list[RegimeError]
+    regimes: RegimeBreakdown
     predicted_deg: np.ndarray
     notes: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return {"model": self.model, "data": self.data, "axis": self.axis, "metrics": self.metrics.to_dict(),
                 "in_sample": self.in_sample, "unit_rmse_deg": [float(x) for x in self.unit_rmse_deg],
-                "regimes": [r.to_dict() for r in self.regimes], "notes": list(self.notes)}
+                "regimes": self.regimes.to_dict(), "notes": list(self.notes)}
 
 
 @dataclass(frozen=True)
@@ -198,7 +198,6 @@ class Group:
     comparison: Comparison
     finding: Finding
     hdata: HysteresisData
-    reversals: np.ndarray
 
     def evaluation(self, model: str) -> Evaluation:
         for e in self.evaluations:
@@ -323,12 +322,14 @@ def _finding(data: DataEntry, axis: str, evs: list[Evaluation], comp: Comparison
         sig, p, eff = None, None, None
         text += "not tested: " + comp.why
     else:
-        sig, p, eff = pair.significant(comp.alpha), pair.p_adjusted, pair.rank_biserial
+        # effect oriented so that r > 0 means the best model has the smaller errors
+        sig, p = pair.significant(comp.alpha), pair.p_adjusted
+        eff = pair.rank_biserial if pair.b == best.model else -pair.rank_biserial
         adj = ", Holm-adjusted" if comp.test == "friedman" else ""
         if sig and pair.better == best.model:
-            text += f"significant (Wilcoxon on {comp.n_units} {comp.unit_kind}s, p = {p:.2g}{adj}, r = {eff:+.2f})"
+            text += f"significant (Wilcoxon on {comp.n_units} {comp.unit_kind}s, p = {p:.2g}{adj}, rank-biserial r = {eff:.2f})"
         else:
-            text += f"not significant (Wilcoxon on {comp.n_units} {comp.unit_kind}s, p = {p:.2g}{adj}, r = {eff:+.2f})"
+            text += f"not significant (Wilcoxon on {comp.n_units} {comp.unit_kind}s, p = {p:.2g}{adj}, rank-biserial r = {eff:.2f})"
             sig = False
     return Finding(data.label, data.signal, axis, best.model, best.metrics.rmse_deg, run.model, run.metrics.rmse_deg,
                    margin, pct, sig, p, comp.test, eff, text)
@@ -339,6 +340,7 @@ def evaluate(
     datas: list[DataEntry],
     *,
     n_boot: int = 400,
+    regime_boot: int = 200,
     seed: int = 0,
     progress: Progress | None = None,
 ) -> tuple[list[Group], list[NotEvaluated]]:
@@ -349,6 +351,8 @@ def evaluate(
     models, datas : from :func:`load_inputs`
     n_boot : int
         Bootstrap replicates of the metric intervals (``error_metrics``' default: 400).
+    regime_boot : int
+        Bootstrap replicates of the per-regime intervals (``error_by_regime``'s default: 200).
     seed : int
         Seed of the bootstrap (``error_metrics``' default: 0).
     progress : callable, optional
@@ -384,17 +388,20 @@ def evaluate(
                                                 "does not excite this axis"))
                     continue
                 try:
-                    with warnings.catch_warnings(record=True) as caught:
-                        warnings.simplefilter("always")
-                        pred = np.asarray(m.model.predict(hd), float)
+                    # as `endocal validate` does: commands beyond the fitted range are clamped and counted
+                    pred, clamped = predict_clamped(m.model, hd)
                 except EndocalError as exc:
                     skipped.append(NotEvaluated(m.label, d.label, axis, str(exc)))
                     continue
-                preds[m.label] = (pred, [str(w.message) for w in caught])
+                notes = []
+                if clamped:
+                    lo, hi = m.model.cmd_range_deg_
+                    notes.append(f"{clamped} samples of {d.label} command beyond {m.label}'s fitted range "
+                                 f"[{lo:.3g}, {hi:.3g}] deg and were clamped (the model extrapolates flat there)")
+                preds[m.label] = (np.asarray(pred, float), notes)
             if not preds:
                 continue
-            units = make_units(hd.cmd_deg, [p - hd.meas_deg for p, _ in preds.values()])
-            rev = reversal_indices(hd.cmd_deg)
+            units = make_units(hd, [p - hd.meas_deg for p, _ in preds.values()])
             evs = []
             for m in (m for m in models if m.label in preds):
                 pred, notes = preds[m.label]
@@ -403,9 +410,9 @@ def evaluate(
                     metrics=error_metrics(hd.meas_deg, pred, n_boot=n_boot, seed=seed),
                     in_sample=_in_sample(m.model, hd),
                     unit_rmse_deg=unit_rmse(hd.meas_deg, pred, units),
-                    regimes=regime_errors(hd, pred, rev),
+                    regimes=error_by_regime(hd, pred, n_boot=regime_boot, seed=seed),
                     predicted_deg=pred, notes=notes,
                 ))
             comp = compare_models({e.model: e.unit_rmse_deg for e in evs}, units)
-            groups.append(Group(d.label, axis, units, evs, comp, _finding(d, axis, evs, comp), hd, rev))
+            groups.append(Group(d.label, axis, units, evs, comp, _finding(d, axis, evs, comp), hd))
     return groups, skipped

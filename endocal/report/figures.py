@@ -186,23 +186,29 @@ def residuals(t_s: np.ndarray, cmd_deg: np.ndarray, other: tuple[str, np.ndarray
     return _png(fig)
 
 
-def regimes(rows: Mapping[str, Sequence], colors: Mapping[str, str], title: str) -> bytes:
-    """RMSE per regime of motion, one bar per model (rows: label -> list of RegimeError)."""
+def regimes(rows: Mapping[str, object], colors: Mapping[str, str], title: str) -> bytes:
+    """RMSE per regime of motion, one bar per model.
+
+    Parameters
+    ----------
+    rows : mapping of label to RegimeBreakdown
+        :func:`endocal.validation.regimes.error_by_regime` of each model.
+    """
     labels = list(rows)
     keys: list[tuple[str, str]] = []
     for lbl in labels:
-        for r in rows[lbl]:
-            if (r.family, r.regime) not in keys:
-                keys.append((r.family, r.regime))
-    fig = _new(10.5, 0.32 * len(keys) * max(1, len(labels)) ** 0.5 + 1.6)
+        for r in rows[lbl].regimes:
+            if (r.group, r.name) not in keys:
+                keys.append((r.group, r.name))
+    fig = _new(10.5, 0.075 * len(keys) * max(2, len(labels)) + 0.25 * len(keys) + 1.2)
     ax = fig.subplots()
     h = 0.8 / max(1, len(labels))
     for j, lbl in enumerate(labels):
-        by = {(r.family, r.regime): r for r in rows[lbl]}
+        by = {(r.group, r.name): r for r in rows[lbl].regimes}
         y = [i + (j - (len(labels) - 1) / 2) * h for i in range(len(keys))]
-        v = [by[k].rmse_deg if k in by else np.nan for k in keys]
+        v = [by[k].metrics.rmse_deg if k in by else np.nan for k in keys]
         ax.barh(y, v, height=h, color=colors[lbl], label=lbl)
-    ax.set_yticks(range(len(keys)), [f"{f}: {r}" for f, r in keys], fontsize=8)
+    ax.set_yticks(range(len(keys)), [f"{g}: {n}" for g, n in keys], fontsize=8)
     ax.invert_yaxis()
     fam = [k[0] for k in keys]
     for i in range(1, len(keys)):
@@ -271,7 +277,7 @@ def parameters(params: Mapping[str, tuple[float, float | None, bool]], title: st
         if fixed:
             ax.scatter([1.0], [i], marker="s", color="#999", s=18)
             continue
-        if v == 0:
+        if abs(v) <= 1e-6 * max(1.0, se or 0.0):  # at a zero bound (e.g. a PI weight): no relative scale
             ax.scatter([0.0], [i], marker="o", color=color, s=14)
             if se is not None and np.isfinite(se):
                 ax.text(0.05, i, f"0 +- {se:.2g}", va="center", fontsize=7, color="#555")
@@ -282,6 +288,9 @@ def parameters(params: Mapping[str, tuple[float, float | None, bool]], title: st
             lo, hi = centre - rel, centre + rel
             crosses = lo <= 0 <= hi
             ax.plot([max(lo, -3), min(hi, 3)], [i, i], color="#d62728" if crosses else color, lw=2)
+            for end, edge in ((lo, -3.0), (hi, 3.0)):
+                if abs(end) > 3:
+                    ax.scatter([edge], [i], marker="<" if edge < 0 else ">", color="#d62728" if crosses else color, s=16)
         ax.scatter([centre], [i], color=color, s=14, zorder=3)
     ax.set_yticks(range(len(names)), [f"{n} = {params[n][0]:.4g}" + (" (fixed)" if params[n][2] else
                                       f" +- {params[n][1]:.2g}" if params[n][1] is not None else " +- ?")

@@ -192,7 +192,8 @@ def render_html(report) -> str:
         findings.append(f'<li class="{cls}">{escape(f.sentence)}<span class="badge {cls}">{badge}</span></li>')
     skipped = "".join(f'<div class="warn"><b>Not evaluated:</b> {escape(n.model)} on {escape(n.data)} '
                       f"({escape(n.axis)}): {escape(n.reason)}</div>" for n in report.not_evaluated)
-    notes = "".join(f'<div class="warn">{escape(n)}</div>' for n in report.notes)
+    notes = "".join(f'<div class="warn">{escape(n)}</div>'
+                    for n in [x for g in report.groups for e in g.evaluations for x in e.notes] + list(report.notes))
     wins: dict[str, int] = {}
     for f in report.findings:
         wins[f.best] = wins.get(f.best, 0) + 1

@@ -97,6 +97,7 @@ class Report:
         """The summary as plain sentences (terminal and HTML)."""
         lines = [f.sentence for f in self.findings]
         lines += [f"not evaluated: {n.model} on {n.data} ({n.axis}): {n.reason}" for n in self.not_evaluated]
+        lines += [f"note: {note}" for g in self.groups for e in g.evaluations for note in e.notes]
         return lines
 
     def __str__(self) -> str:

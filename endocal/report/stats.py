@@ -7,7 +7,7 @@ samples as independent finds "significant" differences between any two models. S
 is scored on the same *units* of the record, and the tests compare those per-unit scores:
 
 ``half-cycle``
-    the stretch between two consecutive reversals of the command (one branch of the
+    the stretch between two consecutive reversals of the command (and run starts) (one branch of the
     hysteresis loop). This is the natural unit of a tendon-sheath drive: each branch starts
     from a reversal where backlash and dead zone act, and errors decorrelate across reversals.
 ``block``
@@ -40,7 +40,9 @@ from itertools import combinations
 import numpy as np
 from scipy import stats as sps
 
+from endocal.models import HysteresisData
 from endocal.validation.metrics import block_length, error_metrics
+from endocal.validation.regimes import turning_points
 
 #: Fewest units a comparison needs: with 5 the exact signed-rank test cannot reach p < 0.05.
 MIN_UNITS = 6
@@ -72,53 +74,6 @@ class Units:
         return {"kind": self.kind, "n": self.n, "bounds": [list(b) for b in self.bounds], "reason": self.reason}
 
 
-def reversal_indices(cmd_deg: np.ndarray, tol_frac: float = 0.05) -> np.ndarray:
-    """Sample indices where the command turns (its local extremes), ignoring wiggles.
-
-    A turning point is confirmed once the command has moved back from the running extreme by
-    more than ``tol_frac`` of its total span, so sensor-scale jitter never counts.
-
-    Parameters
-    ----------
-    cmd_deg : (n,) array
-        Knob command of one run, degrees.
-    tol_frac : float
-        Hysteresis of the detector as a fraction of the command's span.
-
-    Returns
-    -------
-    (m,) int array of indices, increasing.
-    """
-    u = np.asarray(cmd_deg, float)
-    span = float(np.ptp(u)) if u.size else 0.0
-    if span <= 0:
-        return np.zeros(0, dtype=int)
-    tol = tol_frac * span
-    out: list[int] = []
-    hi_i = lo_i = ext_i = 0
-    direction = 0  # +1 rising, -1 falling, 0 not yet moved by more than tol
-    for i in range(1, u.size):
-        if direction == 0:
-            hi_i = i if u[i] > u[hi_i] else hi_i
-            lo_i = i if u[i] < u[lo_i] else lo_i
-            if u[hi_i] - u[lo_i] > tol:
-                direction = 1 if hi_i > lo_i else -1
-                ext_i = hi_i if direction > 0 else lo_i
-        elif direction > 0:
-            if u[i] > u[ext_i]:
-                ext_i = i
-            elif u[ext_i] - u[i] > tol:
-                out.append(ext_i)
-                direction, ext_i = -1, i
-        else:
-            if u[i] < u[ext_i]:
-                ext_i = i
-            elif u[i] - u[ext_i] > tol:
-                out.append(ext_i)
-                direction, ext_i = 1, i
-    return np.asarray(out, dtype=int)
-
-
 def _merge_short(cuts: list[int], n: int) -> list[tuple[int, int]]:
     """Segments between cuts; a leading or trailing piece shorter than half the median joins its neighbour."""
     edges = [0] + [c for c in cuts if 0 < c < n] + [n]
@@ -133,7 +88,7 @@ def _merge_short(cuts: list[int], n: int) -> list[tuple[int, int]]:
 
 
 def make_units(
-    cmd_deg: np.ndarray,
+    data: HysteresisData,
     errors_deg: list[np.ndarray] | None = None,
     *,
     tol_frac: float = 0.05,
@@ -143,12 +98,14 @@ def make_units(
 
     Parameters
     ----------
-    cmd_deg : (n,) array
-        The command that drives the record (the axis that moves), degrees.
+    data : HysteresisData
+        The record; its command's reversals (:func:`endocal.validation.regimes.turning_points`)
+        and run starts cut the half-cycles.
     errors_deg : list of (n,) arrays, optional
         Errors of the models to be compared; their decorrelation length sizes the blocks.
     tol_frac : float
-        Reversal detector hysteresis (see :func:`reversal_indices`).
+        A reversal must be left by more than this fraction of the command's span (ignores
+        wiggles; coarser than validation's regime boundaries because a unit needs a real branch).
     min_units : int
         Fewest half-cycles for them to be used.
 
@@ -156,10 +113,9 @@ def make_units(
     -------
     Units
     """
-    u = np.asarray(cmd_deg, float)
-    n = u.size
-    rev = reversal_indices(u, tol_frac)
-    segs = _merge_short(list(rev), n)
+    n = data.n_samples
+    rev = turning_points(data, tol_frac)
+    segs = _merge_short(sorted(set(int(r) for r in rev) | set(int(s) for s in data.run_starts)), n)
     if len(segs) >= min_units:
         return Units("half-cycle", segs,
                      f"{len(rev)} command reversals: each branch of the loop (reversal to reversal) is one unit, "
