@@ -1,0 +1,166 @@
+"""``endocal validate``: hold a model against measurements (or play it on a backend) and say what is missing."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.table import Table
+
+from endocal.cli._common import cli_errors, err, out
+from endocal.errors import ModelError
+from endocal.validation.metrics import METRIC_KEYS
+
+_UNITS = {"rmse_deg": "deg", "mae_deg": "deg", "max_deg": "deg", "median_deg": "deg", "median_pct": "%"}
+
+
+def previous_model_path(model_path: Path, effects: list[str]) -> Path | None:
+    """The model this one was refitted from, by the naming of the refit command (``M-EFFECT.json`` from ``M.json``)."""
+    name = model_path.name
+    if not name.endswith(".json"):
+        return None
+    stem = name[:-5]
+    for e in effects:
+        tag = "-" + e.replace(":", "-")
+        if stem.endswith(tag):
+            cand = model_path.with_name(stem[: -len(tag)] + ".json")
+            if cand.is_file():
+                return cand
+    return None
+
+
+def _metrics_table(title: str, metrics) -> Table:
+    t = Table(title=title, title_justify="left", show_edge=False)
+    t.add_column("metric")
+    t.add_column("value", justify="right")
+    t.add_column("95 % CI", justify="right")
+    for k in METRIC_KEYS:
+        lo_hi = metrics.ci.get(k)
+        ci = f"{lo_hi[0]:.3g} .. {lo_hi[1]:.3g}" if lo_hi else "-"
+        t.add_row(k, f"{getattr(metrics, k):.3g} {_UNITS[k]}", ci)
+    return t
+
+
+def render(result) -> None:
+    """Print the terminal summary of a :class:`~endocal.validation.offline.ValidationResult`."""
+    m = result.model
+    out.print(f"[bold]{m['label']}[/] on axis {result.axis}: {sum(d['n_samples'] for d in result.data)} samples "
+              f"from {len(result.data)} table(s)")
+    out.print(m["equation"], markup=False)
+    out.print(_metrics_table("How far off (measured vs predicted)", result.metrics))
+    out.print(f"held-out RMSE (model refitted on earlier data, rolling origin, {result.scan.folds} blocks): "
+              f"{result.scan.baseline_rmse_heldout_deg:.3g} deg")
+    c = result.compare
+    if c is not None:
+        arrow = "fell" if c.change_pct < 0 else "rose"
+        out.print(f"[bold]Watch the error fall:[/] held-out RMSE {c.old_label} {c.old_heldout_rmse_deg:.3g} deg -> "
+                  f"{c.new_label} {c.new_heldout_rmse_deg:.3g} deg ({arrow} {abs(c.change_pct):.0f} %); "
+                  f"on all data {c.old_rmse_deg:.3g} -> {c.new_rmse_deg:.3g} deg")
+    out.print("[bold]Where it fails[/] (worst regimes, RMSE relative to the whole record):")
+    for r in result.regimes.worst(3):
+        out.print(f"  {r.group}: {r.name}: RMSE {r.metrics.rmse_deg:.3g} deg ({r.ratio:.2f}x), "
+                  f"{100 * r.fraction:.0f} % of samples", markup=False)
+    w = result.residuals.whiteness
+    out.print(f"residual: {'white' if w.white else 'not white'} (Ljung-Box p = {w.p_value:.2g}, correlation time "
+              f"{w.correlation_time_s:.3g} s)", markup=False)
+    for x in result.residuals.significant():
+        out.print(f"  correlates with {x.signal} (|r| = {x.max_abs_corr:.2f} at lag {x.lag_s:+.3g} s): {x.hint}",
+                  markup=False)
+    if result.suspects:
+        out.print("[bold]Which effect is missing[/] (held-out gain, Holm-corrected p):")
+        for i, s in enumerate(result.suspects, 1):
+            out.print(f"  {i}. {s.effect}: -{s.gain_pct:.0f} % held-out RMSE ({s.base_rmse_heldout_deg:.3g} -> "
+                      f"{s.rmse_heldout_deg:.3g} deg), p = {s.p_value:.2g}", markup=False)
+            out.print(f"     {s.cause}; signature: {s.signature}", markup=False)
+        out.print("[bold]Next:[/] refit with the first suspect, then validate the new model:")
+        out.print("  " + result.suspects[0].command, markup=False)
+    else:
+        out.print("[bold]Which effect is missing:[/] nothing significant; the model explains this data as well as "
+                  "any catalog effect would.")
+    for note in result.notes:
+        out.print(f"note: {note}", markup=False)
+
+
+@cli_errors
+def validate(
+    model_path: Path = typer.Argument(..., help="Fitted model file (endocal fit hysteresis --out)."),
+    data: Optional[list[Path]] = typer.Argument(None, help="Run folders or aligned tables (.parquet/.csv) to validate on."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object (metrics, regimes, residuals, suspects, notes)."),
+    folds: int = typer.Option(5, "--folds", help="Held-out blocks of the blocked cross-validation."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the bootstrap intervals (and of the backend with --protocol)."),
+    compare: Optional[Path] = typer.Option(None, "--compare", help="A previous model: show its error beside this one's."),
+    load_column: list[str] = typer.Option([], "--load-column", help="Try load:COLUMN on this column (repeatable; default: every varying extra column)."),
+    protocol: Optional[str] = typer.Option(None, "--protocol", help="Play this desired-angle protocol through the inverse model on a backend instead."),
+    backend: str = typer.Option("sim", "--backend", "-b", help="Backend for --protocol: `sim` or `hardware`."),
+    probe: str = typer.Option("tee", "--probe", help="Probe preset or .toml for --protocol."),
+    sim_config: Optional[Path] = typer.Option(None, "--sim-config", help="Simulator TOML for --backend sim."),
+    hardware_config: Optional[Path] = typer.Option(None, "--hardware-config", help="Rig TOML for --backend hardware."),
+    planes: Optional[Path] = typer.Option(None, "--planes", help="planes.json (endocal fit planes) for --protocol."),
+) -> None:
+    """Compare a model with measurements: how far off, where it fails, which physical effect is missing.
+
+    Offline (DATA given): error metrics with 95 % block-bootstrap intervals, the error by regime,
+    residual whiteness and cross-correlations, and every catalog effect the model lacks tested
+    on held-out data (blocked cross-validation, Holm-corrected); prints the command that refits
+    with the most likely missing effect. With --protocol: plays the protocol through the
+    inverse model on a backend and measures desired vs reached angles.
+    """
+    from endocal.models import load_model
+
+    model = load_model(model_path)
+    if protocol is not None:
+        if data:
+            raise ModelError("give either DATA (offline validation) or --protocol (playback on a backend), not both")
+        _playback(model, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json)
+        return
+    if not data:
+        raise ModelError("nothing to validate on: give run folders or aligned tables, or --protocol P")
+    from endocal.runs.aligned import load_aligned
+    from endocal.validation.offline import validate_offline
+
+    tables = [load_aligned(p) for p in data]
+    effects = [e.label for e in model.effects_]
+    old_path = compare if compare is not None else previous_model_path(model_path, effects)
+    old = load_model(old_path) if old_path is not None else None
+    result = validate_offline(model, tables, folds=folds, seed=seed, compare=old, model_path=str(model_path),
+                              data_paths=[str(p) for p in data], load_columns=load_column or None)
+    if as_json:
+        d = result.to_dict()
+        if old_path is not None:
+            d["compare"]["path"] = str(old_path)
+        out.print_json(json.dumps(_finite(d), allow_nan=False))
+        return
+    render(result)
+    if old_path is not None and compare is None:
+        err.print(f"compared with {old_path} (the model this one was refitted from)")
+
+
+def _finite(obj):
+    """JSON has no NaN or infinity: write them as null."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj
+
+
+def _playback(model, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json) -> None:
+    from endocal.backends.registry import make_backend
+    from endocal.planes import load_planes
+    from endocal.probe import load_probe
+    from endocal.validation.playback import validate_on_backend
+
+    probe_cfg = load_probe(probe)
+    be = make_backend(backend, probe_cfg, seed=seed, sim_config=sim_config, hardware_config=hardware_config)
+    cal = load_planes(planes) if planes is not None else None
+    result = validate_on_backend(model, protocol, be, probe_cfg, planes=cal, seed=seed)
+    if as_json:
+        out.print_json(json.dumps(_finite(result.to_dict()), allow_nan=False))
+        return
+    out.print(_metrics_table(f"compensated: {protocol} on {backend}", result.metrics))
+    out.print(_metrics_table("uncompensated", result.uncompensated))

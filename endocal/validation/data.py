@@ -1,0 +1,154 @@
+"""From aligned tables to the :class:`~endocal.models.HysteresisData` of one bending axis.
+
+Validation reads runs the way fitting does (:func:`endocal.runs.aligned.load_aligned`) and
+hands each model the columns its effect terms may ask for:
+
+``other_cmd_deg``, ``other_meas_deg``
+    the other bending axis's knob command and measured angle (``coupling``), when the
+    data has a second axis;
+every other numeric column
+    kept under its own name (``sheath_wrap_deg``, knob currents, ...) for ``load:COLUMN``.
+
+Several tables become several runs of one :class:`HysteresisData` (operator states restart
+at each); only the extra columns every table has are kept.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from endocal.errors import ModelError
+from endocal.models.data import OTHER_CMD, HysteresisData
+from endocal.runs.aligned import AlignedData
+
+#: Extra column holding the other bending axis's measured angle (deg).
+OTHER_MEAS = "other_meas_deg"
+
+
+def _as_list(aligned) -> list[AlignedData]:
+    if isinstance(aligned, AlignedData):
+        return [aligned]
+    out = list(aligned)
+    if not out:
+        raise ModelError("no data given: name at least one run folder or aligned table")
+    return out
+
+
+def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str) -> HysteresisData:
+    """The command, measurement, time and extra columns of ``axis``, one run per table.
+
+    Parameters
+    ----------
+    aligned : AlignedData or sequence of AlignedData
+        Loaded run folders or aligned tables (:func:`~endocal.runs.aligned.load_aligned`).
+    axis : str
+        Bending axis (``ap``, ``ml``, ``ud``, ``lr`` or a table's own axis name).
+
+    Returns
+    -------
+    HysteresisData
+        ``cmd_deg``, ``meas_deg``, ``t_s`` and ``extras`` (see the module docstring);
+        ``run_starts`` at the first sample of every table.
+
+    Raises
+    ------
+    ModelError
+        A table lacks ``axis`` (the message names the table and the axes it has).
+    """
+    tables = _as_list(aligned)
+    for a in tables:
+        if axis not in a.axes:
+            raise ModelError(f"{a.source}: no axis '{axis}' in the data (it has {', '.join(a.axes)}); "
+                             "validate a model of one of those axes, or give data of this axis")
+    common = set.intersection(*(set(a.extras) for a in tables))
+    others = [[b for b in a.axes if b != axis] for a in tables]
+    # The other axis is used only when every table has the same single one (coupling needs a
+    # consistent meaning of "the other knob").
+    other = others[0][0] if all(len(o) == 1 and o[0] == others[0][0] for o in others) and others[0] else None
+    runs = []
+    for a in tables:
+        extras = {c: a.table[c].to_numpy(float) for c in sorted(common)
+                  if np.issubdtype(a.table[c].dtype, np.number) and not np.issubdtype(a.table[c].dtype, np.bool_)}
+        if other is not None:
+            extras[OTHER_CMD] = a.cmd_deg(other)
+            extras[OTHER_MEAS] = a.meas_deg(other)
+        runs.append(HysteresisData(cmd_deg=a.cmd_deg(axis), meas_deg=a.meas_deg(axis), t_s=a.t_s, extras=extras))
+    return runs[0] if len(runs) == 1 else HysteresisData.from_runs(runs)
+
+
+def is_constant(values: np.ndarray) -> bool:
+    """True when a column carries no variation a fit could use (spread below 1e-9 of its scale)."""
+    v = np.asarray(values, dtype=float)
+    scale = max(float(np.max(np.abs(v))), 1.0) if v.size else 1.0
+    return v.size == 0 or float(np.ptp(v)) <= 1e-9 * scale
+
+
+def load_candidates(data: HysteresisData, bending_axes: Sequence[str] = ()) -> tuple[list[str], list[str]]:
+    """Extra columns that may carry a load (``load:COLUMN``), and the constant ones skipped.
+
+    Excluded by design: the other axis (``other_*``: that is ``coupling``) and the bending
+    knobs' own readings (``<axis>_pos_deg``, ``_vel_degps``, ``_current_ma``): they respond
+    to the bend itself, so a term on them would explain the angle with the angle. Name such
+    a column explicitly to test it anyway.
+
+    Parameters
+    ----------
+    data : HysteresisData
+    bending_axes : sequence of str
+        Bending axis names whose drive columns are excluded.
+
+    Returns
+    -------
+    candidates, constant : list of str
+    """
+    prefixes = tuple(f"{a}_" for a in bending_axes)
+    candidates, constant = [], []
+    for name, col in data.extras.items():
+        if name in (OTHER_CMD, OTHER_MEAS) or (prefixes and name.startswith(prefixes)):
+            continue
+        (constant if is_constant(col) else candidates).append(name)
+    return candidates, constant
+
+
+def check_columns(data: HysteresisData, columns: Sequence[str]) -> None:
+    """Refuse ``load:COLUMN`` on a column that is absent or constant.
+
+    Raises
+    ------
+    ModelError
+        Naming the column and the extra columns present.
+    """
+    have = ", ".join(sorted(data.extras)) or "none"
+    for c in columns:
+        if c not in data.extras:
+            raise ModelError(f"load:{c}: the data has no column '{c}' (extra columns present: {have})")
+        if is_constant(data.extras[c]):
+            raise ModelError(f"load:{c}: column '{c}' is constant in the data, so a load on it cannot be "
+                             "identified; log a covariate that varies, or drop the term")
+
+
+def prefix(data: HysteresisData, n: int) -> HysteresisData:
+    """The first ``n`` samples of ``data`` (runs cut where the prefix ends)."""
+    n = int(n)
+    starts = data.run_starts[data.run_starts < n]
+    return HysteresisData(
+        cmd_deg=data.cmd_deg[:n],
+        meas_deg=None if data.meas_deg is None else data.meas_deg[:n],
+        t_s=None if data.t_s is None else data.t_s[:n],
+        extras={k: v[:n] for k, v in data.extras.items()},
+        run_starts=starts,
+    )
+
+
+def speed_dps(data: HysteresisData) -> np.ndarray:
+    """Command speed (deg/s, signed) per sample, per run; per sample when there is no time."""
+    out = np.zeros(data.n_samples)
+    for sl in data.run_slices():
+        u = data.cmd_deg[sl]
+        if u.size < 2:
+            continue
+        x = data.t_s[sl] if data.t_s is not None else np.arange(u.size, dtype=float)
+        out[sl] = np.gradient(u, x)
+    return out

@@ -1,0 +1,255 @@
+"""Hold a fitted model against measurements: how far off, where, and which effect is missing.
+
+:func:`validate_offline` returns one :class:`ValidationResult`; the terminal summary, the
+``--json`` output and the HTML report all render from it (nothing is computed twice).
+"""
+
+from __future__ import annotations
+
+import copy
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from endocal.errors import ModelError
+from endocal.models import HysteresisData
+from endocal.models.base import HysteresisModel, OutOfRangeWarning
+from endocal.runs.aligned import AlignedData
+from endocal.validation.data import axis_data, check_columns
+from endocal.validation.metrics import ErrorMetrics, error_metrics
+from endocal.validation.regimes import RegimeBreakdown, error_by_regime
+from endocal.validation.residuals import ResidualTests, residual_tests
+from endocal.validation.suspects import (
+    ScanResult,
+    check_cv_data,
+    effect_labels,
+    fold_bounds,
+    heldout_errors,
+    one_blas_thread,
+    scan_effects,
+)
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """The error of a previous model beside the current one, on the same data.
+
+    Attributes
+    ----------
+    old_label, new_label : str
+        ``base+effect+...`` of each model.
+    old_rmse_deg, new_rmse_deg : float
+        RMSE of each fitted model on the data (deg).
+    old_heldout_rmse_deg, new_heldout_rmse_deg : float
+        Held-out RMSE of each model structure, refitted on the same rolling-origin folds (deg).
+    """
+
+    old_label: str
+    new_label: str
+    old_rmse_deg: float
+    new_rmse_deg: float
+    old_heldout_rmse_deg: float
+    new_heldout_rmse_deg: float
+
+    @property
+    def change_pct(self) -> float:
+        """Held-out RMSE change from old to new, percent (negative: the error fell)."""
+        return 100.0 * (self.new_heldout_rmse_deg / self.old_heldout_rmse_deg - 1.0)
+
+    def to_dict(self) -> dict:
+        return {"old_label": self.old_label, "new_label": self.new_label, "old_rmse_deg": self.old_rmse_deg,
+                "new_rmse_deg": self.new_rmse_deg, "old_heldout_rmse_deg": self.old_heldout_rmse_deg,
+                "new_heldout_rmse_deg": self.new_heldout_rmse_deg, "change_pct": self.change_pct}
+
+
+@dataclass(frozen=True)
+class ValidationResult:
+    """Everything ``endocal validate`` reports about one model on one data set.
+
+    Attributes
+    ----------
+    axis : str
+        The model's bending axis.
+    model : dict
+        ``path``, ``base``, ``effects``, ``equation``.
+    data : list of dict
+        ``source``, ``sha256``, ``n_samples`` per table.
+    metrics : ErrorMetrics
+        The fitted model's error on the data (deg), with block-bootstrap intervals.
+    regimes : RegimeBreakdown
+        The error by regime of the motion.
+    residuals : ResidualTests
+        Whiteness and cross-correlation tests.
+    scan : ScanResult
+        The effects tested on held-out data; ``scan.suspects`` is what is missing.
+    notes : tuple of str
+        Everything the user should know in words (clamped samples, ambiguities,
+        effects the data cannot reveal).
+    compare : Comparison or None
+        A previous model's error beside this one.
+    """
+
+    axis: str
+    model: dict
+    data: list
+    metrics: ErrorMetrics
+    regimes: RegimeBreakdown
+    residuals: ResidualTests
+    scan: ScanResult
+    notes: tuple[str, ...] = ()
+    compare: Comparison | None = None
+
+    @property
+    def suspects(self):
+        return self.scan.suspects
+
+    def to_dict(self) -> dict:
+        """One JSON-able object: ``metrics``, ``regimes``, ``residuals``, ``suspects``, ``notes`` and more."""
+        return {
+            "axis": self.axis,
+            "model": dict(self.model),
+            "data": list(self.data),
+            "metrics": self.metrics.to_dict(),
+            "heldout_rmse_deg": self.scan.baseline_rmse_heldout_deg,
+            "regimes": self.regimes.to_dict(),
+            "residuals": self.residuals.to_dict(),
+            "suspects": [s.to_dict() for s in self.scan.suspects],
+            "scan": self.scan.to_dict(),
+            "notes": list(self.notes),
+            "compare": None if self.compare is None else self.compare.to_dict(),
+        }
+
+
+def model_label(model: HysteresisModel) -> str:
+    """``base+effect+...`` (what the ladder of models calls each rung)."""
+    return "+".join([model.base_name] + effect_labels(model))
+
+
+def _resolve_axis(model: HysteresisModel, datas: list[AlignedData]) -> str:
+    axes = [set(a.axes) for a in datas]
+    common = set.intersection(*axes)
+    if model.axis is not None:
+        for a in datas:
+            if model.axis not in a.axes:
+                raise ModelError(f"the model is for axis '{model.axis}' but {a.source} has axis "
+                                 f"{', '.join(a.axes)}; validate it on data of axis '{model.axis}'")
+        return model.axis
+    if len(common) == 1:
+        return next(iter(common))
+    raise ModelError(f"the model names no axis and the data has several ({', '.join(sorted(common))}); "
+                     "refit the model with --axis")
+
+
+def _predict(model: HysteresisModel, data: HysteresisData) -> tuple[np.ndarray, int]:
+    """Predicted angle, clamping commands beyond the fitted range; returns (pred, samples clamped)."""
+    m = copy.copy(model)
+    m.out_of_range = "clamp"
+    lo, hi = model.cmd_range_deg_
+    clamped = int(np.sum((data.cmd_deg < lo) | (data.cmd_deg > hi)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutOfRangeWarning)
+        return m.predict(data), clamped
+
+
+def validate_offline(model: HysteresisModel, datas, *, axis: str | None = None, folds: int = 5, seed: int = 0,
+                     alpha: float = 0.05, min_gain_pct: float = 10.0, compare: HysteresisModel | None = None,
+                     model_path: str | None = None, data_paths: Sequence[str] | None = None,
+                     load_columns: Sequence[str] | None = None, bending_axes: Sequence[str] | None = None,
+                     max_scan_samples: int = 12000, n_boot: int = 400) -> ValidationResult:
+    """Validate a fitted model on measured data: metrics, regimes, residual tests, missing effects.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        A fitted model (:func:`endocal.models.load_model`).
+    datas : AlignedData, list of AlignedData, or HysteresisData
+        Run folders / aligned tables (loaded), or one axis's data directly.
+    axis : str, optional
+        Axis of ``HysteresisData`` input (default: the model's).
+    folds : int
+        Held-out blocks of the effect scan.
+    seed : int
+        Seed of the bootstrap intervals.
+    alpha, min_gain_pct : float
+        Significance level (Holm) and smallest held-out gain of a suspect.
+    compare : HysteresisModel, optional
+        A previous model: its error is shown beside this one's.
+    model_path, data_paths : optional
+        Where model and data came from (recorded, and used in the refit commands).
+    load_columns : sequence of str, optional
+        Columns to try ``load`` on (default: every varying extra column but the knob drives').
+    bending_axes : sequence of str, optional
+        The probe's bending axes (default: the data's axes).
+    max_scan_samples : int
+        Decimate longer records for the scan (see :func:`~endocal.validation.suspects.scan_effects`).
+    n_boot : int
+        Bootstrap replicates of the metrics' intervals.
+
+    Returns
+    -------
+    ValidationResult
+
+    Raises
+    ------
+    ModelError
+        Unfitted model, a model for an axis the data lacks, ``load:`` on a missing or
+        constant column, data too short for cross-validation.
+    """
+    model._require_fitted()
+    if isinstance(datas, HysteresisData):
+        data = datas
+        ax = axis or model.axis or "axis"
+        info = [{"source": None, "sha256": None, "n_samples": data.n_samples}]
+        axes_all = list(bending_axes or [])
+        paths = list(data_paths or ["DATA"])
+    else:
+        tables = [datas] if isinstance(datas, AlignedData) else list(datas)
+        if not tables:
+            raise ModelError("no data given: name at least one run folder or aligned table")
+        ax = _resolve_axis(model, tables)
+        data = axis_data(tables, ax)
+        info = [{"source": str(a.source), "sha256": a.sha256, "n_samples": len(a.table)} for a in tables]
+        axes_all = list(bending_axes) if bending_axes is not None else sorted(set().union(*(a.axes for a in tables)))
+        paths = list(data_paths) if data_paths is not None else [str(a.source) for a in tables]
+    if data.meas_deg is None:
+        raise ModelError("validation needs measured angles")
+    labels = effect_labels(model)
+    check_columns(data, [lab.partition(":")[2] for lab in labels if ":" in lab])
+    check_cv_data(data, folds)
+
+    pred, clamped = _predict(model, data)
+    metrics = error_metrics(data.meas_deg, pred, n_boot=n_boot, seed=seed)
+    regimes = error_by_regime(data, pred, seed=seed)
+    resid = residual_tests(data, data.meas_deg - pred, alpha=alpha)
+    scan = scan_effects(model, data, folds=folds, alpha=alpha, min_gain_pct=min_gain_pct,
+                        load_columns=load_columns, bending_axes=axes_all, max_samples=max_scan_samples,
+                        data_paths=paths, model_path=model_path)
+    notes = []
+    if clamped:
+        lo, hi = model.cmd_range_deg_
+        notes.append(f"{clamped} samples command beyond the model's fitted range [{lo:.3g}, {hi:.3g}] deg and were "
+                     "clamped: refit on data that covers them")
+    if not scan.suspects:
+        notes.append("nothing significant is missing: no catalog effect improves the held-out error "
+                     f"by at least {min_gain_pct:g} % at family-wise level {alpha:g}")
+    notes += list(scan.notes)
+    comp = None
+    if compare is not None:
+        compare._require_fitted()
+        old_pred, _ = _predict(compare, data)
+        stride = scan.stride
+        d = data.decimate(stride) if stride > 1 else data
+        bounds = fold_bounds(d.n_samples, folds)
+        with one_blas_thread():
+            old_err, _ = heldout_errors(compare, effect_labels(compare), d, bounds)
+        comp = Comparison(
+            old_label=model_label(compare), new_label=model_label(model),
+            old_rmse_deg=float(np.sqrt(np.mean((old_pred - data.meas_deg) ** 2))), new_rmse_deg=metrics.rmse_deg,
+            old_heldout_rmse_deg=float(np.sqrt(np.mean(old_err**2))),
+            new_heldout_rmse_deg=scan.baseline_rmse_heldout_deg)
+    model_info = {"path": model_path, "base": model.base_name, "effects": labels, "label": model_label(model),
+                  "equation": model.equation()}
+    return ValidationResult(axis=ax, model=model_info, data=info, metrics=metrics, regimes=regimes,
+                            residuals=resid, scan=scan, notes=tuple(notes), compare=comp)

@@ -1,0 +1,217 @@
+"""Where a model fails: the error broken down by regime of the motion.
+
+Every sample is labelled in several independent groupings, and each regime's error gets
+the same metrics (with block-bootstrap intervals) as the whole record
+(:func:`endocal.validation.metrics.error_metrics`):
+
+``motion``
+    ``near reversal`` (the command has moved less than ``reversal_frac`` of its span since
+    it last changed direction: the backlash transition, where direction-dependent models
+    switch branch), ``steady motion`` (the rest of the moving samples) and ``hold`` (the
+    command stands still for at least ``hold_min_s``: creep and drift show here);
+``speed``
+    moving samples in three bands of knob speed (terciles, deg/s): rate-dependent friction
+    and delay grow with speed;
+``amplitude``
+    ``|cmd - centre|`` in thirds of the half-span: the envelope (dead band, stiffening);
+``other axis``
+    terciles of the other knob's command, when it moves (coupling);
+``time``
+    four equal quarters of the record (drift, a changing load).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from endocal.models.data import OTHER_CMD, HysteresisData
+from endocal.validation.data import is_constant, speed_dps
+from endocal.validation.metrics import ErrorMetrics, error_metrics
+
+
+@dataclass(frozen=True)
+class Regime:
+    """The model error in one regime of the motion.
+
+    Attributes
+    ----------
+    group : str
+        Grouping (``motion``, ``speed``, ``amplitude``, ``other axis``, ``time``).
+    name : str
+        The regime in words with its bounds, e.g. ``fast (> 42.1 deg/s)``.
+    fraction : float
+        Share of the samples in this regime.
+    metrics : ErrorMetrics
+        Error metrics of the regime's samples (deg).
+    ratio : float
+        The regime's RMSE over the whole record's RMSE (> 1: worse than average).
+    """
+
+    group: str
+    name: str
+    fraction: float
+    metrics: ErrorMetrics
+    ratio: float
+
+    def to_dict(self) -> dict:
+        return {"group": self.group, "name": self.name, "fraction": self.fraction, "ratio": self.ratio,
+                **self.metrics.to_dict()}
+
+
+@dataclass(frozen=True)
+class RegimeBreakdown:
+    """All regimes of a record, in grouping order; :meth:`worst` ranks them."""
+
+    regimes: tuple[Regime, ...]
+    overall_rmse_deg: float
+
+    def worst(self, k: int = 3) -> list[Regime]:
+        """The ``k`` regimes with the highest RMSE relative to the whole record."""
+        return sorted(self.regimes, key=lambda r: -r.ratio)[:k]
+
+    def to_dict(self) -> list[dict]:
+        return [r.to_dict() for r in self.regimes]
+
+
+def turning_points(data: HysteresisData, tol_frac: float = 0.01) -> np.ndarray:
+    """Indices (into the concatenated samples) of the command's direction reversals.
+
+    A reversal is a turning point of the command that it then leaves by more than
+    ``tol_frac`` of its run's span (wiggles below that are ignored).
+    """
+    out = []
+    for sl in data.run_slices():
+        u = data.cmd_deg[sl]
+        tol = tol_frac * float(np.ptp(u))
+        if tol <= 0:
+            continue
+        ext_i, direction = 0, 0
+        for k in range(1, u.size):
+            if direction == 0:
+                if abs(u[k] - u[0]) > tol:
+                    direction, ext_i = (1 if u[k] > u[0] else -1), k
+            elif (u[k] - u[ext_i]) * direction > 0:
+                ext_i = k  # further in the current direction
+            elif abs(u[k] - u[ext_i]) > tol:
+                out.append(sl.start + ext_i)
+                direction, ext_i = -direction, k
+    return np.asarray(out, dtype=np.int64)
+
+
+def reversal_distance_deg(data: HysteresisData, tol_frac: float = 0.01) -> np.ndarray:
+    """Command travel (deg) since the last direction reversal, per sample (inf before the first).
+
+    Reversals as in :func:`turning_points`; samples from the turning point on count from it.
+    """
+    out = np.full(data.n_samples, np.inf)
+    turns = turning_points(data, tol_frac)
+    for sl in data.run_slices():
+        mine = [int(k) for k in turns if sl.start <= k < sl.stop]
+        for a, b in zip(mine, mine[1:] + [sl.stop]):
+            out[a:b] = np.abs(data.cmd_deg[a:b] - data.cmd_deg[a])
+    return out
+
+
+def hold_mask(data: HysteresisData, hold_min_s: float = 0.5) -> np.ndarray:
+    """Samples where the command stands still for at least ``hold_min_s`` (or 5 samples without time)."""
+    v = np.abs(speed_dps(data))
+    still = v <= 1e-6 * max(float(v.max()), 1e-12)
+    out = np.zeros(data.n_samples, dtype=bool)
+    for sl in data.run_slices():
+        s = still[sl]
+        t = data.t_s[sl] if data.t_s is not None else None
+        k = 0
+        while k < s.size:
+            if not s[k]:
+                k += 1
+                continue
+            j = k
+            while j < s.size and s[j]:
+                j += 1
+            long_enough = (t[j - 1] - t[k] >= hold_min_s) if t is not None else (j - k >= 5)
+            if long_enough:
+                out[sl.start + k: sl.start + j] = True
+            k = j
+    return out
+
+
+def _bands(x: np.ndarray, mask: np.ndarray, fmt: str, unit: str, labels=("low", "mid", "high")):
+    """Terciles of ``x`` over ``mask``: list of (name, mask)."""
+    if mask.sum() < 3 or is_constant(x[mask]):
+        return []
+    q1, q2 = np.quantile(x[mask], [1 / 3, 2 / 3])
+    return [
+        (f"{labels[0]} (< {q1:{fmt}} {unit})", mask & (x < q1)),
+        (f"{labels[1]} ({q1:{fmt}}..{q2:{fmt}} {unit})", mask & (x >= q1) & (x <= q2)),
+        (f"{labels[2]} (> {q2:{fmt}} {unit})", mask & (x > q2)),
+    ]
+
+
+def regime_masks(data: HysteresisData, *, reversal_frac: float = 0.1, hold_min_s: float = 0.5) -> list[tuple[str, str, np.ndarray]]:
+    """``(group, name, mask)`` of every regime of ``data`` (see the module docstring)."""
+    n = data.n_samples
+    span = float(np.ptp(data.cmd_deg))
+    hold = hold_mask(data, hold_min_s)
+    moving = ~hold
+    near = moving & (reversal_distance_deg(data) < reversal_frac * span)
+    out = [("motion", f"near reversal (< {reversal_frac * span:.3g} deg after)", near),
+           ("motion", "steady motion", moving & ~near),
+           ("motion", f"hold (>= {hold_min_s:g} s still)", hold)]
+    speed = np.abs(speed_dps(data))
+    unit = "deg/s" if data.t_s is not None else "deg/sample"
+    out += [("speed", name, m) for name, m in _bands(speed, moving, ".3g", unit, ("slow", "medium", "fast"))]
+    centre = 0.5 * (float(data.cmd_deg.max()) + float(data.cmd_deg.min()))
+    dist = np.abs(data.cmd_deg - centre)
+    half = 0.5 * span
+    if half > 0:
+        edges = [0.0, half / 3, 2 * half / 3]
+        for lo, hi, word in zip(edges, edges[1:] + [np.inf], ("inner", "middle", "outer")):
+            bound = f"{lo:.3g}..{hi:.3g}" if np.isfinite(hi) else f">= {lo:.3g}"
+            out.append(("amplitude", f"{word} third (|cmd - {centre:.3g}| {bound} deg)", (dist >= lo) & (dist < hi)))
+    if OTHER_CMD in data.extras and not is_constant(data.extras[OTHER_CMD]):
+        out += [("other axis", f"other knob {name}", m)
+                for name, m in _bands(data.extras[OTHER_CMD], np.ones(n, bool), ".3g", "deg")]
+    t = data.t_s if data.t_s is not None else np.arange(n, dtype=float)
+    idx = np.arange(n)
+    for q in range(4):
+        a, b = q * n // 4, (q + 1) * n // 4
+        if b > a:
+            unit_t = "s" if data.t_s is not None else "samples"
+            out.append(("time", f"quarter {q + 1} ({t[a]:.4g}..{t[b - 1]:.4g} {unit_t})", (idx >= a) & (idx < b)))
+    return out
+
+
+def error_by_regime(data: HysteresisData, pred_deg: np.ndarray, *, min_samples: int = 20, n_boot: int = 200,
+                    seed: int = 0, reversal_frac: float = 0.1, hold_min_s: float = 0.5) -> RegimeBreakdown:
+    """The error ``pred - meas`` of every regime of ``data``.
+
+    Parameters
+    ----------
+    data : HysteresisData
+        Commands, measured angles (deg) and time.
+    pred_deg : ndarray (n,)
+        The model's predicted angle (deg).
+    min_samples : int
+        Regimes with fewer samples are left out (their error says nothing).
+    n_boot, seed : int
+        Bootstrap replicates and seed of the intervals.
+    reversal_frac, hold_min_s : float
+        Size of the near-reversal zone (fraction of the command span) and shortest hold (s).
+
+    Returns
+    -------
+    RegimeBreakdown
+    """
+    meas = data.meas_deg
+    pred = np.asarray(pred_deg, dtype=float)
+    overall = float(np.sqrt(np.mean((pred - meas) ** 2)))
+    regimes = []
+    for group, name, mask in regime_masks(data, reversal_frac=reversal_frac, hold_min_s=hold_min_s):
+        k = int(mask.sum())
+        if k < min_samples:
+            continue
+        m = error_metrics(meas[mask], pred[mask], n_boot=n_boot, seed=seed)
+        regimes.append(Regime(group, name, k / data.n_samples, m, m.rmse_deg / overall if overall > 0 else 1.0))
+    return RegimeBreakdown(tuple(regimes), overall)

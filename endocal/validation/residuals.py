@@ -1,0 +1,192 @@
+"""Residual analysis as system-identification tools do it (Ljung, *System Identification*, ch. 16.6).
+
+A model that explains the data leaves a residual ``e = meas - pred`` that is (i) white, or
+at least no more correlated than the measurement noise, and (ii) uncorrelated with the
+input at every lag. Tested here:
+
+- **whiteness**: the residual's autocorrelation ``rho_e(k)``, the Ljung–Box statistic
+  ``Q = n (n + 2) sum_k rho_e(k)^2 / (n - k)`` (chi-squared with ``h`` degrees of freedom
+  under whiteness) and the correlation time (first lag below ``1/e``);
+- **cross-correlation** ``r(tau) = corr(e(t), x(t - tau))`` with the command, its signed
+  speed, its speed magnitude, the other knob and time. Positive ``tau``: the residual
+  follows the signal's past (lagged input: a delay). Both series are autocorrelated, so
+  the null band uses Bartlett's variance ``var r(tau) ~ (1/n) sum_k rho_e(k) rho_x(k)``
+  and a Bonferroni correction over the lags searched; white-noise bands (``1.96/sqrt(n)``)
+  would flag almost anything on 100 Hz data.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.stats import chi2, norm
+
+from endocal.models.data import OTHER_CMD, HysteresisData
+from endocal.validation.data import is_constant, speed_dps
+
+
+@dataclass(frozen=True)
+class Whiteness:
+    """Autocorrelation test of the residual.
+
+    Attributes
+    ----------
+    n : int
+        Samples.
+    lags : int
+        Lags ``1..h`` in the Ljung–Box statistic.
+    ljung_box_q, p_value : float
+        Statistic and its chi-squared p-value (small: not white).
+    white : bool
+        ``p_value >= alpha``.
+    max_abs_acf : float
+        Largest ``|rho_e(k)|`` over the lags.
+    frac_outside : float
+        Share of lags with ``|rho_e(k)| > 1.96/sqrt(n)``.
+    correlation_time_s : float
+        First lag where ``rho_e`` drops below ``1/e`` (s; samples when there is no time).
+    """
+
+    n: int
+    lags: int
+    ljung_box_q: float
+    p_value: float
+    white: bool
+    max_abs_acf: float
+    frac_outside: float
+    correlation_time_s: float
+
+
+@dataclass(frozen=True)
+class CrossCorrelation:
+    """Cross-correlation of the residual with one signal.
+
+    Attributes
+    ----------
+    signal : str
+        ``command``, ``speed``, ``abs speed``, ``other command``, ``time``.
+    corr_at_zero : float
+        ``r(0)``.
+    max_abs_corr : float
+        Largest ``|r(tau)|`` over the lags searched.
+    lag_s : float
+        Its lag (s; positive: the residual follows the signal's past).
+    bound : float
+        Null band of ``|r|`` (Bartlett, Bonferroni over lags, level ``alpha``).
+    significant : bool
+        ``max_abs_corr > bound``.
+    hint : str
+        What a significant correlation points to, physically.
+    """
+
+    signal: str
+    corr_at_zero: float
+    max_abs_corr: float
+    lag_s: float
+    bound: float
+    significant: bool
+    hint: str
+
+
+@dataclass(frozen=True)
+class ResidualTests:
+    """Whiteness and cross-correlation tests of a model's residual."""
+
+    whiteness: Whiteness
+    cross: tuple[CrossCorrelation, ...]
+
+    def significant(self) -> list[CrossCorrelation]:
+        return [c for c in self.cross if c.significant]
+
+    def to_dict(self) -> dict:
+        return {"whiteness": asdict(self.whiteness), "cross_correlation": [asdict(c) for c in self.cross]}
+
+
+_HINTS = {
+    "command": "the error depends on where the knob is: a static shape the model lacks (envelope) or a wrong gain",
+    "speed": "the error follows the signed knob speed: a time shift (delay) or speed-dependent friction (rate)",
+    "abs speed": "the error grows with how fast the knob moves: speed-dependent friction (rate)",
+    "other command": "the other knob moves this axis: coupling",
+    "time": "the error changes steadily over the run: drift (or a slowly changing load)",
+}
+
+
+def _xcorr(a: np.ndarray, b: np.ndarray, max_lag: int) -> np.ndarray:
+    """``r(tau) = sum_t a_t b_{t - tau} / (n sd_a sd_b)`` for ``tau = -max_lag..max_lag`` (means removed)."""
+    n = a.size
+    a = a - a.mean()
+    b = b - b.mean()
+    nfft = 1 << int(np.ceil(np.log2(2 * n)))
+    c = np.fft.irfft(np.fft.rfft(a, nfft) * np.conj(np.fft.rfft(b, nfft)), nfft)
+    denom = n * a.std() * b.std()
+    full = np.concatenate([c[-max_lag:], c[: max_lag + 1]]) if max_lag > 0 else c[:1]
+    return full / denom if denom > 0 else np.zeros(2 * max_lag + 1)
+
+
+def _acf(x: np.ndarray, max_lag: int) -> np.ndarray:
+    return _xcorr(x, x, max_lag)[max_lag:]
+
+
+def residual_tests(data: HysteresisData, resid_deg: np.ndarray, *, max_lag_s: float = 2.0,
+                   alpha: float = 0.05) -> ResidualTests:
+    """Whiteness of ``resid_deg`` and its cross-correlation with the input, speed and lagged input.
+
+    Parameters
+    ----------
+    data : HysteresisData
+        The data the residual belongs to (commands, time, other axis).
+    resid_deg : ndarray (n,)
+        ``meas - pred`` (deg).
+    max_lag_s : float
+        Lags searched, ``+-max_lag_s`` (s; converted with the median sample interval).
+    alpha : float
+        Level of every test.
+
+    Returns
+    -------
+    ResidualTests
+    """
+    e = np.asarray(resid_deg, dtype=float)
+    n = e.size
+    if data.t_s is not None and n > 1:
+        steps = np.diff(data.t_s)
+        first = np.zeros(n, bool)
+        first[data.run_starts] = True
+        dt = float(np.median(steps[~first[1:]])) if (~first[1:]).any() else 1.0
+    else:
+        dt = 1.0
+    max_lag = int(np.clip(round(max_lag_s / dt), 1, max(1, n // 4)))
+    rho_e = _acf(e, max_lag) if e.std() > 0 else np.zeros(max_lag + 1)
+    k = np.arange(1, max_lag + 1)
+    q = float(n * (n + 2) * np.sum(rho_e[1:] ** 2 / (n - k)))
+    p = float(chi2.sf(q, max_lag))
+    below = np.flatnonzero(rho_e < 1 / np.e)
+    white = Whiteness(
+        n=n, lags=max_lag, ljung_box_q=q, p_value=p, white=p >= alpha,
+        max_abs_acf=float(np.max(np.abs(rho_e[1:]))) if max_lag else 0.0,
+        frac_outside=float(np.mean(np.abs(rho_e[1:]) > 1.96 / np.sqrt(n))),
+        correlation_time_s=float((below[0] if below.size else max_lag) * dt),
+    )
+    signals = {"command": data.cmd_deg}
+    v = speed_dps(data)
+    signals["speed"] = v
+    signals["abs speed"] = np.abs(v)
+    if OTHER_CMD in data.extras:
+        signals["other command"] = data.extras[OTHER_CMD]
+    signals["time"] = data.t_s if data.t_s is not None else np.arange(n, dtype=float)
+    z = float(norm.ppf(1 - alpha / (2 * (2 * max_lag + 1))))
+    cross = []
+    for name, x in signals.items():
+        if is_constant(x) or e.std() == 0:
+            continue
+        r = _xcorr(e, x, max_lag)
+        rho_x = _acf(x, max_lag)
+        # Bartlett: var r(tau) ~ (1/n) (1 + 2 sum_{k>=1} rho_e(k) rho_x(k)), lags truncated at max_lag
+        var = max(1.0 + 2.0 * float(np.sum(rho_e[1:] * rho_x[1:])), 1.0) / n
+        bound = z * float(np.sqrt(var))
+        i = int(np.argmax(np.abs(r)))
+        cross.append(CrossCorrelation(
+            signal=name, corr_at_zero=float(r[max_lag]), max_abs_corr=float(abs(r[i])),
+            lag_s=float((i - max_lag) * dt), bound=bound, significant=bool(abs(r[i]) > bound), hint=_HINTS[name]))
+    return ResidualTests(white, tuple(cross))

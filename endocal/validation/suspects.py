@@ -1,0 +1,491 @@
+"""Which physical effect is the model missing: scan the effect catalog with blocked cross-validation.
+
+For every effect of :data:`endocal.models.EFFECTS` the model does not have yet (and, for
+``load``, every varying extra column), the augmented model ``base + effects + candidate``
+is fitted and its error is measured on data it was not fitted on; the model as it stands
+is refitted the same way, so both face the same held-out data.
+
+Cross-validation (rolling origin, contiguous blocks)
+    The first ``train_frac`` of the record is training data only; the rest is cut into
+    ``folds`` contiguous test blocks. Fold ``k`` fits on everything before block ``k`` and
+    predicts block ``k`` by running the fitted model over the record from its start (so the
+    hysteresis operators, delays and creep states enter the block with the history they
+    really had). Training data is always one run from the start: hysteresis memory and
+    time-based effects (drift, creep, delay) would be broken by holes cut into the record,
+    and the model fit takes no sample mask. Held-out data never precedes its training data,
+    the honest direction for time series.
+
+Test (autocorrelation-aware, paired)
+    The per-sample loss differential ``d_t = e_base(t)^2 - e_cand(t)^2`` on the held-out
+    samples (Diebold & Mariano, J. Bus. Econ. Stat. 13, 1995) is averaged over contiguous
+    blocks at least as long as its correlation time
+    (:func:`endocal.validation.metrics.block_length`), and the block means are tested with a
+    one-sided Wilcoxon signed-rank test (candidate better). The p-values of all candidates
+    are Holm-corrected (Holm, Scand. J. Statist. 6, 1979).
+
+A candidate is a *suspect* when its corrected p-value is below ``alpha`` *and* it cuts the
+held-out RMSE by at least ``min_gain_pct``: with thousands of samples, statistics alone
+would flag a term that absorbs a sliver of a model's structural mismatch; the effect size
+keeps a model that already explains the data near its noise floor free of false alarms.
+Suspects are ranked by held-out gain.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.stats import wilcoxon
+
+from endocal.errors import ModelError
+from endocal.models import EFFECTS, HysteresisData, make_model
+from endocal.models.base import HysteresisModel, OutOfRangeWarning
+from endocal.models.data import OTHER_CMD
+from endocal.validation.data import is_constant, load_candidates, prefix
+from endocal.validation.metrics import block_length
+from endocal.validation.regimes import hold_mask, turning_points
+
+try:  # BLAS threads fight each other on the many small least-squares problems of a scan
+    from threadpoolctl import threadpool_limits
+except ImportError:  # pragma: no cover - threadpoolctl is a declared dependency
+    threadpool_limits = None
+
+#: Pairs of effects that can explain the same residual, and the experiment that tells them apart.
+TELL_APART = {
+    frozenset({"delay", "rate"}): (
+        "a delay shifts the whole response in time at every speed, while speed-dependent friction widens "
+        "the loop only when the knob moves fast: run `chirp` (or `sine-set`) and compare the loop at low and "
+        "high frequency, or `staircase`: a delay shows as the same lag at the start of every step"),
+    frozenset({"creep", "drift"}): (
+        "creep relaxes after each motion and stops, drift keeps going at a constant rate: run `staircase` "
+        "(creep restarts at every step) and `hold` (drift keeps going with the knob still)"),
+    frozenset({"deadzone", "envelope"}): (
+        "a dead zone appears after every reversal, wherever it happens, while the envelope depends on the "
+        "knob position only: run `sine` with an offset (reversals away from neutral)"),
+}
+
+
+@dataclass(frozen=True)
+class Suspect:
+    """One candidate effect, tested.
+
+    Attributes
+    ----------
+    effect : str
+        The effect as ``--effects`` writes it (``delay``, ``load:sheath_wrap_deg``).
+    column : str or None
+        The covariate column of a ``load`` term.
+    gain_pct : float
+        Held-out RMSE improvement over the model as it stands, percent (negative: worse).
+    p_value : float
+        Holm-corrected one-sided p-value of that improvement.
+    p_raw : float
+        Uncorrected p-value.
+    rmse_heldout_deg, base_rmse_heldout_deg : float
+        Held-out RMSE with and without the candidate (deg).
+    significant : bool
+        Listed as a suspect (``p_value < alpha`` and ``gain_pct >= min_gain_pct``).
+    command : str
+        The command that refits the model with the candidate.
+    cause, signature, protocol : str
+        From the effect catalog: physical cause, residual signature, revealing protocol.
+    n_blocks : int
+        Independent blocks in the paired test.
+    """
+
+    effect: str
+    column: str | None
+    gain_pct: float
+    p_value: float
+    p_raw: float
+    rmse_heldout_deg: float
+    base_rmse_heldout_deg: float
+    significant: bool
+    command: str
+    cause: str
+    signature: str
+    protocol: str
+    n_blocks: int
+
+    def to_dict(self) -> dict:
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+
+@dataclass(frozen=True)
+class ScanResult:
+    """Result of :func:`scan_effects`.
+
+    Attributes
+    ----------
+    suspects : tuple of Suspect
+        Significant candidates, most likely (largest held-out gain) first; empty when
+        nothing significant is missing.
+    tested : tuple of Suspect
+        Every candidate tested, by decreasing gain.
+    baseline_rmse_heldout_deg : float
+        Held-out RMSE of the model as it stands (refitted fold by fold).
+    untestable : dict
+        Effect -> why this data cannot reveal it (not tested).
+    notes : tuple of str
+        Ambiguities and identifiability, in words.
+    folds, stride, n_samples : int
+        Test blocks, decimation step and samples scanned.
+    """
+
+    suspects: tuple[Suspect, ...]
+    tested: tuple[Suspect, ...]
+    baseline_rmse_heldout_deg: float
+    untestable: dict = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
+    folds: int = 0
+    stride: int = 1
+    n_samples: int = 0
+    alpha: float = 0.05
+    min_gain_pct: float = 0.0
+
+    def to_dict(self) -> dict:
+        return {
+            "suspects": [s.to_dict() for s in self.suspects],
+            "tested": [s.to_dict() for s in self.tested],
+            "baseline_rmse_heldout_deg": self.baseline_rmse_heldout_deg,
+            "untestable": dict(self.untestable),
+            "notes": list(self.notes),
+            "cv": {"scheme": "rolling-origin blocked", "folds": self.folds, "stride": self.stride,
+                   "n_samples": self.n_samples, "alpha": self.alpha, "min_gain_pct": self.min_gain_pct,
+                   "test": "Wilcoxon signed-rank on block-mean loss differentials, Holm-corrected"},
+        }
+
+
+# ---------------------------------------------------------------------------- folds
+def fold_bounds(n_samples: int, folds: int, train_frac: float = 0.5) -> list[tuple[int, int]]:
+    """``(train_end, test_end)`` of each rolling-origin fold: train on ``[0, train_end)``, test ``[train_end, test_end)``."""
+    first = int(round(train_frac * n_samples))
+    edges = np.linspace(first, n_samples, folds + 1).round().astype(int)
+    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
+
+
+def check_cv_data(data: HysteresisData, folds: int, train_frac: float = 0.5, min_block: int = 30) -> None:
+    """Refuse data too short for ``folds``-fold blocked cross-validation.
+
+    Raises
+    ------
+    ModelError
+        Fewer than ``min_block`` samples per test block, or a first training block without
+        two direction reversals (the model could not be fitted on it).
+    """
+    if not isinstance(folds, (int, np.integer)) or isinstance(folds, bool) or folds < 2:
+        raise ModelError(f"folds must be an integer >= 2, got {folds!r}")
+    n = data.n_samples
+    need = int(math.ceil(folds * min_block / (1 - train_frac)))
+    if n < need:
+        raise ModelError(f"data too short for {folds}-fold blocked cross-validation: {n} samples, need at least "
+                         f"{need} ({min_block} per held-out block); give a longer run or fewer --folds")
+    train_end = fold_bounds(n, folds, train_frac)[0][0]
+    n_turns = int(np.sum(turning_points(data) < train_end))
+    if n_turns < 2:
+        raise ModelError(f"data too short for blocked cross-validation: the first {train_end} samples (the first "
+                         f"training block) hold {n_turns} direction reversal(s), a hysteresis model needs at least 2; "
+                         "give a longer run")
+
+
+def _template(model: HysteresisModel, effects: Sequence[str]) -> HysteresisModel:
+    return make_model(model.base_name, list(effects), **model.get_settings(), fixed=model.fixed, axis=model.axis,
+                      out_of_range="clamp")
+
+
+def effect_labels(model: HysteresisModel) -> list[str]:
+    """The model's effects as ``--effects`` writes them."""
+    effects = model.effects_ if hasattr(model, "effects_") else model._effects()
+    return [e.label for e in effects]
+
+
+def heldout_errors(model: HysteresisModel, effects: Sequence[str], data: HysteresisData,
+                   bounds: Sequence[tuple[int, int]]) -> tuple[np.ndarray, list]:
+    """Held-out errors ``pred - meas`` of ``base + effects`` on the rolling-origin folds.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        Gives the base and its settings (its fitted values are not used).
+    effects : sequence of str
+        Effects of the refitted models.
+    data : HysteresisData
+    bounds : list of (train_end, test_end)
+        From :func:`fold_bounds`.
+
+    Returns
+    -------
+    errors : ndarray (n_test,)
+        Concatenated over the test blocks (deg).
+    fitted : list of HysteresisModel
+        The model of each fold.
+    """
+    errs, fitted = [], []
+    for a, b in bounds:
+        m = _template(model, effects).fit(prefix(data, a))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", OutOfRangeWarning)
+            pred = m.predict(prefix(data, b))
+        errs.append(pred[a:b] - data.meas_deg[a:b])
+        fitted.append(m)
+    return np.concatenate(errs), fitted
+
+
+def one_blas_thread():
+    """Context limiting BLAS to one thread (many small least-squares problems run faster that way)."""
+    return threadpool_limits(limits=1, user_api="blas") if threadpool_limits else contextlib.nullcontext()
+
+
+def paired_test(err_base: np.ndarray, err_cand: np.ndarray) -> tuple[float, int]:
+    """One-sided p-value that ``err_cand`` is smaller than ``err_base``, and the number of blocks used.
+
+    Block means of the loss differential ``e_base^2 - e_cand^2`` (blocks as long as its
+    correlation time), Wilcoxon signed-rank test, alternative "greater".
+    """
+    d = err_base**2 - err_cand**2
+    if not np.any(d):
+        return 1.0, 0
+    L = block_length(d)
+    nb = d.size // L
+    means = d[: nb * L].reshape(nb, L).mean(axis=1)
+    if nb < 2 or not np.any(means):
+        return 1.0, nb
+    return float(wilcoxon(means, alternative="greater").pvalue), nb
+
+
+def holm(p: Sequence[float]) -> np.ndarray:
+    """Holm step-down adjusted p-values (same order as ``p``)."""
+    p = np.asarray(p, dtype=float)
+    m = p.size
+    order = np.argsort(p)
+    adj = np.empty(m)
+    running = 0.0
+    for rank, i in enumerate(order):
+        running = max(running, min(1.0, (m - rank) * p[i]))
+        adj[i] = running
+    return adj
+
+
+# ---------------------------------------------------------------------------- identifiability
+def _rate_reason(data: HysteresisData) -> str | None:
+    turns = turning_points(data)
+    t = data.t_s if data.t_s is not None else np.arange(data.n_samples, dtype=float)
+    same_run = np.searchsorted(data.run_starts, turns[1:], side="right") == np.searchsorted(
+        data.run_starts, turns[:-1], side="right")
+    half = np.diff(t[turns])[same_run] if turns.size > 1 else np.array([])
+    if half.size < 2:
+        return "too few reversals: rate cannot be identified (run `chirp` or `sine-set`: several frequencies)"
+    lo, hi = np.quantile(half, [0.1, 0.9])
+    if hi < 1.5 * lo:
+        return ("one frequency only: rate cannot be identified (speed-dependent friction needs the same motion "
+                "at several frequencies: run `chirp` or `sine-set`)")
+    return None
+
+
+def _creep_reason(data: HysteresisData) -> str | None:
+    hold = hold_mask(data, 1.0)
+    span = float(np.ptp(data.cmd_deg))
+    t = data.t_s
+    starts = np.flatnonzero(hold & ~np.concatenate([[False], hold[:-1]]))
+    for k in starts:
+        run0 = data.run_starts[np.searchsorted(data.run_starts, k, side="right") - 1]
+        j = np.searchsorted(t, t[k] - 2.0) if t is not None else k - 20
+        j = max(int(j), int(run0))
+        if k > run0 and np.ptp(data.cmd_deg[j:k + 1]) >= 0.05 * span:
+            return None
+    return ("no holds: creep cannot be identified (it shows as the tip still moving after the knob stops: "
+            "run `staircase`)")
+
+
+def _coupling_reason(data: HysteresisData) -> str | None:
+    if OTHER_CMD not in data.extras:
+        return "one axis only: coupling cannot be identified (drive both knobs: run `lissajous` or `circle`)"
+    if is_constant(data.extras[OTHER_CMD]):
+        return "the other knob never moves: coupling cannot be identified (run `lissajous` or `circle`)"
+    return None
+
+
+def _time_reason(name: str):
+    def reason(data: HysteresisData) -> str | None:
+        return None if data.t_s is not None else f"no time stamps: {name} cannot be identified"
+    return reason
+
+
+#: Effect name -> check of whether the data can reveal it (None: it can; else why not).
+IDENTIFIABILITY = {
+    "rate": _rate_reason,
+    "creep": _creep_reason,
+    "coupling": _coupling_reason,
+    "delay": _time_reason("delay"),
+    "drift": _time_reason("drift"),
+}
+
+
+def takes_column(name: str) -> bool:
+    """True for catalog effects written ``NAME:COLUMN`` (``load``)."""
+    return hasattr(EFFECTS[name], "from_argument")
+
+
+def refit_command(data_paths: Sequence[str], axis: str | None, base: str, effects: Sequence[str], out: str) -> str:
+    """``endocal fit hysteresis DATA... --axis AXIS --model BASE --effects E1,E2 --out OUT``."""
+    parts = ["endocal fit hysteresis", *[str(p) for p in data_paths]]
+    if axis:
+        parts += ["--axis", axis]
+    parts += ["--model", base]
+    if effects:
+        parts += ["--effects", ",".join(effects)]
+    parts += ["--out", out]
+    return " ".join(parts)
+
+
+def refit_path(model_path: str | None, effect: str) -> str:
+    """``MODEL-EFFECT.json`` beside ``MODEL.json`` (``load:col`` becomes ``load-col``)."""
+    tag = effect.replace(":", "-")
+    if not model_path:
+        return f"model-{tag}.json"
+    p = str(model_path)
+    stem = p[:-5] if p.endswith(".json") else p
+    return f"{stem}-{tag}.json"
+
+
+# ---------------------------------------------------------------------------- the scan
+def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5, alpha: float = 0.05,
+                 min_gain_pct: float = 10.0, candidates: Sequence[str] | None = None,
+                 load_columns: Sequence[str] | None = None, bending_axes: Sequence[str] = (),
+                 max_samples: int = 12000, train_frac: float = 0.5, data_paths: Sequence[str] = ("DATA",),
+                 model_path: str | None = None) -> ScanResult:
+    """Test every catalog effect the model lacks on held-out data; rank the significant ones.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        The model under validation (its base, settings and effects are refitted fold by fold).
+    data : HysteresisData
+        Commands, measured angles, time and extra columns (see :mod:`endocal.validation.data`).
+    folds : int
+        Held-out blocks (rolling origin, see the module docstring).
+    alpha : float
+        Family-wise error rate over the candidates (Holm).
+    min_gain_pct : float
+        Smallest held-out RMSE improvement (percent) worth a model term.
+    candidates : sequence of str, optional
+        Effects to test (default: every catalog effect the model lacks; ``load`` on every
+        varying extra column).
+    load_columns : sequence of str, optional
+        Columns to try ``load`` on (default: :func:`~endocal.validation.data.load_candidates`).
+    bending_axes : sequence of str
+        Names of the probe's bending axes (their knob readings are not load candidates).
+    max_samples : int
+        Longer records are decimated to at most this many samples for the scan (every
+        ``s``-th sample; the hysteresis loops at <= 1 Hz keep their shape at >= 10 Hz).
+    train_frac : float
+        Share of the record used only for training.
+    data_paths, model_path : optional
+        Where the data and model came from, for the refit commands.
+
+    Returns
+    -------
+    ScanResult
+
+    Raises
+    ------
+    ModelError
+        Data too short for the cross-validation, or the model as it stands cannot be
+        refitted on the first training block.
+    """
+    if data.meas_deg is None:
+        raise ModelError("validation needs the measured angle meas_deg (deg)")
+    stride = max(1, int(math.ceil(data.n_samples / max_samples)))
+    d = data.decimate(stride) if stride > 1 else data
+    check_cv_data(d, folds, train_frac)
+    bounds = fold_bounds(d.n_samples, folds, train_frac)
+    have = effect_labels(model)
+    have_names = {lab.partition(":")[0] for lab in have}
+    untestable: dict[str, str] = {}
+    if candidates is None:
+        cands: list[str] = []
+        for name in EFFECTS:
+            if takes_column(name):
+                if load_columns is None:
+                    cols, constant = load_candidates(d, bending_axes)
+                else:
+                    cols, constant = list(load_columns), []
+                cols = [c for c in cols if f"{name}:{c}" not in have]
+                if not cols:
+                    untestable[name] = (f"no varying extra column: {name} cannot be identified "
+                                        "(log a covariate such as sheath_wrap_deg)")
+                cands += [f"{name}:{c}" for c in cols]
+            elif name not in have_names:
+                cands.append(name)
+    else:
+        cands = [c for c in candidates if c not in have]
+    tested_cands = []
+    for c in cands:
+        name = c.partition(":")[0]
+        check = IDENTIFIABILITY.get(name)
+        reason = check(d) if check is not None else None
+        if reason is not None:
+            untestable[c] = reason
+        else:
+            tested_cands.append(c)
+
+    with one_blas_thread():
+        err_base, _ = heldout_errors(model, have, d, bounds)
+        rmse_base = float(np.sqrt(np.mean(err_base**2)))
+        results = []
+        for c in tested_cands:
+            try:
+                err, fitted = heldout_errors(model, have + [c], d, bounds)
+            except ModelError as exc:
+                untestable[c] = f"could not be fitted on this data ({exc})"
+                continue
+            p, nb = paired_test(err_base, err)
+            rmse = float(np.sqrt(np.mean(err**2)))
+            results.append((c, err, rmse, p, nb))
+
+    adj = holm([r[3] for r in results]) if results else np.array([])
+    tested = []
+    errs = {}
+    for (c, err, rmse, p, nb), pa in zip(results, adj):
+        name, _, col = c.partition(":")
+        cls = EFFECTS[name]
+        gain = 100.0 * (1.0 - rmse / rmse_base) if rmse_base > 0 else 0.0
+        cmd = refit_command(data_paths, model.axis, model.base_name, have + [c], refit_path(model_path, c))
+        tested.append(Suspect(effect=c, column=col or None, gain_pct=gain, p_value=float(pa), p_raw=p,
+                              rmse_heldout_deg=rmse, base_rmse_heldout_deg=rmse_base,
+                              significant=bool(pa < alpha and gain >= min_gain_pct), command=cmd,
+                              cause=cls.cause, signature=cls.signature, protocol=cls.protocol, n_blocks=nb))
+        errs[c] = err
+    tested.sort(key=lambda s: -s.gain_pct)
+    suspects = [s for s in tested if s.significant]
+    notes = _ambiguities(suspects, errs, alpha)
+    notes += [f"{k}: {v}" for k, v in untestable.items()]
+    if stride > 1:
+        notes.append(f"scanned every {stride}th sample ({d.n_samples} of {data.n_samples})")
+    return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), folds, stride,
+                      d.n_samples, alpha, min_gain_pct)
+
+
+def _ambiguities(suspects: list[Suspect], errs: dict, alpha: float, close_pct: float = 5.0) -> list[str]:
+    """Notes on suspects that explain the residual about as well as the top one."""
+    if len(suspects) < 2:
+        return []
+    top = suspects[0]
+    notes = []
+    for other in suspects[1:]:
+        p, _ = paired_test(errs[other.effect], errs[top.effect])
+        rel = 100.0 * (other.rmse_heldout_deg - top.rmse_heldout_deg) / max(top.rmse_heldout_deg, 1e-300)
+        if p < alpha and rel >= close_pct:
+            continue
+        a, b = top.effect.partition(":")[0], other.effect.partition(":")[0]
+        how = TELL_APART.get(frozenset({a, b}))
+        if how is None:
+            how = (f"{top.effect} is revealed by {EFFECTS[a].protocol}; "
+                   f"{other.effect} by {EFFECTS[b].protocol}")
+        notes.append(f"{top.effect} and {other.effect} explain the residual about equally (held-out RMSE "
+                     f"{top.rmse_heldout_deg:.3g} vs {other.rmse_heldout_deg:.3g} deg); to tell them apart: {how}")
+    return notes
