@@ -75,14 +75,14 @@ class Units:
 
 
 def _merge_short(cuts: list[int], n: int) -> list[tuple[int, int]]:
-    """Segments between cuts; a leading or trailing piece shorter than half the median joins its neighbour."""
+    """Segments between cuts; a leading or trailing piece shorter than a quarter of the median joins its neighbour."""
     edges = [0] + [c for c in cuts if 0 < c < n] + [n]
     segs = [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
     if len(segs) >= 3:
         med = float(np.median([b - a for a, b in segs[1:-1]]))
-        if segs[0][1] - segs[0][0] < med / 2:
+        if segs[0][1] - segs[0][0] < med / 4:
             segs = [(0, segs[1][1])] + segs[2:]
-        if len(segs) >= 2 and segs[-1][1] - segs[-1][0] < med / 2:
+        if len(segs) >= 2 and segs[-1][1] - segs[-1][0] < med / 4:
             segs = segs[:-2] + [(segs[-2][0], n)]
     return segs
 
