@@ -375,3 +375,74 @@ def pi_exp_forward_jac(x, r, w, beta, n_ops, G, run_starts):
             J[k, q + 1] = acc / w
             J[k, q + 2] = d_b
     return y, J
+
+
+@njit(cache=True)
+def varplay_forward_jac(u, w, Wg, M, run_starts):
+    """Play operator of time-varying half width: ``v_k = clip(v_{k-1}, u_k - w_k, u_k + w_k)``, ``v_0 = u_0``.
+
+    The extra friction backlash of the ``rate`` and ``load`` effects (widths ``w`` >= 0,
+    deg of knob). ``M`` (n, q) is the Jacobian of ``u`` w.r.t. q upstream parameters and
+    ``Wg`` (n, q + p) that of ``w`` w.r.t. those and the effect's p own parameters. A play
+    output is the carried value or ``u_k -+ w_k`` at the sample that last pushed it, so its
+    derivatives are those of that sample.
+
+    Returns ``v`` (n,) and ``J`` (n, q + p).
+    """
+    n = u.shape[0]
+    q = M.shape[1]
+    P = Wg.shape[1]
+    v = np.empty(n)
+    J = np.zeros((n, P))
+    n_runs = run_starts.shape[0]
+    for r in range(n_runs):
+        a = run_starts[r]
+        b = run_starts[r + 1] if r + 1 < n_runs else n
+        vk = u[a]
+        v[a] = vk
+        for j in range(q):
+            J[a, j] = M[a, j]
+        for k in range(a + 1, b):
+            lo = u[k] - w[k]
+            hi = u[k] + w[k]
+            if vk < lo:
+                vk = lo
+                for j in range(P):
+                    J[k, j] = -Wg[k, j]
+                for j in range(q):
+                    J[k, j] += M[k, j]
+            elif vk > hi:
+                vk = hi
+                for j in range(P):
+                    J[k, j] = Wg[k, j]
+                for j in range(q):
+                    J[k, j] += M[k, j]
+            else:
+                for j in range(P):
+                    J[k, j] = J[k - 1, j]
+            v[k] = vk
+    return v, J
+
+
+@njit(cache=True)
+def varplay_inverse(v, w, run_starts):
+    """Commands whose :func:`varplay_forward_jac` output is ``v`` for known widths ``w`` (exact).
+
+    The drive moving up means the knob pushes from below (``u = v + w``), down from above;
+    a drive at rest leaves the knob where it was unless the window forces it.
+    """
+    n = v.shape[0]
+    u = np.empty(n)
+    n_runs = run_starts.shape[0]
+    for r in range(n_runs):
+        a = run_starts[r]
+        b = run_starts[r + 1] if r + 1 < n_runs else n
+        u[a] = v[a]
+        for k in range(a + 1, b):
+            if v[k] > v[k - 1]:
+                u[k] = v[k] + w[k]
+            elif v[k] < v[k - 1]:
+                u[k] = v[k] - w[k]
+            else:
+                u[k] = min(max(u[k - 1], v[k] - w[k]), v[k] + w[k])
+    return u

@@ -4,8 +4,8 @@ A model is a *base* (the direction-dependent hysteresis: :mod:`~endocal.models.l
 :mod:`~endocal.models.bspline`, :mod:`~endocal.models.pi`) plus *effect terms*
 (:mod:`endocal.models.effects`)::
 
-    u = E_in(cmd)            input effects, in order (delay, rate, deadzone, envelope)
-    y = base(u) + sum E_out  output effects (drift, coupling, creep, load)
+    u = E_in(cmd)               input effects, in order (delay, rate, load, deadzone, envelope)
+    y = F(base(u)) + sum E_out  output filters (creep), then additive terms (coupling, drift)
 
 Contract (scikit-learn / lmfit style): ``__init__`` only stores its arguments;
 ``fit`` returns ``self`` and sets the trailing-underscore attributes (``params_``,
@@ -31,6 +31,7 @@ from endocal.errors import ModelError
 from endocal.models.data import HysteresisData, as_data
 from endocal.models.effects import resolve_effects
 from endocal.models.effects.base import Effect, InputEffect, OutputEffect
+from endocal.models.effects.creep import OutputFilter
 from endocal.models.params import Parameter
 
 OUT_OF_RANGE_CHOICES = ("error", "clamp")
@@ -207,6 +208,9 @@ class HysteresisModel(ABC):
                 u = e.apply(eff_p[id(e)], u, data)
         y = self._base_forward(structure, base_p, u, data.run_starts)
         for e in effects:
+            if isinstance(e, OutputFilter):
+                y = e.apply(eff_p[id(e)], y, data)
+        for e in effects:
             if isinstance(e, OutputEffect):
                 y = y + e.term(eff_p[id(e)], data.cmd_deg, data)
         return y
@@ -215,8 +219,9 @@ class HysteresisModel(ABC):
                      effects: list[Effect]):
         """Output and full Jacobian ``(y, J, names)`` when every part is differentiable analytically, else None."""
         inputs = [e for e in effects if isinstance(e, InputEffect)]
+        filters = [e for e in effects if isinstance(e, OutputFilter)]
         outputs = [e for e in effects if isinstance(e, OutputEffect)]
-        if any(not hasattr(e, "apply_jac") for e in inputs) or any(not hasattr(e, "term_jac") for e in outputs):
+        if any(not hasattr(e, "apply_jac") for e in inputs + filters) or any(not hasattr(e, "term_jac") for e in outputs):
             return None
         u = data.cmd_deg
         M = np.zeros((u.size, 0))
@@ -231,6 +236,10 @@ class HysteresisModel(ABC):
         y, Jb, Ju = res
         names = [f"{self.base_name}_{s}" for s in self._base_names(structure)] + up_names
         blocks = [Jb, Ju]
+        for e in filters:
+            y, Jf, own = e.apply_jac(eff_p[id(e)], y, data, np.column_stack(blocks))
+            blocks = [Jf, own]
+            names += e.full_names()
         for e in outputs:
             t, Jo = e.term_jac(eff_p[id(e)], data.cmd_deg, data)
             y = y + t
@@ -241,8 +250,9 @@ class HysteresisModel(ABC):
     @staticmethod
     def _ordered(effects: list[Effect]) -> list[Effect]:
         inputs = sorted((e for e in effects if isinstance(e, InputEffect)), key=lambda e: e.order)
+        filters = [e for e in effects if isinstance(e, OutputFilter)]
         outputs = [e for e in effects if isinstance(e, OutputEffect)]
-        return inputs + outputs
+        return inputs + filters + outputs
 
     # ------------------------------------------------------------------ fit
     def fit(self, data, meas_deg=None, *, t_s=None, extras=None, max_nfev: int | None = None):
@@ -285,35 +295,40 @@ class HysteresisModel(ABC):
                              "fit on data that moves the knob back and forth (e.g. a damped sine)")
 
         fixed = dict(self.fixed) if self.fixed is not None else self._gauge(effects)
-        # Start values: input effects in chain order (each sees the command the chain gives it).
-        start: dict[str, Parameter] = {}
+        for e in effects:
+            # constants an effect takes from the data (a covariate's range) are held fixed
+            for short, val in (e.constants(d).items() if hasattr(e, "constants") else ()):
+                fixed.setdefault(f"{e.prefix}_{short}", float(val))
         # Long records: start values and the first convergence use a decimated copy
         # (every s-th sample; the knob moves little between samples, so loops keep
         # their shape); the final iterations and the covariance use every sample.
         stride = d.n_samples // 20000
         dd = d.decimate(stride) if stride >= 2 else d
-        u = dd.cmd_deg
+        start, structure, owners = self._start(dd, effects, fixed, {})
+        # Effects whose nonlinear parameters (a delay, a time constant, a play width) need a
+        # good start offer a few candidates: each is tried with the base re-started on the
+        # command it produces, and the one with the lowest start cost is kept (greedy, in
+        # chain order).
+        overrides: dict[str, float] = {}
         for e in effects:
-            if isinstance(e, InputEffect):
-                for prm in e.initial(dd, u):
-                    start[prm.name] = prm
-                e.adapt_start(start, fixed)
-                self._apply_fixed(start, fixed, e)
-                u = e.apply({s: start[f].value for s, f in zip(e.param_names(), e.full_names())}, u, dd)
-        structure = self._resolve_structure(effects, u, dd)
-        owners = self._owners(effects, structure)
-        for prm in self._base_initial(structure, u, dd):
-            start[f"{self.base_name}_{prm.name}"] = Parameter(f"{self.base_name}_{prm.name}", prm.value, prm.lower, prm.upper)
-        for e in effects:
-            if isinstance(e, OutputEffect):
-                for prm in e.initial(dd, dd.cmd_deg):
-                    start[prm.name] = prm
-                e.adapt_start(start, fixed)
-        unknown = set(fixed) - set(owners)
-        if unknown:
-            raise ModelError(f"fixed names unknown parameter(s) {sorted(unknown)}; this model has {sorted(owners)}")
-        for name, val in fixed.items():
-            start[name].value = float(val)
+            if not hasattr(e, "start_candidates"):
+                continue
+            best = None
+            for cand in e.start_candidates(dd, dd.cmd_deg):
+                trial = {**overrides, **{f"{e.prefix}_{k}": float(v) for k, v in cand.items()
+                                         if f"{e.prefix}_{k}" not in fixed}}
+                if isinstance(e, InputEffect):
+                    st, stru, own = self._start(dd, effects, fixed, trial)
+                else:  # the base's start does not depend on a filter or an additive term
+                    st, stru, own = dict(start), structure, owners
+                    for k, v in trial.items():
+                        if k in st and k.startswith(e.prefix + "_"):
+                            st[k] = Parameter(k, v, st[k].lower, st[k].upper)
+                cost = self._start_cost(dd, st, stru, own, effects, fixed)
+                if best is None or cost < best[0]:
+                    best = (cost, trial, st, stru, own)
+            if best is not None:
+                _, overrides, start, structure, owners = best
 
         names = list(owners)
         free = [n for n in names if n not in fixed]
@@ -406,6 +421,49 @@ class HysteresisModel(ABC):
             n_free=n_free, rank_deficient=rank_def,
         )
         return self
+
+    def _start(self, dd: HysteresisData, effects: list[Effect], fixed: dict, overrides: dict):
+        """Start values (input effects in chain order, each seeing the command the chain gives it), structure, owners."""
+        start: dict[str, Parameter] = {}
+        u = dd.cmd_deg
+        for e in effects:
+            if isinstance(e, InputEffect):
+                for prm in e.initial(dd, u):
+                    start[prm.name] = prm
+                e.adapt_start(start, fixed)
+                self._apply_fixed(start, fixed, e)
+                for full in e.full_names():
+                    if full in overrides:
+                        start[full].value = overrides[full]
+                u = e.apply({s: start[f].value for s, f in zip(e.param_names(), e.full_names())}, u, dd)
+        structure = self._resolve_structure(effects, u, dd)
+        owners = self._owners(effects, structure)
+        for prm in self._base_initial(structure, u, dd):
+            start[f"{self.base_name}_{prm.name}"] = Parameter(f"{self.base_name}_{prm.name}", prm.value, prm.lower, prm.upper)
+        for e in effects:
+            if not isinstance(e, InputEffect):
+                for prm in e.initial(dd, dd.cmd_deg):
+                    start[prm.name] = prm
+                e.adapt_start(start, fixed)
+                for full in e.full_names():
+                    if full in overrides:
+                        start[full].value = overrides[full]
+        unknown = set(fixed) - set(owners)
+        if unknown:
+            raise ModelError(f"fixed names unknown parameter(s) {sorted(unknown)}; this model has {sorted(owners)}")
+        for name, val in fixed.items():
+            start[name].value = float(val)
+        return start, structure, owners
+
+    def _start_cost(self, dd: HysteresisData, start: dict, structure: dict, owners: dict, effects: list[Effect],
+                    fixed: dict) -> float:
+        """Sum of squared residuals (deg²) at the start values."""
+        self._owner_map_ = owners
+        values = {n: (start[n].value if n in fixed else start[n].clipped_start()) for n in owners}
+        base_p, eff_p = self._grouped(values)
+        r = self._forward(dd, base_p, eff_p, structure, effects) - dd.meas_deg
+        cost = float(r @ r)
+        return cost if math.isfinite(cost) else math.inf
 
     @staticmethod
     def _apply_fixed(start: dict, fixed: dict, e: Effect) -> None:
@@ -521,9 +579,11 @@ class HysteresisModel(ABC):
         """Knob commands (deg) that make the model output follow ``desired_deg`` (feedforward compensation).
 
         The base inverse is analytic for ``pi`` (duodenoscope paper, eqs. 9-11) and
-        numerical (sample-by-sample bisection) for ``linear`` and ``bspline``; input
-        effects are undone in reverse order; output terms that depend on the command
-        are handled by fixed-point iteration.
+        numerical (sample-by-sample bisection) for ``linear`` and ``bspline``; output
+        filters (``creep``) and input effects are undone in reverse order, each exactly
+        (``delay`` advances the trajectory in time: exact for whole-sample delays, within
+        the linear-interpolation error otherwise); output terms that depend on the
+        command are handled by fixed-point iteration.
 
         Parameters
         ----------
@@ -554,6 +614,7 @@ class HysteresisModel(ABC):
         y_des = d.cmd_deg
         base_p, eff_p = self._grouped(self.params_)
         outputs = [e for e in self.effects_ if isinstance(e, OutputEffect)]
+        filters = [e for e in self.effects_ if isinstance(e, OutputFilter)]
         inputs = [e for e in self.effects_ if isinstance(e, InputEffect)]
         v_range = self._v_range()
         terms = np.zeros_like(y_des)
@@ -564,7 +625,10 @@ class HysteresisModel(ABC):
         fixed_terms = terms.copy()
         u = y_des
         for _ in range(max_iter if iterate else 1):
-            v = self._base_inverse(self.structure_, base_p, y_des - terms, d.run_starts, v_range)
+            y_base = y_des - terms
+            for e in reversed(filters):
+                y_base = e.invert(eff_p[id(e)], y_base, d)
+            v = self._base_inverse(self.structure_, base_p, y_base, d.run_starts, v_range)
             u = v
             for e in reversed(inputs):
                 u = e.invert(eff_p[id(e)], u, d)
@@ -582,15 +646,21 @@ class HysteresisModel(ABC):
         return d.split(u) if was_list else u
 
     # ------------------------------------------------------------------ streaming
-    def compensator(self):
+    def compensator(self, dt_s: float | None = None):
         """A streaming compensator for a control loop: ``step(desired_deg) -> cmd_deg``.
+
+        Parameters
+        ----------
+        dt_s : float, optional
+            The loop's fixed sample period (s); needed by time-based effects that stream
+            (``rate``, ``creep``).
 
         See :class:`endocal.models.compensator.StreamingCompensator`.
         """
         from endocal.models.compensator import StreamingCompensator
 
         self._require_fitted()
-        return StreamingCompensator(self)
+        return StreamingCompensator(self, dt_s=dt_s)
 
     # ------------------------------------------------------------------ printing
     def equation(self) -> str:
@@ -601,10 +671,13 @@ class HysteresisModel(ABC):
         inner = "cmd"
         defs = []
         for e in self.effects_:
-            if isinstance(e, InputEffect):
+            if isinstance(e, InputEffect) and not e.is_zero(eff_p[id(e)]):
                 inner = e.wrap(inner)
                 defs.append(e.describe(eff_p[id(e)], eff_se.get(id(e), {})))
         out = self._base_describe(self.structure_, base_p, base_se, inner)
+        for e in self.effects_:
+            if isinstance(e, OutputFilter) and not e.is_zero(eff_p[id(e)]):
+                out = e.wrap(out) + " " + e.describe(eff_p[id(e)], eff_se.get(id(e), {}))
         for e in self.effects_:
             if isinstance(e, OutputEffect) and not e.is_zero(eff_p[id(e)]):
                 out += " + " + e.describe(eff_p[id(e)], eff_se.get(id(e), {}))

@@ -18,6 +18,7 @@ from endocal.errors import ModelError
 from endocal.models.base import HysteresisModel, OutOfRangeWarning
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import InputEffect
+from endocal.models.effects.creep import OutputFilter
 
 
 class StreamingCompensator:
@@ -26,23 +27,31 @@ class StreamingCompensator:
     Parameters
     ----------
     model : HysteresisModel
-        A fitted model whose effects can all be compensated causally (``envelope``
-        can; effects that need future samples or logged columns cannot).
+        A fitted model whose effects can all be compensated causally (``envelope``,
+        ``deadzone``, ``rate``, ``creep`` can; ``delay`` needs future samples, ``load``,
+        ``coupling`` and ``drift`` logged columns or time, so they cannot).
+    dt_s : float, optional
+        Fixed sample period of the loop (s), needed by ``rate`` and ``creep``.
 
     Raises
     ------
     ModelError
-        Unfitted model, or an effect that cannot run sample by sample.
+        Unfitted model, an effect that cannot run sample by sample, or a time-based
+        effect without ``dt_s``.
     """
 
-    def __init__(self, model: HysteresisModel):
+    def __init__(self, model: HysteresisModel, dt_s: float | None = None):
         model._require_fitted()
         for e in model.effects_:
             if not e.streamable:
                 raise ModelError(f"effect '{e.label}' cannot be compensated one sample at a time "
                                  "(it needs future samples or logged columns); use model.inverse(...) on the whole trajectory")
+        if dt_s is not None and not (isinstance(dt_s, (int, float)) and math.isfinite(dt_s) and dt_s > 0):
+            raise ModelError(f"dt_s must be a positive sample period in seconds, got {dt_s!r}")
         self.model = model
+        self.dt_s = dt_s
         base_p, eff_p = model._grouped(model.params_)
+        self._filters = [(e, eff_p[id(e)]) for e in reversed(model.effects_) if isinstance(e, OutputFilter)]
         self._inputs = [(e, eff_p[id(e)]) for e in reversed(model.effects_) if isinstance(e, InputEffect)]
         self._base = model._base_stepper(model.structure_, base_p, model._v_range())
         self._lo, self._hi = model.cmd_range_deg_
@@ -60,9 +69,14 @@ class StreamingCompensator:
             (for the PI, the inverse plays are loaded by eq. 11's initial loading).
         """
         self._base.reset()
-        self._states = [e.stream_state(p) for e, p in self._inputs]
+        self._states = [self._state(e, p) for e, p in self._inputs]
+        self._filter_states = [self._state(e, p) for e, p in self._filters]
         if history_cmd_deg is None:
             return
+        stateful = [e.label for e in self.model.effects_ if getattr(e, "stateful", False)]
+        if stateful:
+            raise ModelError(f"reset(history_cmd_deg=...) supports only static input effects such as the envelope; "
+                             f"{', '.join(stateful)} keep(s) a state of its own: start from rest")
         u = np.asarray(history_cmd_deg, dtype=float)
         if u.ndim != 1 or u.size == 0 or not np.all(np.isfinite(u)):
             raise ModelError("history_cmd_deg must be a non-empty 1-D array of finite commands (deg)")
@@ -78,6 +92,11 @@ class StreamingCompensator:
             y = self.model._base_forward(self.model.structure_, base_p, v, d.run_starts)
             self._base.prime(v, y)
 
+    def _state(self, e, p) -> np.ndarray:
+        if getattr(e, "needs_period", False):
+            return e.stream_state(p, dt_s=self.dt_s)
+        return e.stream_state(p)
+
     def step(self, desired_deg: float) -> float:
         """The knob command (deg) for the next desired bending angle (deg).
 
@@ -88,7 +107,10 @@ class StreamingCompensator:
         """
         if not math.isfinite(desired_deg):
             raise ModelError(f"desired angle must be finite, got {desired_deg!r}")
-        v = self._base.step(float(desired_deg))
+        y = float(desired_deg)
+        for (e, p), state in zip(self._filters, self._filter_states):
+            y = e.invert_step(p, y, state)
+        v = self._base.step(y)
         for (e, p), state in zip(self._inputs, self._states):
             v = e.invert_step(p, v, state)
         if v < self._lo or v > self._hi:

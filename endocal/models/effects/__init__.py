@@ -1,7 +1,13 @@
 """The catalog of physical effects that compose onto any hysteresis model.
 
 Names as users write them (``--effects envelope,delay,load:sheath_wrap_deg``) map to
-classes in :data:`EFFECTS`; ``load:COLUMN`` names an extra numeric column of the data.
+classes in :data:`EFFECTS`; ``load:COLUMN`` names an extra numeric column of the data
+(``coupling:COLUMN`` optionally names the column with the other axis's position).
+
+Three kinds of term (see :mod:`endocal.models.base`): input transforms of the command
+(:class:`InputEffect`: ``delay``, ``rate``, ``load``, ``deadzone``, ``envelope``, applied
+in that order), a filter on the base's output (:class:`OutputFilter`: ``creep``) and
+additive output terms (:class:`OutputEffect`: ``coupling``, ``drift``).
 """
 
 from __future__ import annotations
@@ -10,10 +16,20 @@ from collections.abc import Iterable
 
 from endocal.errors import ModelError
 from endocal.models.effects.base import Effect, InputEffect, OutputEffect
+from endocal.models.effects.coupling import Coupling
+from endocal.models.effects.creep import Creep, OutputFilter
+from endocal.models.effects.deadzone import Deadzone
+from endocal.models.effects.delay import Delay
 from endocal.models.effects.drift import Drift
 from endocal.models.effects.envelope import Envelope
+from endocal.models.effects.load import Load
+from endocal.models.effects.rate import Rate
 
-EFFECTS: dict[str, type[Effect]] = {"envelope": Envelope, "drift": Drift}
+#: Catalog name -> effect class, in the order ``endocal effects`` lists them.
+EFFECTS: dict[str, type[Effect]] = {
+    "envelope": Envelope, "deadzone": Deadzone, "rate": Rate, "delay": Delay, "coupling": Coupling,
+    "drift": Drift, "creep": Creep, "load": Load,
+}
 
 
 def register(cls: type[Effect]) -> type[Effect]:
@@ -25,16 +41,24 @@ def register(cls: type[Effect]) -> type[Effect]:
 
 
 def make_effect(spec: str | Effect) -> Effect:
-    """An effect from its catalog name (``"delay"``, ``"load:sheath_wrap_deg"``) or an instance."""
+    """An effect from its catalog name (``"delay"``, ``"load:sheath_wrap_deg"``) or an instance.
+
+    Raises
+    ------
+    ModelError
+        Unknown name, a ``:`` argument for an effect that takes none, or ``load`` without its column.
+    """
     if isinstance(spec, Effect):
         return spec
     if not isinstance(spec, str) or not spec.strip():
         raise ModelError(f"an effect is a name or an Effect instance, got {spec!r}")
-    name, _, arg = spec.strip().partition(":")
+    name, sep, arg = spec.strip().partition(":")
     if name not in EFFECTS:
         raise ModelError(f"unknown effect '{spec}'; known effects: {', '.join(sorted(EFFECTS))}")
     cls = EFFECTS[name]
-    if arg:
+    if sep:
+        if not arg.strip():
+            raise ModelError(f"effect '{spec}': nothing after ':' (write {name}:COLUMN)")
         return cls.from_argument(arg) if hasattr(cls, "from_argument") else _no_argument(spec)
     return cls()
 
@@ -58,4 +82,5 @@ def resolve_effects(specs: Iterable[str | Effect] | None) -> list[Effect]:
     return out
 
 
-__all__ = ["EFFECTS", "Drift", "Effect", "Envelope", "InputEffect", "OutputEffect", "make_effect", "register", "resolve_effects"]
+__all__ = ["EFFECTS", "Coupling", "Creep", "Deadzone", "Delay", "Drift", "Effect", "Envelope", "InputEffect", "Load",
+           "OutputEffect", "OutputFilter", "Rate", "make_effect", "register", "resolve_effects"]

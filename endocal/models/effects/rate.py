@@ -1,0 +1,194 @@
+"""``rate``: friction that grows with knob speed (hysteresis loops widen at higher frequency).
+
+Coulomb friction of the tendon in its sheath rises with sliding speed (lubricant
+drag, stick-slip), so the drive lags the knob by more backlash the faster the knob
+turns. Modelled as an extra play on the command whose half width grows with the
+knob speed::
+
+    w_k = g · ŝ_k,        ŝ_k = ŝ_{k-1} + (1 - exp(-Δt_k / T_s)) (|u̇_{k-1}| - ŝ_{k-1})
+    v_k = clip(v_{k-1}, u_k - w_k, u_k + w_k)
+
+``g`` (``rate_gain_s``, seconds: deg of play per deg/s of knob speed) is fitted;
+``ŝ`` is the knob speed (deg/s) from the commands up to the previous sample,
+smoothed over ``T_s`` (``speed_filter_s``, a setting: the servo's own smoothing of the
+knob speed). In steady motion the drive lags by ``g·|u̇|`` knob degrees; when the
+knob stops the play closes (the loop narrows back to the base's). Using only past
+speeds keeps the inverse explicit: the command that produces a desired drive
+position is exact and causal, so the effect streams (given the sample period).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from endocal.errors import ModelError
+from endocal.models._kernels import varplay_forward_jac
+from endocal.models.data import HysteresisData
+from endocal.models.effects.base import InputEffect
+from endocal.models.params import Parameter
+
+
+@njit(cache=True)
+def smoothed_speed(u, t, tau, M, run_starts):
+    """Smoothed knob speed ``ŝ`` (n,) (deg/s, from past samples only) and its Jacobian (n, q) via ``M``."""
+    n = u.shape[0]
+    q = M.shape[1]
+    s = np.zeros(n)
+    D = np.zeros((n, q))
+    n_runs = run_starts.shape[0]
+    for r in range(n_runs):
+        a = run_starts[r]
+        b = run_starts[r + 1] if r + 1 < n_runs else n
+        prev_r = 0.0
+        sk = 0.0
+        for j in range(q):
+            D[a, j] = 0.0
+        for k in range(a + 1, b):
+            dt = t[k] - t[k - 1]
+            alpha = 1.0 - math.exp(-dt / tau)
+            sk = sk + alpha * (prev_r - sk)
+            s[k] = sk
+            # derivative: ŝ_k = (1-α) ŝ_{k-1} + α r_{k-1}
+            if k - 1 > a:
+                dtp = t[k - 1] - t[k - 2]
+                du = u[k - 1] - u[k - 2]
+                sg = 1.0 if du > 0 else (-1.0 if du < 0 else 0.0)
+                for j in range(q):
+                    D[k, j] = (1.0 - alpha) * D[k - 1, j] + alpha * sg * (M[k - 1, j] - M[k - 2, j]) / dtp
+            else:
+                for j in range(q):
+                    D[k, j] = (1.0 - alpha) * D[k - 1, j]
+            prev_r = abs(u[k] - u[k - 1]) / dt
+    return s, D
+
+
+@njit(cache=True)
+def rate_inverse(v, t, g, tau, run_starts):
+    """Commands whose rate play output is ``v`` (exact, causal: the width uses past commands only)."""
+    n = v.shape[0]
+    u = np.empty(n)
+    n_runs = run_starts.shape[0]
+    for r in range(n_runs):
+        a = run_starts[r]
+        b = run_starts[r + 1] if r + 1 < n_runs else n
+        u[a] = v[a]
+        prev_r = 0.0
+        sk = 0.0
+        for k in range(a + 1, b):
+            dt = t[k] - t[k - 1]
+            sk = sk + (1.0 - math.exp(-dt / tau)) * (prev_r - sk)
+            w = g * sk
+            if v[k] > v[k - 1]:
+                u[k] = v[k] + w
+            elif v[k] < v[k - 1]:
+                u[k] = v[k] - w
+            else:
+                u[k] = min(max(u[k - 1], v[k] - w), v[k] + w)
+            prev_r = abs(u[k] - u[k - 1]) / dt
+    return u
+
+
+class Rate(InputEffect):
+    """Speed-dependent friction play on the command (module docstring).
+
+    Parameters
+    ----------
+    speed_filter_s : float
+        Time constant ``T_s`` (s) smoothing the knob speed that sets the play's width.
+
+    Fitted parameter (prefix ``rate_``): ``gain_s`` (s), play half width per deg/s of
+    knob speed.
+    """
+
+    name = "rate"
+    order = 20
+    streamable = True
+    stateful = True
+    needs_period = True
+    cause = ("friction between tendon and sheath that grows with sliding speed "
+             "(lubricant drag, stick-slip): the faster the knob turns, the more it leads the tip")
+    signature = ("residual proportional to knob speed with the sign of the motion, vanishing when the knob "
+                 "stops; loops wider at high frequency than at low")
+    protocol = "the same motion at several frequencies (a chirp, or slow and fast sines)"
+    units = {"gain_s": "s"}
+
+    def __init__(self, speed_filter_s: float = 0.1):
+        if not (isinstance(speed_filter_s, (int, float)) and math.isfinite(speed_filter_s) and speed_filter_s > 0):
+            raise ModelError(f"rate: speed_filter_s must be a positive number of seconds, got {speed_filter_s!r}")
+        self.speed_filter_s = float(speed_filter_s)
+
+    def settings(self) -> dict:
+        return {"speed_filter_s": self.speed_filter_s}
+
+    def check(self, data: HysteresisData) -> None:
+        data.require_time("effect 'rate'")
+
+    def _upper(self) -> float:
+        # the inverse feeds its own command jumps back into the width: keep that loop gain below 1/2
+        return 0.5 * self.speed_filter_s
+
+    def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
+        return [Parameter(f"{self.prefix}_gain_s", 0.05 * self._upper(), 0.0, self._upper())]
+
+    def start_candidates(self, data: HysteresisData, u: np.ndarray) -> list[dict]:
+        """Start values tried before the fit (the best is kept)."""
+        return [{"gain_s": f * self._upper()} for f in (0.02, 0.2, 0.6)]
+
+    def _speed(self, u, data, M):
+        t = data.require_time("effect 'rate'")
+        return smoothed_speed(np.ascontiguousarray(u, dtype=float), t, self.speed_filter_s,
+                              np.ascontiguousarray(M, dtype=float), data.run_starts)
+
+    def apply(self, p: dict, u: np.ndarray, data: HysteresisData) -> np.ndarray:
+        v, _, _ = self.apply_jac(p, u, data, np.zeros((len(u), 0)))
+        return v
+
+    def apply_jac(self, p: dict, u: np.ndarray, data: HysteresisData, M: np.ndarray):
+        g = float(p["gain_s"])
+        s, D = self._speed(u, data, M)
+        Wg = np.column_stack([g * D, s])
+        v, J = varplay_forward_jac(np.ascontiguousarray(u, dtype=float), g * s, Wg,
+                                   np.ascontiguousarray(M, dtype=float), data.run_starts)
+        q = M.shape[1]
+        return v, J[:, q:], J[:, :q]
+
+    def invert(self, p: dict, v: np.ndarray, data: HysteresisData) -> np.ndarray:
+        t = data.require_time("effect 'rate'")
+        return rate_inverse(np.ascontiguousarray(v, dtype=float), t, float(p["gain_s"]), self.speed_filter_s,
+                            data.run_starts)
+
+    def stream_state(self, p: dict, dt_s: float | None = None) -> np.ndarray:
+        if dt_s is None or not dt_s > 0:
+            raise ModelError("effect 'rate' streams only with a fixed sample period: give dt_s (s) to the compensator")
+        # [started, v_prev, u_prev, speed_prev, smoothed speed, alpha]
+        return np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0 - math.exp(-dt_s / self.speed_filter_s), dt_s])
+
+    def invert_step(self, p: dict, v: float, state: np.ndarray) -> float:
+        if state[0] == 0.0:
+            state[0], state[1], state[2] = 1.0, v, v
+            return v
+        alpha, dt = state[5], state[6]
+        state[4] += alpha * (state[3] - state[4])
+        w = float(p["gain_s"]) * state[4]
+        u_prev = state[2]
+        if v > state[1]:
+            u = v + w
+        elif v < state[1]:
+            u = v - w
+        else:
+            u = min(max(u_prev, v - w), v + w)
+        state[3] = abs(u - u_prev) / dt
+        state[1], state[2] = v, u
+        return u
+
+    def wrap(self, inner: str) -> str:
+        return f"rateplay({inner})"
+
+    def describe(self, p: dict, se: dict) -> str:
+        return f"rateplay = rate{self._bracket(p, se)[:-1]}, T_s={self.speed_filter_s:g} s (fixed)]"
+
+    def is_zero(self, p: dict) -> bool:
+        return p["gain_s"] == 0.0
