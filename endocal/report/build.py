@@ -22,7 +22,7 @@ from endocal.planes import PlanesCalibration, load_planes
 from endocal.planes.halfplanes import NOMINAL_AZIMUTH_DEG
 from endocal.report import figures as F
 from endocal.report.evaluate import DataEntry, Group, ModelEntry, Progress, evaluate, load_inputs
-from endocal.report.result import Report, ReportFigure
+from endocal.report.result import Report, ReportFigure, check_output
 from endocal.runs.aligned import read_stream
 from endocal.runs.format import TRACKER, sha256_of, software_versions, utc_now
 
@@ -138,6 +138,8 @@ def build_report(
     OutputExistsError, OutputPathError
         See :meth:`Report.write`.
     """
+    if out is not None:
+        check_output(out, force=force)  # refuse before minutes of work, not after
     model_entries, data_entries = load_inputs(models, datas)
     cal, planes_path = None, None
     if planes is not None:

@@ -179,13 +179,7 @@ class Report:
             The folder cannot be created or written.
         """
         out = Path(out_html)
-        paths = {"html": out, "json": out.parent / JSON_NAME, "csv": out.parent / CSV_NAME}
-        if out.suffix.lower() not in (".html", ".htm"):
-            raise OutputPathError(f"{out}: the report is an HTML file; give --out a name ending in .html")
-        if not force:
-            exists = [str(p) for p in paths.values() if p.exists()]
-            if exists:
-                raise OutputExistsError(f"{', '.join(exists)} already exist(s): choose another --out or pass --force")
+        paths = check_output(out, force=force)
         try:
             out.parent.mkdir(parents=True, exist_ok=True)
             contents = {"json": self.to_json().encode(), "csv": self.to_csv().encode(), "html": self.to_html().encode()}
@@ -194,6 +188,27 @@ class Report:
         except (PermissionError, NotADirectoryError, FileExistsError, IsADirectoryError) as exc:
             raise OutputPathError(f"cannot write the report to {out.parent}: {exc.strerror or exc}") from None
         return paths
+
+
+def check_output(out_html: str | Path, *, force: bool = False) -> dict[str, Path]:
+    """The three report paths for ``out_html``, refused before any work if they exist (unless ``force``).
+
+    Raises
+    ------
+    OutputPathError
+        ``out_html`` does not end in ``.html``.
+    OutputExistsError
+        One of the files exists and ``force`` is False.
+    """
+    out = Path(out_html)
+    paths = {"html": out, "json": out.parent / JSON_NAME, "csv": out.parent / CSV_NAME}
+    if out.suffix.lower() not in (".html", ".htm"):
+        raise OutputPathError(f"{out}: the report is an HTML file; give --out a name ending in .html")
+    if not force:
+        exists = [str(p) for p in paths.values() if p.exists()]
+        if exists:
+            raise OutputExistsError(f"{', '.join(exists)} already exist(s): choose another --out or pass --force")
+    return paths
 
 
 def _clean(x):
