@@ -331,6 +331,11 @@ def _finding(data: DataEntry, axis: str, evs: list[Evaluation], comp: Comparison
         else:
             text += f"not significant (Wilcoxon on {comp.n_units} {comp.unit_kind}s, p = {p:.2g}{adj}, rank-biserial r = {eff:.2f})"
             sig = False
+            # smallest p an exact signed-rank test on n units can give, after Holm's first step
+            p_floor = len(comp.pairs) * 2.0 / 2.0 ** comp.n_units
+            if p_floor >= comp.alpha:
+                text += (f"; with {comp.n_units} units and {len(comp.pairs)} pair(s) no p-value can fall below "
+                         f"{min(p_floor, 1.0):.2g}: record more cycles to decide")
     return Finding(data.label, data.signal, axis, best.model, best.metrics.rmse_deg, run.model, run.metrics.rmse_deg,
                    margin, pct, sig, p, comp.test, eff, text)
 

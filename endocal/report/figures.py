@@ -200,7 +200,7 @@ def regimes(rows: Mapping[str, object], colors: Mapping[str, str], title: str) -
         for r in rows[lbl].regimes:
             if (r.group, r.name) not in keys:
                 keys.append((r.group, r.name))
-    fig = _new(10.5, 0.075 * len(keys) * max(2, len(labels)) + 0.25 * len(keys) + 1.2)
+    fig = _new(10.5, 0.05 * len(keys) * max(2, len(labels)) + 0.12 * len(keys) + 1.0)
     ax = fig.subplots()
     h = 0.8 / max(1, len(labels))
     for j, lbl in enumerate(labels):
@@ -352,12 +352,12 @@ def tip_paths(paths_mm: Mapping[str, np.ndarray], title: str) -> bytes:
     for k, (lbl, p) in enumerate(paths_mm.items()):
         idx = _thin(p.shape[0], 6000)
         for ax, (xl, yl, i, j) in zip(axes, views):
-            ax.plot(p[idx, i], p[idx, j], lw=0.7, color=cols[k % len(cols)], label=lbl)
+            ax.scatter(p[idx, i], p[idx, j], s=1.5, color=cols[k % len(cols)], label=lbl, rasterized=True, linewidths=0)
     for ax, (xl, yl, _, _) in zip(axes, views):
         ax.set_xlabel(xl.replace("_mm", " (mm)"))
         ax.set_ylabel(yl.replace("_mm", " (mm)"))
         ax.set_aspect("equal", adjustable="datalim")
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=7)
+    axes[0].legend(fontsize=7, markerscale=5)
     fig.suptitle(title, x=0.01, ha="left", fontsize=11)
     return _png(fig)
