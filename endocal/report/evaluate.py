@@ -307,7 +307,11 @@ def _in_sample(model: HysteresisModel, data: HysteresisData) -> bool:
 def _finding(data: DataEntry, axis: str, evs: list[Evaluation], comp: Comparison) -> Finding:
     ranked = sorted(evs, key=lambda e: e.metrics.rmse_deg)
     best = ranked[0]
-    head = f"{data.label} ({data.signal}), {axis}: "
+    fitted_on = [e.model for e in evs if e.in_sample]
+    head = f"{data.label} ({data.signal}), {axis}"
+    if fitted_on:
+        head += f" [in-sample for {', '.join(fitted_on)}]" if len(fitted_on) < len(evs) else " [in-sample: every model was fitted on it]"
+    head += ": "
     if len(ranked) == 1:
         return Finding(data.label, data.signal, axis, best.model, best.metrics.rmse_deg, None, None, None, None, None,
                        None, comp.test, None,
