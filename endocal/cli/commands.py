@@ -5,8 +5,10 @@ from endocal.cli import fit as _fit
 from endocal.cli import protocols as _protocols
 from endocal.cli.excite import excite
 from endocal.cli.info import info
+from endocal.cli.report import report
 
 app.command("excite")(excite)
 app.command("info")(info)
+app.command("report")(report)
 app.add_typer(_protocols.app, name="protocols")
 app.add_typer(_fit.app, name="fit")

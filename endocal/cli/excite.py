@@ -7,13 +7,8 @@ from pathlib import Path
 from typing import Optional
 
 import typer
-from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-from endocal.backends.registry import make_backend
 from endocal.cli._common import cli_errors, err, fail, out
-from endocal.excite import run_excitation
-from endocal.probe import load_probe
-from endocal.protocols import load_protocol, parse_overrides
 
 
 @cli_errors
@@ -41,6 +36,13 @@ def excite(
     The simulator (the default backend) runs as fast as it can; `--realtime` paces it.
     Ctrl-C stops cleanly and leaves a valid run (status `interrupted` in run.json).
     """
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+    from endocal.backends.registry import make_backend
+    from endocal.excite import run_excitation
+    from endocal.probe import load_probe
+    from endocal.protocols import load_protocol, parse_overrides
+
     overrides = parse_overrides(sets)
     for key, value in (("amplitude_deg", amplitude), ("offset_deg", offset), ("duration_s", duration), ("sample_rate_hz", sample_rate)):
         if value is not None:

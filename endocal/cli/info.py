@@ -6,10 +6,8 @@ import json
 from pathlib import Path
 
 import typer
-from rich.table import Table
 
 from endocal.cli._common import cli_errors, out
-from endocal.runs.summary import summarize
 
 
 @cli_errors
@@ -22,6 +20,10 @@ def info(
     The table is checked as every later command checks it, so this is also the quickest
     way to see whether data recorded elsewhere follows the run format.
     """
+    from rich.table import Table
+
+    from endocal.runs.summary import summarize
+
     s = summarize(data)
     if as_json:
         out.print_json(json.dumps(s.to_dict()))

@@ -9,10 +9,7 @@ from typing import Any
 import typer
 
 from endocal.cli._common import cli_errors, err, out
-from endocal.errors import LimitError
 from endocal.probe import load_probe
-from endocal.protocols import list_protocols, load_protocol, parse_overrides, protocol_dirs
-from endocal.protocols.plot import plot_trajectory
 
 app = typer.Typer(
     name="protocols",
@@ -43,6 +40,8 @@ def _value(v: Any) -> str:
 @cli_errors
 def _list(ctx: typer.Context) -> None:
     """List the protocols: name, duration, axes and what each is for."""
+    from endocal.protocols import list_protocols, load_protocol, protocol_dirs
+
     if ctx.invoked_subcommand is not None:
         return
     rows = []
@@ -68,6 +67,8 @@ def show(
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of text."),
 ) -> None:
     """Print a protocol's parameters (defaults, file values and overrides), its source and duration."""
+    from endocal.protocols import load_protocol, parse_overrides
+
     overrides = parse_overrides(sets)
     proto = load_protocol(name, overrides=overrides or None)
     probe_cfg = load_probe(probe)
@@ -109,6 +110,10 @@ def plot(
 
     A protocol beyond the probe's limits is still drawn (to show where), with a warning.
     """
+    from endocal.errors import LimitError
+    from endocal.protocols import load_protocol, parse_overrides
+    from endocal.protocols.plot import plot_trajectory
+
     overrides = parse_overrides(sets)
     proto = load_protocol(name, overrides=overrides or None)
     probe_cfg = load_probe(probe)
