@@ -5,7 +5,7 @@ hands each model the columns its effect terms may ask for:
 
 ``other_cmd_deg``, ``other_meas_deg``
     the other bending axis's knob command and measured angle (``coupling``), when the
-    data has a second axis;
+    data has a second axis (also under their own names, ``ml_cmd_deg``, ``ml_meas_deg``);
 every other numeric column
     kept under its own name (``sheath_wrap_deg``, knob currents, ...) for ``load:COLUMN``.
 
@@ -74,6 +74,9 @@ def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str) -> Hyster
         if other is not None:
             extras[OTHER_CMD] = a.cmd_deg(other)
             extras[OTHER_MEAS] = a.meas_deg(other)
+            # also under their own names, for effects that name them (``coupling:ml_meas_deg``)
+            extras[f"{other}_cmd_deg"] = extras[OTHER_CMD]
+            extras[f"{other}_meas_deg"] = extras[OTHER_MEAS]
         runs.append(HysteresisData(cmd_deg=a.cmd_deg(axis), meas_deg=a.meas_deg(axis), t_s=a.t_s, extras=extras))
     return runs[0] if len(runs) == 1 else HysteresisData.from_runs(runs)
 
@@ -88,10 +91,11 @@ def is_constant(values: np.ndarray) -> bool:
 def load_candidates(data: HysteresisData, bending_axes: Sequence[str] = ()) -> tuple[list[str], list[str]]:
     """Extra columns that may carry a load (``load:COLUMN``), and the constant ones skipped.
 
-    Excluded by design: the other axis (``other_*``: that is ``coupling``) and the bending
-    knobs' own readings (``<axis>_pos_deg``, ``_vel_degps``, ``_current_ma``): they respond
-    to the bend itself, so a term on them would explain the angle with the angle. Name such
-    a column explicitly to test it anyway.
+    Excluded by design: the other axis (``other_*``: that is ``coupling``), the bending
+    knobs' own readings (``<axis>_pos_deg``, ``_vel_degps``, ``_current_ma``: they respond
+    to the bend itself, so a term on them would explain the angle with the angle) and
+    columns that are mostly noise (:func:`is_smooth`). Name such a column explicitly to
+    test it anyway.
 
     Parameters
     ----------
@@ -108,8 +112,27 @@ def load_candidates(data: HysteresisData, bending_axes: Sequence[str] = ()) -> t
     for name, col in data.extras.items():
         if name in (OTHER_CMD, OTHER_MEAS) or (prefixes and name.startswith(prefixes)):
             continue
-        (constant if is_constant(col) else candidates).append(name)
+        if is_constant(col):
+            constant.append(name)
+        elif is_smooth(col, data):
+            candidates.append(name)
     return candidates, constant
+
+
+def is_smooth(values: np.ndarray, data: HysteresisData, min_lag1: float = 0.5) -> bool:
+    """True when a column varies slowly enough to be a physical load (lag-1 autocorrelation >= ``min_lag1``).
+
+    A column that is mostly sample-to-sample noise (a current reading of a motor at rest) is
+    not a load on the tendons; a play whose width follows it acts as an extra backlash of
+    random width and would pass for a load on data with any lag.
+    """
+    num = den = 0.0
+    for sl in data.run_slices():
+        x = np.asarray(values[sl], dtype=float)
+        x = x - x.mean()
+        num += float(x[1:] @ x[:-1])
+        den += float(x @ x)
+    return den > 0 and num / den >= min_lag1
 
 
 def check_columns(data: HysteresisData, columns: Sequence[str]) -> None:

@@ -18,8 +18,8 @@ Cross-validation (rolling origin, contiguous blocks)
 Test (autocorrelation-aware, paired)
     The per-sample loss differential ``d_t = e_base(t)^2 - e_cand(t)^2`` on the held-out
     samples (Diebold & Mariano, J. Bus. Econ. Stat. 13, 1995) is averaged over contiguous
-    blocks at least as long as its correlation time
-    (:func:`endocal.validation.metrics.block_length`), and the block means are tested with a
+    blocks three times as long as the errors' correlation time
+    (:func:`endocal.validation.metrics.block_length`, the shorter of the two models'), and the block means are tested with a
     one-sided Wilcoxon signed-rank test (candidate better). The p-values of all candidates
     are Holm-corrected (Holm, Scand. J. Statist. 6, 1979).
 
@@ -95,6 +95,9 @@ class Suspect:
         From the effect catalog: physical cause, residual signature, revealing protocol.
     n_blocks : int
         Independent blocks in the paired test.
+    screened : bool
+        Not refitted beyond the first fold: its training fit gained too little (see
+        :func:`scan_effects`).
     """
 
     effect: str
@@ -110,6 +113,7 @@ class Suspect:
     signature: str
     protocol: str
     n_blocks: int
+    screened: bool = False
 
     def to_dict(self) -> dict:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
@@ -203,6 +207,21 @@ def effect_labels(model: HysteresisModel) -> list[str]:
     return [e.label for e in effects]
 
 
+def fold_errors(model: HysteresisModel, effects: Sequence[str], data: HysteresisData,
+                bound: tuple[int, int]) -> tuple[np.ndarray, HysteresisModel]:
+    """Held-out errors ``pred - meas`` (deg) of ``base + effects`` on one rolling-origin fold, and its fitted model.
+
+    The model is fitted on ``[0, train_end)`` and run over ``[0, test_end)`` from the record's
+    start; the errors are those of ``[train_end, test_end)``.
+    """
+    a, b = bound
+    m = _template(model, effects).fit(prefix(data, a))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutOfRangeWarning)
+        pred = m.predict(prefix(data, b))
+    return pred[a:b] - data.meas_deg[a:b], m
+
+
 def heldout_errors(model: HysteresisModel, effects: Sequence[str], data: HysteresisData,
                    bounds: Sequence[tuple[int, int]]) -> tuple[np.ndarray, list]:
     """Held-out errors ``pred - meas`` of ``base + effects`` on the rolling-origin folds.
@@ -224,15 +243,8 @@ def heldout_errors(model: HysteresisModel, effects: Sequence[str], data: Hystere
     fitted : list of HysteresisModel
         The model of each fold.
     """
-    errs, fitted = [], []
-    for a, b in bounds:
-        m = _template(model, effects).fit(prefix(data, a))
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", OutOfRangeWarning)
-            pred = m.predict(prefix(data, b))
-        errs.append(pred[a:b] - data.meas_deg[a:b])
-        fitted.append(m)
-    return np.concatenate(errs), fitted
+    out = [fold_errors(model, effects, data, bd) for bd in bounds]
+    return np.concatenate([e for e, _ in out]), [m for _, m in out]
 
 
 def one_blas_thread():
@@ -243,13 +255,19 @@ def one_blas_thread():
 def paired_test(err_base: np.ndarray, err_cand: np.ndarray) -> tuple[float, int]:
     """One-sided p-value that ``err_cand`` is smaller than ``err_base``, and the number of blocks used.
 
-    Block means of the loss differential ``e_base^2 - e_cand^2`` (blocks as long as its
-    correlation time), Wilcoxon signed-rank test, alternative "greater".
+    Block means of the loss differential ``e_base^2 - e_cand^2`` (blocks three times the
+    errors' correlation time), Wilcoxon signed-rank test, alternative "greater".
     """
     d = err_base**2 - err_cand**2
     if not np.any(d):
         return 1.0, 0
-    L = block_length(d)
+    # Blocks of three correlation times: neighbouring block means are then nearly independent
+    # (one correlation time leaves them correlated by ~1/e and the test rejects too often).
+    # The correlation time is the errors', the shorter of the two models': a systematic error
+    # that one model removes (a drift, a lag) makes the other's error and the differential
+    # correlated over the whole record, which measures the signal, not the dependence of the noise.
+    L = 3 * min(block_length(err_base), block_length(err_cand))
+    L = min(L, max(1, d.size // 6))
     nb = d.size // L
     means = d[: nb * L].reshape(nb, L).mean(axis=1)
     if nb < 2 or not np.any(means):
@@ -271,19 +289,35 @@ def holm(p: Sequence[float]) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------- identifiability
-def _rate_reason(data: HysteresisData) -> str | None:
+def _one_frequency(data: HysteresisData) -> str | None:
+    """Why the data has a single frequency of motion (None when it has several)."""
     turns = turning_points(data)
     t = data.t_s if data.t_s is not None else np.arange(data.n_samples, dtype=float)
     same_run = np.searchsorted(data.run_starts, turns[1:], side="right") == np.searchsorted(
         data.run_starts, turns[:-1], side="right")
     half = np.diff(t[turns])[same_run] if turns.size > 1 else np.array([])
     if half.size < 2:
-        return "too few reversals: rate cannot be identified (run `chirp` or `sine-set`: several frequencies)"
+        return "too few reversals"
     lo, hi = np.quantile(half, [0.1, 0.9])
-    if hi < 1.5 * lo:
-        return ("one frequency only: rate cannot be identified (speed-dependent friction needs the same motion "
-                "at several frequencies: run `chirp` or `sine-set`)")
-    return None
+    return "one frequency only" if hi < 1.5 * lo else None
+
+
+def _rate_reason(data: HysteresisData) -> str | None:
+    why = _one_frequency(data)
+    if why is None:
+        return None
+    return (f"{why}: rate cannot be identified (speed-dependent friction needs the same motion at several "
+            "frequencies: run `chirp` or `sine-set`)")
+
+
+def _delay_reason(data: HysteresisData) -> str | None:
+    if data.t_s is None:
+        return "no time stamps: delay cannot be identified"
+    why = _one_frequency(data)
+    if why is None:
+        return None
+    return (f"{why}: delay cannot be identified (at one frequency a time shift looks like a wider loop: "
+            "run `chirp` or `random`)")
 
 
 def _creep_reason(data: HysteresisData) -> str | None:
@@ -320,14 +354,18 @@ IDENTIFIABILITY = {
     "rate": _rate_reason,
     "creep": _creep_reason,
     "coupling": _coupling_reason,
-    "delay": _time_reason("delay"),
+    "delay": _delay_reason,
     "drift": _time_reason("drift"),
 }
 
 
 def takes_column(name: str) -> bool:
-    """True for catalog effects written ``NAME:COLUMN`` (``load``)."""
-    return hasattr(EFFECTS[name], "from_argument")
+    """True for catalog effects that need a column, written ``NAME:COLUMN`` (``load``)."""
+    try:
+        EFFECTS[name]()
+    except (ModelError, TypeError):
+        return True
+    return False
 
 
 def refit_command(data_paths: Sequence[str], axis: str | None, base: str, effects: Sequence[str], out: str) -> str:
@@ -356,8 +394,8 @@ def refit_path(model_path: str | None, effect: str) -> str:
 def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5, alpha: float = 0.05,
                  min_gain_pct: float = 10.0, candidates: Sequence[str] | None = None,
                  load_columns: Sequence[str] | None = None, bending_axes: Sequence[str] = (),
-                 max_samples: int = 12000, train_frac: float = 0.5, data_paths: Sequence[str] = ("DATA",),
-                 model_path: str | None = None) -> ScanResult:
+                 max_samples: int = 12000, train_frac: float = 0.5, screen_pct: float = 0.5,
+                 data_paths: Sequence[str] = ("DATA",), model_path: str | None = None) -> ScanResult:
     """Test every catalog effect the model lacks on held-out data; rank the significant ones.
 
     Parameters
@@ -384,6 +422,12 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
         ``s``-th sample; the hysteresis loops at <= 1 Hz keep their shape at >= 10 Hz).
     train_frac : float
         Share of the record used only for training.
+    screen_pct : float
+        A candidate whose fit on the first training block improves that block's RMSE by less
+        than ``screen_pct * min_gain_pct`` percent is not refitted on the other folds: a
+        nested model gains less on held-out data than on its own training data, so it could
+        not reach ``min_gain_pct``. Its p-value is 1 (it still counts in Holm's family) and its
+        gain is the first fold's. The decision uses training data only.
     data_paths, model_path : optional
         Where the data and model came from, for the refit commands.
 
@@ -434,15 +478,28 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
             tested_cands.append(c)
 
     with one_blas_thread():
-        err_base, _ = heldout_errors(model, have, d, bounds)
+        base_folds = [fold_errors(model, have, d, bd) for bd in bounds]
+        err_base = np.concatenate([e for e, _ in base_folds])
+        base_train_rmse = base_folds[0][1].fit_report_.rmse_deg
         rmse_base = float(np.sqrt(np.mean(err_base**2)))
         results = []
         for c in tested_cands:
             try:
-                err, fitted = heldout_errors(model, have + [c], d, bounds)
+                first = fold_errors(model, have + [c], d, bounds[0])
+                train_gain = 100.0 * (1.0 - first[1].fit_report_.rmse_deg / base_train_rmse) if base_train_rmse > 0 else 0.0
+                if train_gain < screen_pct * min_gain_pct:
+                    # screened on its training fit alone: no held-out data was looked at to decide
+                    e0 = first[0]
+                    n0 = e0.size
+                    rmse0 = float(np.sqrt(np.mean(e0**2)))
+                    base0 = float(np.sqrt(np.mean(err_base[:n0] ** 2)))
+                    results.append((c, None, rmse0 * rmse_base / base0 if base0 > 0 else rmse0, 1.0, 0))
+                    continue
+                rest = [fold_errors(model, have + [c], d, bd) for bd in bounds[1:]]
             except ModelError as exc:
                 untestable[c] = f"could not be fitted on this data ({exc})"
                 continue
+            err = np.concatenate([first[0]] + [e for e, _ in rest])
             p, nb = paired_test(err_base, err)
             rmse = float(np.sqrt(np.mean(err**2)))
             results.append((c, err, rmse, p, nb))
@@ -458,8 +515,10 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
         tested.append(Suspect(effect=c, column=col or None, gain_pct=gain, p_value=float(pa), p_raw=p,
                               rmse_heldout_deg=rmse, base_rmse_heldout_deg=rmse_base,
                               significant=bool(pa < alpha and gain >= min_gain_pct), command=cmd,
-                              cause=cls.cause, signature=cls.signature, protocol=cls.protocol, n_blocks=nb))
-        errs[c] = err
+                              cause=cls.cause, signature=cls.signature, protocol=cls.protocol, n_blocks=nb,
+                              screened=err is None))
+        if err is not None:
+            errs[c] = err
     tested.sort(key=lambda s: -s.gain_pct)
     suspects = [s for s in tested if s.significant]
     notes = _ambiguities(suspects, errs, alpha)

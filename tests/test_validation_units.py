@@ -1,0 +1,150 @@
+"""Building blocks of `endocal validate`: axis data, regimes, residual tests, folds, paired test, Holm.
+
+Signals are synthetic with known answers; tolerances are argued in comments.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from endocal.errors import ModelError
+from endocal.models import HysteresisData
+from endocal.runs.aligned import AlignedData
+from endocal.validation.data import OTHER_CMD, axis_data, check_columns, load_candidates, prefix
+from endocal.validation.regimes import error_by_regime, hold_mask, reversal_distance_deg, turning_points
+from endocal.validation.residuals import residual_tests
+from endocal.validation.suspects import check_cv_data, fold_bounds, holm, paired_test, refit_command, refit_path
+
+FS = 100.0
+
+
+def _sine(duration_s=60.0, f_hz=0.1, amp=40.0):
+    t = np.arange(int(duration_s * FS)) / FS
+    return t, amp * np.sin(2 * np.pi * f_hz * t)
+
+
+def _aligned(n=500, name="run"):
+    t = np.arange(n) / FS
+    df = pd.DataFrame({"t_s": t, "ap_cmd_deg": np.sin(t), "ap_meas_deg": 0.5 * np.sin(t),
+                       "ml_cmd_deg": np.cos(t), "ml_meas_deg": 0.4 * np.cos(t),
+                       "ap_current_ma": np.sin(2 * t), "sheath_wrap_deg": 180 + t, "contact_force_n": 0.0 * t})
+    return AlignedData(df, ["ap", "ml"], Path(name), "0" * 64, {})
+
+
+def test_axis_data_carries_the_other_axis_and_extras_and_concatenates_runs():
+    a, b = _aligned(500, "a"), _aligned(300, "b")
+    d = axis_data([a, b], "ap")
+    assert d.n_samples == 800 and d.run_starts.tolist() == [0, 500]
+    np.testing.assert_array_equal(d.extras[OTHER_CMD][:500], a.table["ml_cmd_deg"])
+    np.testing.assert_array_equal(d.extras["ml_meas_deg"][500:], b.table["ml_meas_deg"])
+    cands, constant = load_candidates(d, ["ap", "ml"])
+    # the knob drive's own current responds to the bend (excluded); a constant column says nothing
+    assert cands == ["sheath_wrap_deg"] and constant == ["contact_force_n"]
+    with pytest.raises(ModelError, match="no axis 'lr'"):
+        axis_data(a, "lr")
+    with pytest.raises(ModelError, match="constant"):
+        check_columns(d, ["contact_force_n"])
+    with pytest.raises(ModelError, match="no column 'wrap'"):
+        check_columns(d, ["wrap"])
+    p = prefix(d, 600)
+    assert p.n_samples == 600 and p.run_starts.tolist() == [0, 500]
+
+
+def test_turning_points_and_distance_since_reversal():
+    t, u = _sine(60.0, 0.1)
+    d = HysteresisData(cmd_deg=u, t_s=t)
+    turns = turning_points(d)
+    # 6 cycles: a maximum and a minimum each (the last one, at 57.5 s, is left by 2.5 s), the
+    # first at t = 2.5 s; the tolerance (1 % of
+    # the span) only delays detection, the index is the extreme itself (within a sample).
+    assert turns.size == 12
+    np.testing.assert_allclose(t[turns], 2.5 + 5.0 * np.arange(12), atol=1.5 / FS)
+    dist = reversal_distance_deg(d)
+    assert np.all(np.isinf(dist[: turns[0]]))
+    k = turns[3] + 100  # one second after a reversal of a 0.1 Hz, 40 deg sine: 40 (1 - cos(0.2 pi)) deg
+    assert dist[k] == pytest.approx(40 * (1 - np.cos(2 * np.pi * 0.1 * 1.0)), rel=1e-3)
+
+
+def test_holds_and_regimes_find_where_the_error_is():
+    t = np.arange(3000) / FS
+    u = np.where(t < 10, 30 * np.sin(2 * np.pi * 0.2 * t), 0.0)  # 10 s of motion then a 20 s hold
+    d0 = HysteresisData(cmd_deg=u, t_s=t)
+    hold = hold_mask(d0)
+    assert hold[t > 10.01].all() and not hold[(t > 0.1) & (t < 9.9)].any()
+    rng = np.random.default_rng(0)
+    meas = u + 0.1 * rng.standard_normal(t.size)
+    pred = u.copy()
+    near = reversal_distance_deg(d0) < 0.1 * np.ptp(u)
+    pred[near & ~hold] += 2.0  # the model is off by 2 deg right after reversals only
+    d = HysteresisData(cmd_deg=u, meas_deg=meas, t_s=t)
+    br = error_by_regime(d, pred)
+    worst = br.worst(1)[0]
+    assert worst.group == "motion" and worst.name.startswith("near reversal")
+    # in that regime the error is the 2 deg offset plus 0.1 deg noise: RMSE sqrt(4 + 0.01)
+    assert worst.metrics.rmse_deg == pytest.approx(np.sqrt(4.01), rel=0.02)
+    hold_r = [r for r in br.regimes if r.name.startswith("hold")][0]
+    assert hold_r.metrics.rmse_deg == pytest.approx(0.1, rel=0.1)  # noise only; 2000 samples
+    assert {r.group for r in br.regimes} >= {"motion", "speed", "amplitude", "time"}
+
+
+def test_residual_tests_white_noise_and_signatures():
+    t, u = _sine(60.0, 0.1)
+    d = HysteresisData(cmd_deg=u, t_s=t)
+    rng = np.random.default_rng(1)
+    white = residual_tests(d, rng.standard_normal(t.size))
+    assert white.whiteness.white and not white.significant()
+    # a residual that is the command 0.3 s ago, minus its present: a delay's signature
+    lagged = np.interp(t - 0.3, t, u) - u + 0.05 * rng.standard_normal(t.size)
+    r = residual_tests(d, lagged)
+    assert not r.whiteness.white
+    speed = {c.signal: c for c in r.cross}["speed"]
+    # u(t - tau) - u(t) = -2 A sin(w tau / 2) cos(w (t - tau / 2)): the speed, delayed by tau / 2
+    assert speed.significant and speed.corr_at_zero < -0.9 and 0.0 <= speed.lag_s <= 0.3
+
+
+def test_folds_are_contiguous_rolling_origin_blocks():
+    b = fold_bounds(1000, 5)
+    assert b[0][0] == 500 and b[-1][1] == 1000
+    assert all(b1 == a2 for (_, b1), (a2, _) in zip(b[:-1], b[1:]))  # contiguous, disjoint, in time order
+    t, u = _sine(4.0, 0.1)  # less than one cycle: the first training half has no two reversals
+    with pytest.raises(ModelError, match="too short"):
+        check_cv_data(HysteresisData(cmd_deg=u, meas_deg=u, t_s=t), 5)
+    with pytest.raises(ModelError, match="too short"):
+        check_cv_data(HysteresisData(cmd_deg=u[:100], meas_deg=u[:100], t_s=t[:100]), 5)
+
+
+def _ar1(rng, n, phi):
+    e = np.empty(n)
+    e[0] = rng.standard_normal()
+    w = rng.standard_normal(n) * np.sqrt(1 - phi**2)
+    for k in range(1, n):
+        e[k] = phi * e[k - 1] + w[k]
+    return e
+
+
+def test_paired_test_is_calibrated_on_autocorrelated_errors_and_has_power():
+    rng = np.random.default_rng(2)
+    # Two equally good models whose errors are strongly autocorrelated (AR(1), phi = 0.98,
+    # correlation time ~50 samples): the blocked test must reject at about its level. 200
+    # replicates: the false-alarm count is Binomial(200, 0.05) under calibration, mean 10,
+    # sd 3.1; 22 is ~4 sd above. A per-sample test would reject in most replicates.
+    p = [paired_test(_ar1(rng, 3000, 0.98), _ar1(rng, 3000, 0.98))[0] for _ in range(200)]
+    assert sum(x < 0.05 for x in p) <= 22
+    e = _ar1(rng, 3000, 0.98)
+    p_better, nb = paired_test(e, 0.5 * e + 0.1 * _ar1(rng, 3000, 0.98))
+    assert p_better < 1e-3 and nb >= 20
+
+
+def test_holm_adjustment():
+    # sorted p: 0.005*4 = 0.02, 0.01*3 = 0.03, 0.03*2 = 0.06, then max(0.06, 0.04*1) = 0.06
+    np.testing.assert_allclose(holm([0.01, 0.04, 0.03, 0.005]), [0.03, 0.06, 0.06, 0.02])
+
+
+def test_refit_command_and_path():
+    assert refit_path("models/m.json", "load:sheath_wrap_deg") == "models/m-load-sheath_wrap_deg.json"
+    cmd = refit_command(["runs/a", "b.csv"], "ap", "bspline", ["delay"], "m-delay.json")
+    assert cmd == "endocal fit hysteresis runs/a b.csv --axis ap --model bspline --effects delay --out m-delay.json"
