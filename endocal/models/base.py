@@ -26,6 +26,7 @@ from typing import ClassVar
 
 import numpy as np
 from scipy.optimize import least_squares
+from threadpoolctl import threadpool_limits
 
 from endocal.errors import ModelError
 from endocal.models.data import HysteresisData, as_data
@@ -283,6 +284,12 @@ class HysteresisModel(ABC):
             samples for the free parameters, a command that never reverses (backlash
             cannot be identified), missing columns for an effect, duplicate parameters.
         """
+        # The fit's linear algebra is on thin matrices (n × a few parameters): BLAS threads
+        # only contend with each other there (10-20x slower on a loaded machine), so one.
+        with threadpool_limits(limits=1, user_api="blas"):
+            return self._fit(data, meas_deg, t_s=t_s, extras=extras, max_nfev=max_nfev)
+
+    def _fit(self, data, meas_deg, *, t_s, extras, max_nfev):
         self._check_common()
         d, _ = as_data(data, meas_deg, t_s=t_s, extras=extras)
         if d.meas_deg is None:

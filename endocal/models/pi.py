@@ -219,15 +219,36 @@ class PIModel(HysteresisModel):
         else:
             ri = pi_thresholds(r, n)
             good = w > 1e-6 * max(w.max(), 1e-300)
+            betas = [3.0 / (n * r) * f for f in (-0.5, 0.0, 0.3, 1.0, 3.0, 10.0)]
             if good.sum() >= 3:
-                slope, icpt = np.polyfit(ri[good], np.log(w[good]), 1, w=np.sqrt(w[good]))
-                beta = float(-slope)
-                w0 = float(np.exp(icpt))
-            else:
+                slope, _ = np.polyfit(ri[good], np.log(w[good]), 1, w=np.sqrt(w[good]))
+                betas.append(float(-slope))
+            # The free weights are sparse (bounded least squares), so a line through their
+            # logarithms can miss the scale badly: for each candidate β the output is linear
+            # in ω (and the offset), so ω comes from one regression and the best β is kept.
+            stride = max(1, v.size // 5000)
+            phi = play_bank_states(np.ascontiguousarray(v, dtype=float), ri, data.run_starts)[::stride]
+            y = data.meas_deg[::stride]
+            best = None
+            for beta in betas:
+                col = phi @ np.exp(-beta * ri)
+                A = col[:, None] if not structure["offset"] else np.column_stack([col, np.ones(col.size)])
+                coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+                if not coef[0] > 0:
+                    continue
+                cost = float(np.sum((A @ coef - y) ** 2))
+                if best is None or cost < best[0]:
+                    best = (cost, float(beta), float(coef[0]), float(coef[1]) if structure["offset"] else 0.0)
+            if best is None:
                 beta = 3.0 / (n * r)
-                w0 = float(w.sum() / np.exp(-beta * ri).sum())
+                best = (0.0, beta, float(max(w.sum(), 1e-12) / np.exp(-beta * ri).sum()),
+                        float(x[-1]) if structure["offset"] else 0.0)
+            _, beta, w0, off = best
             out += [Parameter("r", r, 1e-12 * max(r, 1e-300), np.inf), Parameter("w", w0, 1e-12 * max(w0, 1e-300), np.inf),
                     Parameter("beta", beta)]
+            if structure["offset"]:
+                out.append(Parameter("offset_deg", off))
+            return out
         if structure["offset"]:
             out.append(Parameter("offset_deg", float(x[-1])))
         return out

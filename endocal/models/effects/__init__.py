@@ -13,6 +13,7 @@ additive output terms (:class:`OutputEffect`: ``coupling``, ``drift``).
 from __future__ import annotations
 
 from collections.abc import Iterable
+from dataclasses import asdict, dataclass
 
 from endocal.errors import ModelError
 from endocal.models.effects.base import Effect, InputEffect, OutputEffect
@@ -30,6 +31,58 @@ EFFECTS: dict[str, type[Effect]] = {
     "envelope": Envelope, "deadzone": Deadzone, "rate": Rate, "delay": Delay, "coupling": Coupling,
     "drift": Drift, "creep": Creep, "load": Load,
 }
+
+
+@dataclass(frozen=True)
+class EffectInfo:
+    """One catalog entry, as ``endocal effects`` shows it.
+
+    Attributes
+    ----------
+    name : str
+        Catalog name; ``usage`` is how ``--effects`` writes it (``load:COLUMN``).
+    kind : str
+        ``input`` (transforms the command), ``filter`` (acts on the base's output) or
+        ``output`` (additive term).
+    cause, signature, protocol : str
+        Physical cause, the signature it leaves in residuals, the excitation that reveals it.
+    parameters : list of str
+        Short parameter names (prefixed by the effect's name in a model).
+    needs : list of str
+        What the data must carry besides command and measurement (``t_s``, a column).
+    streamable : bool
+        Whether the streaming compensator can undo it one sample at a time.
+    """
+
+    name: str
+    usage: str
+    kind: str
+    cause: str
+    signature: str
+    protocol: str
+    parameters: list[str]
+    needs: list[str]
+    streamable: bool
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+_USAGE = {"load": "load:COLUMN", "coupling": "coupling[:COLUMN]"}
+_NEEDS = {"rate": ["t_s"], "delay": ["t_s"], "drift": ["t_s"], "creep": ["t_s"],
+          "coupling": ["other_cmd_deg (or the named column)"], "load": ["the named column, not constant"]}
+
+
+def catalog() -> list[EffectInfo]:
+    """Every effect of :data:`EFFECTS`, in catalog order, with its documentation."""
+    out = []
+    for name, cls in EFFECTS.items():
+        out.append(EffectInfo(
+            name=name, usage=_USAGE.get(name, name), kind=cls.kind, cause=cls.cause, signature=cls.signature,
+            protocol=cls.protocol, parameters=list(cls.units), needs=list(_NEEDS.get(name, [])),
+            streamable=bool(cls.streamable),
+        ))
+    return out
 
 
 def register(cls: type[Effect]) -> type[Effect]:
@@ -82,5 +135,5 @@ def resolve_effects(specs: Iterable[str | Effect] | None) -> list[Effect]:
     return out
 
 
-__all__ = ["EFFECTS", "Coupling", "Creep", "Deadzone", "Delay", "Drift", "Effect", "Envelope", "InputEffect", "Load",
-           "OutputEffect", "OutputFilter", "Rate", "make_effect", "register", "resolve_effects"]
+__all__ = ["EFFECTS", "Coupling", "Creep", "Deadzone", "Delay", "Drift", "Effect", "EffectInfo", "Envelope", "InputEffect",
+           "Load", "OutputEffect", "OutputFilter", "Rate", "catalog", "make_effect", "register", "resolve_effects"]

@@ -217,20 +217,29 @@ class Deadzone(InputEffect):
     protocol = "large sines or triangles crossing neutral, and small loops around neutral"
     units = {"slack_deg": "deg", "band_deg": "deg", "center_deg": "deg"}
 
+    @staticmethod
+    def _center_start(data: HysteresisData, u: np.ndarray) -> float:
+        # the command where the angle passes its mid level, averaged over both directions
+        y = data.meas_deg
+        if y is None:
+            return float(np.median(u))
+        near = np.abs(y - 0.5 * (y.max() + y.min())) < 0.05 * np.ptp(y)
+        return float(np.median(u[near])) if near.any() else float(np.median(u))
+
     def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
         span = float(np.ptp(u)) or 1.0
         return [
             Parameter(f"{self.prefix}_slack_deg", 0.02 * span, 0.0, 0.5 * span),
             Parameter(f"{self.prefix}_band_deg", 0.05 * span, 0.0, span),
-            Parameter(f"{self.prefix}_center_deg", float(np.median(u)), float(u.min()), float(u.max())),
+            Parameter(f"{self.prefix}_center_deg", self._center_start(data, u), float(u.min()), float(u.max())),
         ]
 
     def start_candidates(self, data: HysteresisData, u: np.ndarray) -> list[dict]:
         """Start values tried before the fit (the base is re-started on each; the best is kept)."""
         span = float(np.ptp(u)) or 1.0
-        mid = float(np.median(u))
+        mid = self._center_start(data, u)
         return [{"slack_deg": fh * span, "band_deg": fc * span, "center_deg": mid}
-                for fh in (0.01, 0.04) for fc in (0.0, 0.06, 1.0)]
+                for fh in (0.015, 0.05) for fc in (0.0, 0.08, 1.0)]
 
     def apply(self, p: dict, u: np.ndarray, data: HysteresisData) -> np.ndarray:
         v, _, _ = slack_forward_jac(np.ascontiguousarray(u, dtype=float), float(p["slack_deg"]), float(p["band_deg"]),
