@@ -157,7 +157,7 @@ def validate_offline(model: HysteresisModel, datas, *, axis: str | None = None, 
                      alpha: float = 0.05, min_gain_pct: float = 10.0, compare: HysteresisModel | None = None,
                      model_path: str | None = None, data_paths: Sequence[str] | None = None,
                      load_columns: Sequence[str] | None = None, bending_axes: Sequence[str] | None = None,
-                     max_scan_samples: int = 12000, n_boot: int = 400) -> ValidationResult:
+                     max_scan_samples: int = 6000, n_boot: int = 400) -> ValidationResult:
     """Validate a fitted model on measured data: metrics, regimes, residual tests, missing effects.
 
     Parameters
@@ -216,7 +216,9 @@ def validate_offline(model: HysteresisModel, datas, *, axis: str | None = None, 
     if data.meas_deg is None:
         raise ModelError("validation needs measured angles")
     labels = effect_labels(model)
-    check_columns(data, [lab.partition(":")[2] for lab in labels if ":" in lab])
+    check_columns(data, [lab.partition(":")[2] for lab in labels if lab.startswith("load:")])
+    if load_columns:
+        check_columns(data, load_columns)
     check_cv_data(data, folds)
 
     pred, clamped = _predict(model, data)

@@ -394,7 +394,7 @@ def refit_path(model_path: str | None, effect: str) -> str:
 def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5, alpha: float = 0.05,
                  min_gain_pct: float = 10.0, candidates: Sequence[str] | None = None,
                  load_columns: Sequence[str] | None = None, bending_axes: Sequence[str] = (),
-                 max_samples: int = 12000, train_frac: float = 0.5, screen_pct: float = 0.5,
+                 max_samples: int = 6000, train_frac: float = 0.5, screen_pct: float = 0.5,
                  data_paths: Sequence[str] = ("DATA",), model_path: str | None = None) -> ScanResult:
     """Test every catalog effect the model lacks on held-out data; rank the significant ones.
 
@@ -419,7 +419,9 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
         Names of the probe's bending axes (their knob readings are not load candidates).
     max_samples : int
         Longer records are decimated to at most this many samples for the scan (every
-        ``s``-th sample; the hysteresis loops at <= 1 Hz keep their shape at >= 10 Hz).
+        ``s``-th sample). The test's power comes from the number of independent error
+        blocks, i.e. from the record's duration over the error's correlation time, not from
+        the sample rate; hysteresis loops at <= 1 Hz keep their shape at >= 10 Hz.
     train_frac : float
         Share of the record used only for training.
     screen_pct : float
