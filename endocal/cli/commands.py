@@ -6,9 +6,11 @@ from endocal.cli import protocols as _protocols
 from endocal.cli.excite import excite
 from endocal.cli.info import info
 from endocal.cli.report import report
+from endocal.cli.validate import validate
 
 app.command("excite")(excite)
 app.command("info")(info)
+app.command("validate")(validate)
 app.command("report")(report)
 app.add_typer(_protocols.app, name="protocols")
 app.add_typer(_fit.app, name="fit")

@@ -99,6 +99,8 @@ def validate(
     sim_config: Optional[Path] = typer.Option(None, "--sim-config", help="Simulator TOML for --backend sim."),
     hardware_config: Optional[Path] = typer.Option(None, "--hardware-config", help="Rig TOML for --backend hardware."),
     planes: Optional[Path] = typer.Option(None, "--planes", help="planes.json (endocal fit planes) for --protocol."),
+    sets: list[str] = typer.Option([], "--set", help="Override a parameter of --protocol, e.g. --set amplitude_deg=40 (repeatable)."),
+    runs_out: Optional[Path] = typer.Option(None, "--runs-out", help="With --protocol: keep the played runs here (compensated/, uncompensated/)."),
 ) -> None:
     """Compare a model with measurements: how far off, where it fails, which physical effect is missing.
 
@@ -114,7 +116,7 @@ def validate(
     if protocol is not None:
         if data:
             raise ModelError("give either DATA (offline validation) or --protocol (playback on a backend), not both")
-        _playback(model, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json)
+        _playback(model, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets, runs_out)
         return
     if not data:
         raise ModelError("nothing to validate on: give run folders or aligned tables, or --protocol P")
@@ -149,16 +151,26 @@ def _finite(obj):
     return obj
 
 
-def _playback(model, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json) -> None:
+def _playback(model, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets, runs_out) -> None:
     from endocal.backends.registry import make_backend
     from endocal.planes import load_planes
     from endocal.probe import load_probe
+    from endocal.protocols import load_protocol, parse_overrides
     from endocal.validation.playback import validate_on_backend
 
     probe_cfg = load_probe(probe)
-    be = make_backend(backend, probe_cfg, seed=seed, sim_config=sim_config, hardware_config=hardware_config)
+    proto = load_protocol(protocol, overrides=parse_overrides(sets) or None)
+    make_backend(backend, probe_cfg, seed=seed, sim_config=sim_config, hardware_config=hardware_config)  # check configs first
     cal = load_planes(planes) if planes is not None else None
-    result = validate_on_backend(model, protocol, be, probe_cfg, planes=cal, seed=seed)
+    result = validate_on_backend(
+        model,
+        proto,
+        lambda: make_backend(backend, probe_cfg, seed=seed, sim_config=sim_config, hardware_config=hardware_config),
+        probe_cfg,
+        planes=cal,
+        seed=seed,
+        out_dir=runs_out,
+    )
     if as_json:
         out.print_json(json.dumps(_finite(result.to_dict()), allow_nan=False))
         return
