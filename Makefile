@@ -19,11 +19,7 @@ test: $(STAMP)
 	$(BIN)/python -m pytest
 
 demo: $(STAMP)
-	$(BIN)/endocal excite damped-sine --out $(DEMO)/damped-sine --force
-	$(BIN)/endocal excite planes --out $(DEMO)/planes --force
-	$(BIN)/endocal fit planes $(DEMO)/planes --out $(DEMO)/planes.json --force
-	@echo
-	@echo "Results are in $(DEMO)/: run.json, motor/, tracker/, truth/ and aligned.parquet per run."
+	bash scripts/demo.sh $(DEMO)
 
 bench: $(STAMP)
 	@for b in bench/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done

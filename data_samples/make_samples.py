@@ -25,8 +25,8 @@ RUNS = [
 
 def make_runs() -> None:
     for folder, protocol, extra in RUNS:
-        cmd = [sys.executable, "-m", "endocal", "excite", protocol, "--out", str(HERE / folder), "--force", "--quiet", *extra]
-        subprocess.run(cmd, check=True)
+        cmd = [sys.executable, "-m", "endocal", "excite", protocol, "--out", folder, "--force", "--quiet", *extra]
+        subprocess.run(cmd, check=True, cwd=HERE)
 
 
 def make_piezo(rows: int = 4000, rate_hz: float = 200.0) -> None:

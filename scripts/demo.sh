@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# The whole calibration loop on the simulator, as `make demo` runs it:
+# excite -> fit planes -> fit hysteresis -> validate (which effect is missing?) -> refit -> validate -> report.
+set -euo pipefail
+E=${ENDOCAL:-.venv/bin/endocal}
+OUT=${1:-demo-out}
+mkdir -p "$OUT"
+step() { printf '\n\033[1m== %s\033[0m\n$ %s\n' "$1" "${*:2}"; "${@:2}"; }
+
+step "bending planes: single-knob sweeps of the four half-planes" \
+  $E excite planes --out "$OUT/planes" --seed 1 --force --quiet
+step "fit the deviation angles and the orthogonal compensator" \
+  $E fit planes "$OUT/planes" --out "$OUT/planes.json" --force
+step "identification run: the duodenoscope paper's damped sine" \
+  $E excite damped-sine --amplitude 85 --out "$OUT/train" --seed 2 --force --quiet
+step "held-out run: band-limited random input" \
+  $E excite random --amplitude 60 --out "$OUT/test" --seed 3 --force --quiet
+step "fit the paper's modified Prandtl-Ishlinskii model" \
+  $E fit hysteresis "$OUT/train" --axis ap --model pi --effects envelope --out "$OUT/pi-envelope.json" --force
+step "hold it against the held-out run: how far off, where, which effect is missing" \
+  $E validate "$OUT/pi-envelope.json" "$OUT/test"
+$E validate "$OUT/pi-envelope.json" "$OUT/test" --json > "$OUT/validate-pi-envelope.json"
+refit=$(.venv/bin/python -c "import json,sys; s=json.load(open(sys.argv[1]))['suspects']; print(s[0]['command'] if s else '')" "$OUT/validate-pi-envelope.json")
+if [ -n "$refit" ]; then
+  new=$(.venv/bin/python -c "import json,sys; print(json.load(open(sys.argv[1]))['suspects'][0]['command'].split('--out ')[1].split()[0])" "$OUT/validate-pi-envelope.json")
+  step "add the suspected effect: the exact command validate printed" $refit --force
+  step "watch the error fall" $E validate "$new" "$OUT/test"
+  models=("$OUT/pi-envelope.json" "$new")
+else
+  echo "validate found nothing missing"
+  models=("$OUT/pi-envelope.json")
+fi
+step "feedforward compensation on the simulator (desired vs reached angle)" \
+  $E validate "${models[-1]}" --protocol triangle --set amplitude_deg=40 --runs-out "$OUT/playback"
+step "report" \
+  $E report "${models[@]}" --data "$OUT/test" --data "$OUT/train" --planes "$OUT/planes.json" --out "$OUT/report.html" --force
+printf '\nResults are in %s/: runs (run.json, motor/, tracker/, truth/, aligned.parquet), planes.json, model files, report.html\n' "$OUT"
