@@ -2,7 +2,8 @@
 # The whole calibration loop on the simulator, as `make demo` runs it:
 # excite -> fit planes -> fit hysteresis -> validate (which effect is missing?) -> refit -> validate -> report.
 set -euo pipefail
-E=${ENDOCAL:-.venv/bin/endocal}
+export PATH="$PWD/.venv/bin:$PATH"  # the commands validate prints call `endocal` by name
+E=endocal
 OUT=${1:-demo-out}
 mkdir -p "$OUT"
 step() { printf '\n\033[1m== %s\033[0m\n$ %s\n' "$1" "${*:2}"; "${@:2}"; }
@@ -20,9 +21,9 @@ step "fit the paper's modified Prandtl-Ishlinskii model" \
 step "hold it against the held-out run: how far off, where, which effect is missing" \
   $E validate "$OUT/pi-envelope.json" "$OUT/test"
 $E validate "$OUT/pi-envelope.json" "$OUT/test" --json > "$OUT/validate-pi-envelope.json"
-refit=$(.venv/bin/python -c "import json,sys; s=json.load(open(sys.argv[1]))['suspects']; print(s[0]['command'] if s else '')" "$OUT/validate-pi-envelope.json")
+refit=$(python -c "import json,sys; s=json.load(open(sys.argv[1]))['suspects']; print(s[0]['command'] if s else '')" "$OUT/validate-pi-envelope.json")
 if [ -n "$refit" ]; then
-  new=$(.venv/bin/python -c "import json,sys; print(json.load(open(sys.argv[1]))['suspects'][0]['command'].split('--out ')[1].split()[0])" "$OUT/validate-pi-envelope.json")
+  new=$(python -c "import json,sys; print(json.load(open(sys.argv[1]))['suspects'][0]['command'].split('--out ')[1].split()[0])" "$OUT/validate-pi-envelope.json")
   step "add the suspected effect: the exact command validate printed" $refit --force
   step "watch the error fall" $E validate "$new" "$OUT/test"
   models=("$OUT/pi-envelope.json" "$new")
