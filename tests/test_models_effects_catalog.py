@@ -35,7 +35,8 @@ TRUTH = {
     "delay": ("delay", {"delay_s": 0.13}, "(t - tau)"),
     "coupling": ("coupling", {"coupling_linear": 0.12, "coupling_abs": 0.06}, "coupling["),
     "creep": ("creep", {"creep_fraction": 0.25, "creep_tau_s": 2.0}, "creep("),
-    "load": ("load:wrap_deg", {"load_wrap_deg_gain": 0.05, "load_wrap_deg_lo": 100.0, "load_wrap_deg_hi": 200.0},
+    "load": ("load:wrap_deg", {"load_wrap_deg_up": 0.05, "load_wrap_deg_down": 0.0, "load_wrap_deg_lo": 100.0,
+                               "load_wrap_deg_hi": 200.0},
              "loadplay("),
 }
 
@@ -107,8 +108,8 @@ def test_catalog_lists_every_effect_with_its_physics():
 
 def test_effect_names_parse_and_bad_names_fail():
     assert make_effect("load:sheath_wrap_deg").label == "load:sheath_wrap_deg"
-    assert make_effect("load:sheath_wrap_deg").full_names() == ["load_sheath_wrap_deg_gain", "load_sheath_wrap_deg_lo",
-                                                                 "load_sheath_wrap_deg_hi"]
+    assert make_effect("load:sheath_wrap_deg").full_names() == [
+        "load_sheath_wrap_deg_up", "load_sheath_wrap_deg_down", "load_sheath_wrap_deg_lo", "load_sheath_wrap_deg_hi"]
     assert make_effect("coupling:ml_meas_deg").column == "ml_meas_deg"
     with pytest.raises(ModelError, match="load needs a column"):
         make_effect("load")
@@ -176,7 +177,7 @@ def test_effect_gains_nothing_on_data_without_it(effect, clean):
 
 @pytest.mark.parametrize("base", ["linear", "bspline"])
 def test_effects_compose_onto_the_other_bases(base):
-    d = synthetic("delay")
+    d = synthetic("delay").decimate(2)
     without, _ = heldout_rmse(base, ["envelope"], d)
     with_it, m = heldout_rmse(base, ["envelope", "delay"], d)
     assert with_it < 0.6 * without

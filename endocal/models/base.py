@@ -317,6 +317,7 @@ class HysteresisModel(ABC):
         # command it produces, and the one with the lowest start cost is kept (greedy, in
         # chain order).
         overrides: dict[str, float] = {}
+        ds = dd.decimate(dd.n_samples // 4000) if dd.n_samples >= 8000 else dd
         for e in effects:
             if not hasattr(e, "start_candidates"):
                 continue
@@ -331,7 +332,7 @@ class HysteresisModel(ABC):
                     for k, v in trial.items():
                         if k in st and k.startswith(e.prefix + "_"):
                             st[k] = Parameter(k, v, st[k].lower, st[k].upper)
-                cost = self._start_cost(dd, st, stru, own, effects, fixed)
+                cost, st = self._start_cost(ds, st, stru, own, effects, fixed)
                 if best is None or cost < best[0]:
                     best = (cost, trial, st, stru, own)
             if best is not None:
@@ -462,15 +463,36 @@ class HysteresisModel(ABC):
             start[name].value = float(val)
         return start, structure, owners
 
-    def _start_cost(self, dd: HysteresisData, start: dict, structure: dict, owners: dict, effects: list[Effect],
-                    fixed: dict) -> float:
-        """Sum of squared residuals (deg²) at the start values."""
+    def _start_cost(self, ds: HysteresisData, start: dict, structure: dict, owners: dict, effects: list[Effect],
+                    fixed: dict) -> tuple[float, dict]:
+        """Cost (deg²) of a start after a few iterations on a small subsample, and the refined start.
+
+        The raw start cost ranks candidates poorly (the base's start is only a linear
+        approximation); a short refinement of all parameters together tells which
+        candidate leads somewhere.
+        """
         self._owner_map_ = owners
-        values = {n: (start[n].value if n in fixed else start[n].clipped_start()) for n in owners}
-        base_p, eff_p = self._grouped(values)
-        r = self._forward(dd, base_p, eff_p, structure, effects) - dd.meas_deg
-        cost = float(r @ r)
-        return cost if math.isfinite(cost) else math.inf
+        free = [n for n in owners if n not in fixed]
+        values = {n: float(start[n].value) for n in owners}
+        x0 = np.array([start[n].clipped_start() for n in free])
+        lo = np.array([start[n].lower for n in free])
+        hi = np.array([start[n].upper for n in free])
+
+        def residual(x):
+            for n, v in zip(free, x):
+                values[n] = float(v)
+            base_p, eff_p = self._grouped(values)
+            return self._forward(ds, base_p, eff_p, structure, effects) - ds.meas_deg
+
+        try:
+            res = least_squares(residual, x0, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=8 * (1 + len(free)))
+        except (ValueError, FloatingPointError):
+            return math.inf, start
+        refined = dict(start)
+        for n, v in zip(free, res.x):
+            refined[n] = Parameter(n, float(v), start[n].lower, start[n].upper)
+        cost = 2.0 * float(res.cost)
+        return (cost if math.isfinite(cost) else math.inf), refined
 
     @staticmethod
     def _apply_fixed(start: dict, fixed: dict, e: Effect) -> None:

@@ -238,8 +238,9 @@ class Deadzone(InputEffect):
         """Start values tried before the fit (the base is re-started on each; the best is kept)."""
         span = float(np.ptp(u)) or 1.0
         mid = self._center_start(data, u)
+        # no slack at all is a candidate too: on data without it the fit must not start lost
         return [{"slack_deg": fh * span, "band_deg": fc * span, "center_deg": mid}
-                for fh in (0.015, 0.05) for fc in (0.0, 0.08, 1.0)]
+                for fh in (0.0, 0.015, 0.05) for fc in (0.0, 0.08, 1.0) if fh > 0 or fc == 0.08]
 
     def apply(self, p: dict, u: np.ndarray, data: HysteresisData) -> np.ndarray:
         v, _, _ = slack_forward_jac(np.ascontiguousarray(u, dtype=float), float(p["slack_deg"]), float(p["band_deg"]),

@@ -6,13 +6,15 @@ Any extra numeric column ``x`` of the data (``sheath_wrap_deg``, a shape sensor,
 force) can be named; the extra backlash is a play on the command whose half width
 follows the covariate linearly::
 
-    w_k = c · (x_k - x_lo)   if c >= 0,     c · (x_k - x_hi)   if c < 0      (w_k >= 0)
+    w_k = max(c_up · (x_k - x_lo) + c_down · (x_hi - x_k), 0)
     v_k = clip(v_{k-1}, u_k - w_k, u_k + w_k)
 
-``c`` (``load_<COLUMN>_gain``, deg of play per unit of ``x``) is fitted; ``x_lo``, ``x_hi``
-(``load_<COLUMN>_lo``, ``_hi``) are the covariate's range in the fitted data, held fixed:
-the base model carries the width at the least-friction end, the term what the covariate
-adds. The inverse is exact for a logged covariate (the batch inverse needs the column);
+``c_up`` (``load_<COLUMN>_up``) and ``c_down`` (``load_<COLUMN>_down``), both >= 0 (deg of
+play per unit of ``x``), are fitted: friction growing with the covariate, or falling
+with it. ``x_lo``, ``x_hi`` (``load_<COLUMN>_lo``, ``_hi``) are the covariate's range in the
+fitted data, held fixed: the base model carries the width at the least-friction end,
+the term what the covariate adds. (Two one-signed gains rather than one signed gain keep
+the model smooth where the sign would change, so the fit does not stall at zero.) The inverse is exact for a logged covariate (the batch inverse needs the column);
 the future covariate is unknown to a control loop, so the effect does not stream.
 """
 
@@ -43,7 +45,7 @@ class Load(InputEffect):
     signature = ("loop width (residual at reversals, with the sign of the motion) that changes with the "
                  "covariate; residual correlated with the covariate times the direction of motion")
     protocol = "the same motion repeated while the covariate changes (e.g. different sheath curvatures)"
-    units = {"gain": "deg/unit", "lo": "", "hi": ""}
+    units = {"up": "deg/unit", "down": "deg/unit", "lo": "", "hi": ""}
 
     def __init__(self, column: str | None = None):
         if not isinstance(column, str) or not column.strip():
@@ -82,49 +84,47 @@ class Load(InputEffect):
 
     def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
         c = self.constants(data)
-        return [Parameter(f"{self.prefix}_gain", 0.0), Parameter(f"{self.prefix}_lo", c["lo"]),
-                Parameter(f"{self.prefix}_hi", c["hi"])]
+        return [Parameter(f"{self.prefix}_up", 0.0, 0.0, np.inf), Parameter(f"{self.prefix}_down", 0.0, 0.0, np.inf),
+                Parameter(f"{self.prefix}_lo", c["lo"]), Parameter(f"{self.prefix}_hi", c["hi"])]
 
     def start_candidates(self, data: HysteresisData, u: np.ndarray) -> list[dict]:
         """Start values tried before the fit (the best is kept): extra play up to 5 % of the command span."""
         x = data.column(self.column)
         scale = float(np.ptp(u)) / float(np.ptp(x))
-        return [{"gain": f * scale} for f in (-0.05, -0.01, 0.01, 0.05)]
+        return [{"up": 0.0, "down": 0.0}] + [{side: f * scale, other: 0.0} for side, other in (("up", "down"), ("down", "up"))
+                                             for f in (0.01, 0.05)]
 
-    def _width(self, p: dict, data: HysteresisData) -> tuple[np.ndarray, np.ndarray]:
+    def _width(self, p: dict, data: HysteresisData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         x = data.column(self.column)
-        g = float(p["gain"])
-        dx = x - (p["lo"] if g >= 0.0 else p["hi"])
-        return np.maximum(g * dx, 0.0), dx
+        above, below = x - p["lo"], p["hi"] - x
+        return np.maximum(p["up"] * above + p["down"] * below, 0.0), above, below
 
     def apply(self, p: dict, u: np.ndarray, data: HysteresisData) -> np.ndarray:
         v, _, _ = self.apply_jac(p, u, data, np.zeros((len(u), 0)))
         return v
 
     def apply_jac(self, p: dict, u: np.ndarray, data: HysteresisData, M: np.ndarray):
-        w, dx = self._width(p, data)
+        w, above, below = self._width(p, data)
         q = M.shape[1]
         zeros = np.zeros((w.size, 2))  # lo and hi are held fixed: no derivative needed
-        g = float(p["gain"])
-        # dw/dgain = dx where the play is open (at gain 0: on the side a positive gain would open)
-        active = (w > 0) | ((g == 0.0) & (dx > 0))
-        Wg = np.column_stack([np.zeros((w.size, q)), np.where(active, dx, 0.0), zeros])
+        raw = p["up"] * above + p["down"] * below
+        active = raw >= 0.0  # the width is clipped at zero only for covariates beyond the fitted range
+        Wg = np.column_stack([np.zeros((w.size, q)), np.where(active, above, 0.0), np.where(active, below, 0.0), zeros])
         v, J = varplay_forward_jac(np.ascontiguousarray(u, dtype=float), w, Wg, np.ascontiguousarray(M, dtype=float),
                                    data.run_starts)
         return v, J[:, q:], J[:, :q]
 
     def invert(self, p: dict, v: np.ndarray, data: HysteresisData) -> np.ndarray:
-        w, _ = self._width(p, data)
+        w, _, _ = self._width(p, data)
         return varplay_inverse(np.ascontiguousarray(v, dtype=float), w, data.run_starts)
 
     def wrap(self, inner: str) -> str:
         return f"loadplay({inner})"
 
     def describe(self, p: dict, se: dict) -> str:
-        return (f"loadplay = load[gain={fmt_value(p['gain'], se.get('gain'), 'deg')} per unit of {self.column} "
-                f"above {p['lo']:.4g}]" if p["gain"] >= 0 else
-                f"loadplay = load[gain={fmt_value(p['gain'], se.get('gain'), 'deg')} per unit of {self.column} "
-                f"below {p['hi']:.4g}]")
+        x = self.column
+        return (f"loadplay = load[up={fmt_value(p['up'], se.get('up'), 'deg')}*({x}-{p['lo']:.4g}), "
+                f"down={fmt_value(p['down'], se.get('down'), 'deg')}*({p['hi']:.4g}-{x})]")
 
     def is_zero(self, p: dict) -> bool:
-        return p["gain"] == 0.0
+        return p["up"] == 0.0 and p["down"] == 0.0
