@@ -127,8 +127,13 @@ def validate(
     effects = [e.label for e in model.effects_]
     old_path = compare if compare is not None else previous_model_path(model_path, effects)
     old = load_model(old_path) if old_path is not None else None
+    # The refit command fits on the model's own training data (from its provenance, where those
+    # files still exist) plus the data validated here: the effect shows in the latter, and the
+    # former keeps the command range the model was built for.
+    trained_on = [d["path"] for d in getattr(model, "provenance_", {}).get("data", []) if Path(d["path"]).exists()]
+    refit_paths = list(dict.fromkeys(trained_on + [str(p) for p in data]))
     result = validate_offline(model, tables, folds=folds, seed=seed, compare=old, model_path=str(model_path),
-                              data_paths=[str(p) for p in data], load_columns=load_column or None)
+                              data_paths=refit_paths, load_columns=load_column or None)
     if as_json:
         d = result.to_dict()
         if old_path is not None:
