@@ -3,6 +3,7 @@
 from endocal.cli import app
 from endocal.cli import fit as _fit
 from endocal.cli import protocols as _protocols
+from endocal.cli.effects import effects
 from endocal.cli.excite import excite
 from endocal.cli.info import info
 from endocal.cli.report import report
@@ -10,6 +11,7 @@ from endocal.cli.validate import validate
 
 app.command("excite")(excite)
 app.command("info")(info)
+app.command("effects")(effects)
 app.command("validate")(validate)
 app.command("report")(report)
 app.add_typer(_protocols.app, name="protocols")
