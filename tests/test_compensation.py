@@ -1,0 +1,40 @@
+"""Feedforward compensation on the simulator: desired angle -> inverse model -> knob -> tip.
+
+The thesis's first experiment and the duodenoscope paper's fig. 9b. The simulator's default
+probe has tendon slack (deadzone), a stiffening bending section (envelope) and ~75 ms of servo
+and tracker lag (delay), so the model carries those three effects on a B-spline base.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from endocal.backends.registry import make_backend
+from endocal.fitting import fit_hysteresis
+from endocal.probe import PRESETS
+from endocal.protocols import load_protocol
+from endocal.validation.playback import validate_on_backend
+from tests.test_cli_excite import endocal
+
+PROBE = PRESETS["tee"]
+
+
+@pytest.fixture(scope="module")
+def model(tmp_path_factory):
+    root = tmp_path_factory.mktemp("comp")
+    assert endocal("excite", "damped-sine", "--amplitude", "85", "--out", root / "train", "--seed", "2", "--quiet").returncode == 0
+    assert endocal("excite", "random", "--amplitude", "60", "--out", root / "more", "--seed", "3", "--quiet").returncode == 0
+    return fit_hysteresis([root / "train", root / "more"], "ap", "bspline", ["envelope", "deadzone", "delay"]).model
+
+
+@pytest.mark.parametrize("signal", ["triangle", "chirp"])
+def test_compensation_reaches_the_noise_floor(model, signal, tmp_path):
+    proto = load_protocol(signal, overrides={"amplitude_deg": 40.0})
+    result = validate_on_backend(model, proto, lambda: make_backend("sim", PROBE, seed=1), PROBE, seed=1, out_dir=tmp_path)
+    # A robot that commands the desired angle directly is far off (paper: 9-13 deg).
+    assert result.uncompensated.rmse_deg > 5.0
+    # Measured angles carry ~0.38 deg of tracker noise (0.5 mm at 60 mm); issue 4 asks for
+    # at most 0.6 deg compensated, which leaves ~0.45 deg RMS for the model itself.
+    assert result.metrics.rmse_deg <= 0.6, result.metrics
+    assert result.metrics.max_deg < 3.0
+    assert set(result.runs) == {"compensated", "uncompensated"} and (tmp_path / "compensated" / "run.json").exists()
