@@ -16,6 +16,8 @@ step "identification run: the duodenoscope paper's damped sine" \
   $E excite damped-sine --amplitude 85 --out "$OUT/train" --seed 2 --force --quiet
 step "held-out run: band-limited random input" \
   $E excite random --amplitude 60 --out "$OUT/test" --seed 3 --force --quiet
+step "check run for the report, used by no fit: a chirp" \
+  $E excite chirp --amplitude 50 --out "$OUT/check" --seed 4 --force --quiet
 step "fit the paper's modified Prandtl-Ishlinskii model" \
   $E fit hysteresis "$OUT/train" --axis ap --model pi --effects envelope --out "$OUT/pi-envelope.json" --force
 step "hold it against the held-out run: how far off, where, which effect is missing" \
@@ -34,5 +36,5 @@ fi
 step "feedforward compensation on the simulator (desired vs reached angle)" \
   $E validate "${models[-1]}" --protocol triangle --set amplitude_deg=40 --runs-out "$OUT/playback"
 step "report" \
-  $E report "${models[@]}" --data "$OUT/test" --data "$OUT/train" --planes "$OUT/planes.json" --out "$OUT/report.html" --force
+  $E report "${models[@]}" --data "$OUT/check" --data "$OUT/test" --planes "$OUT/planes.json" --out "$OUT/report.html" --force
 printf '\nResults are in %s/: runs (run.json, motor/, tracker/, truth/, aligned.parquet), planes.json, model files, report.html\n' "$OUT"
