@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -11,57 +11,37 @@ from endocal.errors import ModelError
 from endocal.models import HysteresisData, make_model
 from endocal.models.base import HysteresisModel
 from endocal.runs.aligned import AlignedData, load_aligned
+from endocal.validation.data import axis_data
 
 
 def hysteresis_data(datas: list[AlignedData], axis: str, planes=None) -> HysteresisData:
     """One axis of several aligned tables as a multi-run :class:`HysteresisData`.
 
-    The other bending axis's command is passed as ``other_cmd_deg`` (for ``coupling``) and
-    every numeric extra column is kept (for ``load:COLUMN``). With ``planes`` the measured
-    standard-plane angles are mapped into the twisted half-planes the knobs actually drive
-    (the orthogonal compensator of duodenoscope eqs. 3-4 maps an output in the standard
-    planes to the input along the twisted planes that produces it), so the hysteresis model
-    sees one knob against its own plane.
+    The conversion is :func:`endocal.validation.data.axis_data` (the same one ``validate``
+    and ``report`` use, so a model file's training-data hashes match the records they
+    evaluate). With ``planes`` the measured standard-plane angles are mapped into the
+    twisted half-planes the knobs actually drive: the orthogonal compensator of duodenoscope
+    eqs. 3-4 maps an output in the standard planes to the input along the twisted planes that
+    produces it, so the hysteresis model sees one knob against its own plane.
 
     Raises
     ------
-    RunFormatError
-        ``axis`` is missing from one of the tables.
     ModelError
-        Tables disagree on their extra columns.
+        ``axis`` is missing from a table, or ``planes`` is given for a table without both
+        bending axes.
     """
-    cmd, meas, t, starts, extras = [], [], [], [], {}
-    offset = 0
-    common = None
+    if planes is None:
+        return axis_data(datas, axis)
+    runs = []
     for data in datas:
-        data.cmd_deg(axis)  # raises RunFormatError naming the source when the axis is absent
-        cols = set(data.extras)
-        common = cols if common is None else common & cols
-    for data in datas:
-        m = data.meas_deg(axis)
-        others = [a for a in data.axes if a != axis]
-        if planes is not None:
-            if len(data.axes) != 2:
-                raise ModelError(f"{data.source}: --planes needs both bending axes in the data")
-            first, second = data.axes
-            comp = planes.compensate(data.meas_deg(first), data.meas_deg(second))
-            m = np.asarray(comp[0] if axis == first else comp[1], float)
-        cmd.append(data.cmd_deg(axis))
-        meas.append(m)
-        t.append(data.t_s - data.t_s[0] + (t[-1][-1] + 1.0 if t else 0.0))  # runs back to back, 1 s apart
-        starts.append(offset)
-        offset += len(data.t_s)
-        other = data.cmd_deg(others[0]) if others else np.zeros(len(data.t_s))
-        extras.setdefault("other_cmd_deg", []).append(other)
-        for col in sorted(common or ()):
-            extras.setdefault(col, []).append(data.table[col].to_numpy(float))
-    return HysteresisData(
-        np.concatenate(cmd),
-        np.concatenate(meas),
-        t_s=np.concatenate(t),
-        extras={k: np.concatenate(v) for k, v in extras.items()},
-        run_starts=np.asarray(starts, dtype=np.int64),
-    )
+        if len(data.axes) != 2:
+            raise ModelError(f"{data.source}: --planes needs both bending axes in the data")
+        first, second = data.axes
+        comp = planes.compensate(data.meas_deg(first), data.meas_deg(second))
+        table = data.table.copy()
+        table[f"{axis}_meas_deg"] = np.asarray(comp[0] if axis == first else comp[1], float)
+        runs.append(replace(data, table=table))
+    return axis_data(runs, axis)
 
 
 @dataclass

@@ -19,7 +19,6 @@ from pathlib import Path
 
 import numpy as np
 
-from endocal.backends.base import Backend
 from endocal.errors import ModelError
 from endocal.excite import run_excitation
 from endocal.models.base import HysteresisModel
