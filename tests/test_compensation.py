@@ -14,7 +14,7 @@ from endocal.fitting import fit_hysteresis
 from endocal.probe import PRESETS
 from endocal.protocols import load_protocol
 from endocal.validation.playback import validate_on_backend
-from tests.test_cli_excite import endocal
+from tests.test_cli_excite import endocal, one_line_error
 
 PROBE = PRESETS["tee"]
 
@@ -38,3 +38,25 @@ def test_compensation_reaches_the_noise_floor(model, signal, tmp_path):
     assert result.metrics.rmse_deg <= 0.6, result.metrics
     assert result.metrics.max_deg < 3.0
     assert set(result.runs) == {"compensated", "uncompensated"} and (tmp_path / "compensated" / "run.json").exists()
+
+
+def test_task_space_excite_plays_desired_angles_through_the_inverse(model, tmp_path):
+    import numpy as np
+
+    from endocal.models import save_model
+    from endocal.runs.aligned import load_aligned
+    from endocal.validation.playback import PREROLL_S
+
+    save_model(model, tmp_path / "ap.json")
+    run = tmp_path / "ts"
+    proc = endocal("excite", "triangle", "--set", "amplitude_deg=30", "--model", tmp_path / "ap.json", "--out", run, "--seed", "4", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    data = load_aligned(run)
+    assert data.meta["protocol"]["hysteresis_compensation"] == {"ap": str(tmp_path / "ap.json")}
+    proto = load_protocol("triangle", overrides={"amplitude_deg": 30.0}).trajectory(PROBE)
+    keep = data.t_s >= PREROLL_S
+    desired = np.interp(data.t_s[keep] - PREROLL_S, proto.t_s, proto.goal["ap"])
+    err = data.meas_deg("ap")[keep] - desired
+    # Same bar as the playback above: the tip follows the desired angle, not the knob.
+    assert np.sqrt(np.mean(err**2)) <= 0.6
+    one_line_error(endocal("excite", "triangle", "--model", tmp_path / "ap.json", "--model", tmp_path / "ap.json", "--out", tmp_path / "x"), "two --model files")

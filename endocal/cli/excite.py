@@ -29,6 +29,7 @@ def excite(
     sample_rate: Optional[float] = typer.Option(None, "--sample-rate", help="Shortcut for --set sample_rate_hz=VALUE (motor clock)."),
     axes: Optional[str] = typer.Option(None, "--axes", help="Comma-separated axes to drive, e.g. `ml` or `ap,ml`."),
     planes_file: Optional[Path] = typer.Option(None, "--planes", help="planes.json from `endocal fit planes`: pass the knob goals through the orthogonal compensator."),
+    model_files: list[Path] = typer.Option([], "--model", help="Hysteresis model (endocal fit hysteresis) of one axis, repeatable: the protocol's goals become desired bending angles played through the inverse models (task-space control)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
 ) -> None:
     """Run an excitation protocol and log motor and tracker streams to a run folder.
@@ -54,12 +55,30 @@ def excite(
     proto = load_protocol(protocol, overrides=overrides or None)
     trajectory = proto.trajectory(probe_cfg, seed=seed)
     protocol_info = proto.to_dict()
+    planes = None
     if planes_file is not None:
         from endocal.planes import load_planes
+
+        planes = load_planes(planes_file)
+        protocol_info["orthogonal_compensation"] = str(planes_file)
+    if model_files:
+        from endocal.errors import ModelError
+        from endocal.models import load_model
+        from endocal.validation.playback import PREROLL_S, task_space_trajectory
+
+        models = {}
+        for path in model_files:
+            model = load_model(path)
+            if model.axis in models:
+                raise ModelError(f"two --model files for axis '{model.axis}' ({path}): give one per axis")
+            models[model.axis] = model
+        trajectory = task_space_trajectory(trajectory, probe_cfg, models, planes)
+        protocol_info["hysteresis_compensation"] = {axis: str(p) for axis, p in zip(models, model_files)}
+        protocol_info["preroll_s"] = PREROLL_S  # the protocol starts this much after t_s = 0
+    elif planes is not None:
         from endocal.planes.from_runs import compensate_trajectory
 
-        trajectory = compensate_trajectory(trajectory, probe_cfg, load_planes(planes_file))
-        protocol_info["orthogonal_compensation"] = str(planes_file)
+        trajectory = compensate_trajectory(trajectory, probe_cfg, planes)
     trajectory.check_limits(probe_cfg)  # before any backend is built or anything moves
     be = make_backend(backend, probe_cfg, seed=seed, sim_config=sim_config, hardware_config=hardware_config)
     command = "endocal " + " ".join(sys.argv[1:])

@@ -74,7 +74,12 @@ PREROLL_S = 2.0
 
 
 def _with_goal(traj: Trajectory, dof: str, goal: np.ndarray, preroll_s: float = PREROLL_S) -> Trajectory:
-    """A copy of ``traj`` whose ``dof`` follows ``goal``, after a pre-roll of ``preroll_s``.
+    """A copy of ``traj`` whose ``dof`` follows ``goal``, after a pre-roll of ``preroll_s``."""
+    return _with_goals(traj, {dof: goal}, preroll_s)
+
+
+def _with_goals(traj: Trajectory, new_goals: dict, preroll_s: float = PREROLL_S) -> Trajectory:
+    """A copy of ``traj`` whose DoFs in ``new_goals`` follow them, after a pre-roll of ``preroll_s``.
 
     The inverse model's first command is generally not zero (the dead band and the initial
     loading of eq. 11 put it elsewhere); a probe at rest cannot jump there, so it is reached
@@ -88,7 +93,7 @@ def _with_goal(traj: Trajectory, dof: str, goal: np.ndarray, preroll_s: float = 
     ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(n_pre) / n_pre)
     goals = {}
     for d, g in traj.goal.items():
-        g = np.asarray(goal if d == dof else g, float)
+        g = np.asarray(new_goals.get(d, g), float)
         goals[d] = np.concatenate([g[0] * ramp, g])
     t = np.concatenate([np.arange(n_pre) / fs, traj.t_s + n_pre / fs])
     return replace(traj, t_s=t, goal=goals)
@@ -129,6 +134,35 @@ def compensated_commands(
     cmd = np.asarray(model.inverse(desired, t_s=traj.t_s, extras={"other_cmd_deg": traj.goal[other]}), float)
     # 0.99: stay strictly inside the speed limit that check_limits enforces.
     return slew_limit(cmd, traj.t_s, 0.99 * probe.max_knob_speed_dps)
+
+
+def task_space_trajectory(traj: Trajectory, probe: ProbeConfig, models: dict, planes=None) -> Trajectory:
+    """Knob goals that make the tip follow ``traj``'s goals read as desired bending angles.
+
+    Task Space Control as in the thesis (fig. 5): desired standard-plane angles go through
+    the orthogonal compensator (duodenoscope eqs. 3-4) when ``planes`` is given, then each
+    axis with a model in ``models`` (axis name -> fitted model) through its inverse
+    hysteresis model; axes without a model keep the (compensated) angle as the knob goal.
+    A pre-roll of :data:`PREROLL_S` brings the knobs from rest to the first command.
+
+    Raises
+    ------
+    ModelError
+        A model for an axis the probe does not have.
+    """
+    for axis in models:
+        if axis not in probe.bending_axes:
+            raise ModelError(f"a model is for axis {axis!r}, but probe '{probe.name}' has {', '.join(probe.bending_axes)}")
+    first, second = probe.bending_axes
+    desired = {first: traj.goal[first], second: traj.goal[second]}
+    if planes is not None:
+        desired[first], desired[second] = (np.asarray(g, float) for g in planes.compensate(desired[first], desired[second]))
+    goals = dict(desired)
+    for axis, model in models.items():
+        other = second if axis == first else first
+        cmd = np.asarray(model.inverse(desired[axis], t_s=traj.t_s, extras={"other_cmd_deg": desired[other]}), float)
+        goals[axis] = slew_limit(cmd, traj.t_s, 0.99 * probe.max_knob_speed_dps)
+    return _with_goals(traj, goals)
 
 
 def validate_on_backend(
