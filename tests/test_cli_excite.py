@@ -145,3 +145,26 @@ def test_kill_9_loses_at_most_two_seconds(tmp_path):
     assert not (run / "aligned.parquet").exists()
     data = load_aligned(run)  # rebuilt from the streams
     assert data.t_s[-1] >= reached_t_s - 2.0 - 0.1
+
+
+def test_ctrl_c_stops_cleanly_and_leaves_a_valid_run(tmp_path):
+    run = tmp_path / "stopped"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "endocal", "excite", "sine-set", "--out", str(run), "--realtime", "--quiet"],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not list((run / "motor").glob("part-*.parquet")):
+        time.sleep(0.05)
+    time.sleep(1.5)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, (stdout, stderr)
+    assert "interrupted" in stderr and "Traceback" not in stderr
+    meta = json.loads((run / "run.json").read_text())
+    assert meta["status"] == "interrupted"
+    data = load_aligned(run)  # the aligned table was written for what was logged
+    assert (run / "aligned.parquet").exists() and data.t_s[-1] == pytest.approx(meta["logged_s"], abs=0.05)
