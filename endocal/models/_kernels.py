@@ -312,6 +312,60 @@ def count_reversals(u, tol):
     return total
 
 
+#: largest exponent of the PI weight law (eq. 8) evaluated: a weight ratio of e^100 across
+#: the operators is far beyond any physical loop, and squared residuals summed over many
+#: samples must stay finite (e^200 ~ 1e87) for the optimiser to reject such a trial step
+_EXP_MAX = 100.0
+
+
+@njit(cache=True)
+def pi_free_forward_jac(x, thresholds, weights, G, run_starts):
+    """PI with given thresholds and free weights (eqs. 5, 7) and its exact Jacobian.
+
+    ``G`` (n, q) is the Jacobian of the input ``x`` w.r.t. q upstream parameters. A play
+    output equals ``x_a -+ r_i`` with ``a`` the sample that last pushed it, so its
+    sensitivity to upstream parameters is that of the anchor sample (as in
+    :func:`pi_exp_forward_jac`); its sensitivity to ``ω_i`` is the play output itself.
+
+    Returns ``y`` (n,), ``J`` (n, q + m): columns q upstream, then ``ω_0..ω_{m-1}``.
+    """
+    n = x.shape[0]
+    q = G.shape[1]
+    m = thresholds.shape[0]
+    y = np.empty(n)
+    J = np.zeros((n, q + m))
+    z = np.zeros(m)
+    anchor = np.full(m, -1)
+    n_runs = run_starts.shape[0]
+    for qq in range(n_runs):
+        a = run_starts[qq]
+        b = run_starts[qq + 1] if qq + 1 < n_runs else n
+        for i in range(m):
+            z[i] = 0.0
+            anchor[i] = -1
+        for k in range(a, b):
+            xk = x[k]
+            acc = 0.0
+            for i in range(m):
+                lo = xk - thresholds[i]
+                hi = xk + thresholds[i]
+                if z[i] < lo:
+                    z[i] = lo
+                    anchor[i] = k
+                elif z[i] > hi:
+                    z[i] = hi
+                    anchor[i] = k
+                acc += weights[i] * z[i]
+                J[k, q + i] = z[i]
+                ai = anchor[i]
+                if ai >= 0:
+                    wgt = weights[i]
+                    for j in range(q):
+                        J[k, j] += wgt * G[ai, j]
+            y[k] = acc
+    return y, J
+
+
 @njit(cache=True)
 def pi_exp_forward_jac(x, r, w, beta, n_ops, G, run_starts):
     """PI with ``r_i = r·i``, ``ω_i = ω e^{-β r_i}`` (eqs. 5, 7, 8) and its exact Jacobian.
@@ -329,7 +383,9 @@ def pi_exp_forward_jac(x, r, w, beta, n_ops, G, run_starts):
     J = np.zeros((n, q + 3))
     idx = np.arange(m) * 1.0
     thr = r * idx
-    wi = w * np.exp(-beta * thr)
+    # exponent clipped where exp overflows (a trial step of the optimiser far outside
+    # any physical β); the weights are then huge and the step is rejected
+    wi = w * np.exp(np.minimum(np.maximum(-beta * thr, -_EXP_MAX), _EXP_MAX))
     z = np.zeros(m)
     anchor = np.full(m, -1)
     cr = np.zeros(m)

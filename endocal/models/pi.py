@@ -13,7 +13,9 @@ Duodenoscope paper (Cheng et al., Machines 2024), section 2.3:
 
 Without effects the envelope is linear (``f(θ) = θ``): the classic PI, with free
 non-negative weights by default. With the ``envelope`` effect (eqs. 6, 10) it is the
-paper's modified PI, with the exponential weights of eq. 8 by default.
+paper's modified PI, with the exponential weights of eq. 8 by default (free weights
+when the data clearly reject that law). Both weight laws have an analytic Jacobian
+(:func:`~endocal.models._kernels.pi_exp_forward_jac`, ``pi_free_forward_jac``).
 """
 
 from __future__ import annotations
@@ -21,16 +23,25 @@ from __future__ import annotations
 from typing import ClassVar
 
 import numpy as np
-from scipy.optimize import lsq_linear
+from scipy.optimize import least_squares, lsq_linear
 
 from endocal.errors import ModelError
-from endocal.models._kernels import pi_exp_forward_jac, play_bank_forward, play_bank_states, play_bank_step
+from endocal.models._kernels import (_EXP_MAX, pi_exp_forward_jac, pi_free_forward_jac, play_bank_forward,
+                                     play_bank_states, play_bank_step)
 from endocal.models.base import HysteresisModel
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import Effect
 from endocal.models.params import Parameter, fmt_value
 
 WEIGHT_CHOICES = ("auto", "free", "exponential")
+
+#: ``weights="auto"`` with the envelope keeps the paper's exponential law unless free
+#: weights fit the start data with a residual RMS this much smaller (a law that fits
+#: leaves only noise, which free weights cannot reduce by more than ~sqrt(1 - n/N))
+AUTO_RMS_RATIO = 1.1
+
+#: fractions of the input's half range covered by the n plays, tried for the threshold step
+_STEP_FRACTIONS = (0.05, 0.1, 0.2, 0.35, 0.5, 0.8)
 
 
 def pi_thresholds(r: float, n_operators: int) -> np.ndarray:
@@ -40,7 +51,8 @@ def pi_thresholds(r: float, n_operators: int) -> np.ndarray:
 
 def pi_exp_weights(w: float, beta: float, thresholds: np.ndarray) -> np.ndarray:
     """``ω_i = ω·exp(-β r_i)`` (duodenoscope paper, eq. 8)."""
-    return w * np.exp(-beta * thresholds)
+    # exponent clipped where exp would overflow (only an optimiser's wild trial step gets there)
+    return w * np.exp(np.clip(-beta * np.asarray(thresholds, dtype=float), -_EXP_MAX, _EXP_MAX))
 
 
 def pi_inverse_parameters(thresholds: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -117,8 +129,11 @@ class PIModel(HysteresisModel):
     weights : {"auto", "free", "exponential"}
         ``free``: one non-negative weight per operator (``pi_w0``…``pi_wn``), thresholds
         ``r·i`` with ``r`` chosen from the data; ``exponential``: eq. 8 with fitted
-        ``pi_r``, ``pi_w``, ``pi_beta``. ``auto``: exponential with the envelope effect
-        (the modified PI), free otherwise. Resolved into ``structure_["weights"]``.
+        ``pi_r``, ``pi_w``, ``pi_beta``. ``auto``: with the envelope effect (the modified
+        PI) the paper's exponential law, unless free weights fit the start data with a
+        residual RMS more than ``AUTO_RMS_RATIO`` (1.1) times smaller (weights the law
+        cannot shape, e.g. one large backlash at a middle threshold); free without the
+        envelope. Resolved into ``structure_["weights"]`` (and ``threshold_step``).
     offset : {"auto", True, False}
         Add a constant ``pi_offset_deg`` to the output. ``auto``: only without the
         envelope (whose θ1 already places the neutral). Resolved into ``structure_``.
@@ -157,8 +172,22 @@ class PIModel(HysteresisModel):
         weights = self.weights if self.weights != "auto" else ("exponential" if has_env else "free")
         offset = self.offset if self.offset != "auto" else (not has_env)
         st = {"n_operators": int(self.n_operators), "weights": weights, "offset": bool(offset)}
-        if weights == "free":
-            st["threshold_step"] = None if v is None else self._choose_step(v, data, st)[0]
+        if weights == "free" and v is not None:
+            st["threshold_step"] = self._choose_step(v, data, st)[0]
+        elif weights == "free":
+            st["threshold_step"] = None
+        elif self.weights == "auto" and v is not None:
+            # The paper's law (eq. 8) ties all weights to three numbers. When the data put
+            # the weight where no exponential can (e.g. one large backlash at a middle
+            # threshold) the law leaves a clearly larger residual than free non-negative
+            # weights on the same plays; those then describe the loop, with the same exact
+            # inverse (eq. 11). Only a clear gap switches: free weights also fit noise and
+            # other effects' signatures, which would blur the diagnosis of effects.
+            r_free, _, cost_free = self._choose_step(v, data, {**st, "weights": "free"})
+            cost_exp = self._exp_start(v, data, st)[0]
+            if not cost_exp <= AUTO_RMS_RATIO ** 2 * cost_free:
+                st["weights"] = "free"
+                st["threshold_step"] = r_free
         return st
 
     def _base_names(self, structure: dict) -> list[str]:
@@ -193,7 +222,7 @@ class PIModel(HysteresisModel):
         stride = max(1, v.size // 5000)
         best = None
         if steps is None:
-            steps = [frac * half_span / n for frac in (0.15, 0.3, 0.5, 0.8, 1.2)]
+            steps = [frac * half_span / n for frac in _STEP_FRACTIONS]
         for r in steps:
             phi = play_bank_states(v, pi_thresholds(r, n), data.run_starts)[::stride]
             A = phi if not st["offset"] else np.column_stack([phi, np.ones(phi.shape[0])])
@@ -207,6 +236,77 @@ class PIModel(HysteresisModel):
                 best = (r, sol.x, cost)
         return best
 
+    def _exp_start(self, v: np.ndarray, data: HysteresisData, st: dict) -> tuple[float, float, float, float, float]:
+        """Start of the exponential law (eq. 8) on a grid of ``r`` and ``β``: ``(cost, r, β, ω, offset)``.
+
+        For given ``r`` and ``β`` the output is linear in ``ω`` (and the offset), so ``ω``
+        comes from one regression; the best pair with ``ω > 0`` is kept.
+        """
+        n = st["n_operators"]
+        half_span = 0.5 * float(np.ptp(v))
+        if half_span <= 0:
+            raise ModelError("the command reaching the PI model is constant: nothing to fit")
+        stride = max(1, v.size // 5000)
+        y = data.meas_deg[::stride]
+        vv = np.ascontiguousarray(v, dtype=float)
+        best = None
+        for frac in _STEP_FRACTIONS:
+            r = frac * half_span / n
+            ri = pi_thresholds(r, n)
+            phi = play_bank_states(vv, ri, data.run_starts)[::stride]
+            for f in (-0.5, 0.0, 0.3, 1.0, 3.0, 10.0):
+                beta = 3.0 / (n * r) * f
+                col = phi @ np.exp(-beta * ri)
+                A = col[:, None] if not st["offset"] else np.column_stack([col, np.ones(col.size)])
+                coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+                if not coef[0] > 0:
+                    continue
+                cost = float(np.sum((A @ coef - y) ** 2))
+                if best is None or cost < best[0]:
+                    best = (cost, float(r), float(beta), float(coef[0]), float(coef[1]) if st["offset"] else 0.0)
+        if best is not None:
+            best = self._refine_exp(vv, y, stride, data.run_starts, st, best)
+        if best is None:
+            r = 0.3 * half_span / n
+            beta = 1.0 / (n * r)
+            scale = float(np.ptp(data.meas_deg)) / max(2.0 * half_span, 1e-300)
+            best = (np.inf, r, beta, scale / np.exp(-beta * pi_thresholds(r, n)).sum(),
+                    float(np.mean(data.meas_deg)) if st["offset"] else 0.0)
+        return best
+
+    @staticmethod
+    def _refine_exp(v: np.ndarray, y_dec: np.ndarray, stride: int, run_starts: np.ndarray, st: dict, best: tuple):
+        """Polish a grid start of eq. 8 by a few Gauss-Newton steps on the decimated data (input fixed)."""
+        n = st["n_operators"]
+        # decimate the input after the plays would lose reversals: run the plays on the
+        # full input, compare on the decimated samples
+        G = np.zeros((v.size, 0))
+        off = st["offset"]
+
+        def fun(x):
+            yy, _ = pi_exp_forward_jac(v, x[0], x[1], x[2], n, G, run_starts)
+            return (yy[::stride] + (x[3] if off else 0.0)) - y_dec
+
+        def jac(x):
+            _, J = pi_exp_forward_jac(v, x[0], x[1], x[2], n, G, run_starts)
+            J = J[::stride]
+            return np.column_stack([J, np.ones(J.shape[0])]) if off else J
+
+        cost0, r0, b0, w0, o0 = best
+        x0 = np.array([r0, w0, b0] + ([o0] if off else []))
+        lo = np.array([1e-6 * r0, 1e-9 * w0, -np.inf] + ([-np.inf] if off else []))
+        hi = np.full(x0.size, np.inf)
+        try:
+            with np.errstate(all="ignore"):
+                res = least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=30)
+        except (ValueError, FloatingPointError):
+            return best
+        cost = 2.0 * float(res.cost)
+        if not (np.isfinite(cost) and cost < cost0):
+            return best
+        x = res.x
+        return (cost, float(x[0]), float(x[2]), float(x[1]), float(x[3]) if off else 0.0)
+
     def _base_initial(self, structure: dict, v: np.ndarray, data: HysteresisData) -> list[Parameter]:
         n = structure["n_operators"]
         steps = [structure["threshold_step"]] if structure["weights"] == "free" else None
@@ -217,33 +317,7 @@ class PIModel(HysteresisModel):
             scale = max(float(w.sum()), 1e-12)
             out += [Parameter(f"w{i}", float(w[i]), 1e-9 * scale if i == 0 else 0.0, np.inf) for i in range(n + 1)]
         else:
-            ri = pi_thresholds(r, n)
-            good = w > 1e-6 * max(w.max(), 1e-300)
-            betas = [3.0 / (n * r) * f for f in (-0.5, 0.0, 0.3, 1.0, 3.0, 10.0)]
-            if good.sum() >= 3:
-                slope, _ = np.polyfit(ri[good], np.log(w[good]), 1, w=np.sqrt(w[good]))
-                betas.append(float(-slope))
-            # The free weights are sparse (bounded least squares), so a line through their
-            # logarithms can miss the scale badly: for each candidate β the output is linear
-            # in ω (and the offset), so ω comes from one regression and the best β is kept.
-            stride = max(1, v.size // 5000)
-            phi = play_bank_states(np.ascontiguousarray(v, dtype=float), ri, data.run_starts)[::stride]
-            y = data.meas_deg[::stride]
-            best = None
-            for beta in betas:
-                col = phi @ np.exp(-beta * ri)
-                A = col[:, None] if not structure["offset"] else np.column_stack([col, np.ones(col.size)])
-                coef, *_ = np.linalg.lstsq(A, y, rcond=None)
-                if not coef[0] > 0:
-                    continue
-                cost = float(np.sum((A @ coef - y) ** 2))
-                if best is None or cost < best[0]:
-                    best = (cost, float(beta), float(coef[0]), float(coef[1]) if structure["offset"] else 0.0)
-            if best is None:
-                beta = 3.0 / (n * r)
-                best = (0.0, beta, float(max(w.sum(), 1e-12) / np.exp(-beta * ri).sum()),
-                        float(x[-1]) if structure["offset"] else 0.0)
-            _, beta, w0, off = best
+            _, r, beta, w0, off = self._exp_start(v, data, structure)
             out += [Parameter("r", r, 1e-12 * max(r, 1e-300), np.inf), Parameter("w", w0, 1e-12 * max(w0, 1e-300), np.inf),
                     Parameter("beta", beta)]
             if structure["offset"]:
@@ -268,7 +342,14 @@ class PIModel(HysteresisModel):
         for free weights (the fit then differentiates numerically).
         """
         if structure["weights"] != "exponential":
-            return None
+            r, w = self._thresholds_weights(structure, p)
+            y, J = pi_free_forward_jac(np.ascontiguousarray(v, dtype=float), r, w, np.ascontiguousarray(M), run_starts)
+            q = M.shape[1]
+            Jb = J[:, q:]
+            if structure["offset"]:
+                y += p["offset_deg"]
+                Jb = np.column_stack([Jb, np.ones(y.size)])
+            return y, Jb, J[:, :q]
         y, J = pi_exp_forward_jac(np.ascontiguousarray(v, dtype=float), p["r"], p["w"], p["beta"],
                                   structure["n_operators"], np.ascontiguousarray(M), run_starts)
         q = M.shape[1]
