@@ -31,12 +31,13 @@ DT_S = 0.02
 TRUTH = {
     # the slack is centred on the neutral bend, the zero of the paper's envelope (theta1 = 3.73 deg)
     "deadzone": ("deadzone", {"deadzone_slack_deg": 4.0, "deadzone_band_deg": 6.0, "deadzone_center_deg": 3.7}, "slack("),
-    "rate": ("rate", {"rate_gain_s": 0.03}, "rateplay("),
+    # play of 0.03 s per deg/s at neutral, growing 1 %/deg with the knob angle (tension)
+    "rate": ("rate", {"rate_gain_s": 0.03, "rate_amp_s_per_deg": 0.0003}, "rateplay("),
     "delay": ("delay", {"delay_s": 0.13}, "(t - tau)"),
     "coupling": ("coupling", {"coupling_linear": 0.12, "coupling_abs": 0.06}, "coupling["),
     "creep": ("creep", {"creep_fraction": 0.25, "creep_tau_s": 2.0}, "creep("),
-    "load": ("load:wrap_deg", {"load_wrap_deg_up": 0.05, "load_wrap_deg_down": 0.0, "load_wrap_deg_lo": 100.0,
-                               "load_wrap_deg_hi": 200.0},
+    "load": ("load:wrap_deg", {"load_wrap_deg_up": 0.05, "load_wrap_deg_down": 0.0, "load_wrap_deg_up_amp": 0.0005,
+                               "load_wrap_deg_down_amp": 0.0, "load_wrap_deg_lo": 100.0, "load_wrap_deg_hi": 200.0},
              "loadplay("),
 }
 
@@ -109,7 +110,8 @@ def test_catalog_lists_every_effect_with_its_physics():
 def test_effect_names_parse_and_bad_names_fail():
     assert make_effect("load:sheath_wrap_deg").label == "load:sheath_wrap_deg"
     assert make_effect("load:sheath_wrap_deg").full_names() == [
-        "load_sheath_wrap_deg_up", "load_sheath_wrap_deg_down", "load_sheath_wrap_deg_lo", "load_sheath_wrap_deg_hi"]
+        "load_sheath_wrap_deg_up", "load_sheath_wrap_deg_down", "load_sheath_wrap_deg_up_amp",
+        "load_sheath_wrap_deg_down_amp", "load_sheath_wrap_deg_lo", "load_sheath_wrap_deg_hi"]
     assert make_effect("coupling:ml_meas_deg").column == "ml_meas_deg"
     with pytest.raises(ModelError, match="load needs a column"):
         make_effect("load")

@@ -4,14 +4,18 @@ Capstan friction of a tendon in its sheath grows with the wrap angle of the shea
 (``T_out = T_in e^{μΘ}``): when the insertion tube curves more, the hysteresis widens.
 Any extra numeric column ``x`` of the data (``sheath_wrap_deg``, a shape sensor, a
 force) can be named; the extra backlash is a play on the command whose half width
-follows the covariate linearly::
+follows the covariate linearly. Capstan friction is proportional to the tendon tension,
+which grows with the bend away from neutral, so the extra play also grows with the knob
+angle ``|u|`` (taken at the previous sample, which keeps the inverse explicit)::
 
-    w_k = max(c_up · (x_k - x_lo) + c_down · (x_hi - x_k), 0)
+    a_k = |u_{k-1}|
+    w_k = max((c_up + d_up · a_k) · (x_k - x_lo) + (c_down + d_down · a_k) · (x_hi - x_k), 0)
     v_k = clip(v_{k-1}, u_k - w_k, u_k + w_k)
 
 ``c_up`` (``load_<COLUMN>_up``) and ``c_down`` (``load_<COLUMN>_down``), both >= 0 (deg of
 play per unit of ``x``), are fitted: friction growing with the covariate, or falling
-with it. ``x_lo``, ``x_hi`` (``load_<COLUMN>_lo``, ``_hi``) are the covariate's range in the
+with it; ``d_up``, ``d_down`` (``load_<COLUMN>_up_amp``, ``_down_amp``, >= 0, deg of play per
+unit of ``x`` and per knob degree) are their tension-proportional shares. ``x_lo``, ``x_hi`` (``load_<COLUMN>_lo``, ``_hi``) are the covariate's range in the
 fitted data, held fixed: the base model carries the width at the least-friction end,
 the term what the covariate adds. (Two one-signed gains rather than one signed gain keep
 the model smooth where the sign would change, so the fit does not stall at zero.) The inverse is exact for a logged covariate (the batch inverse needs the column);
@@ -23,10 +27,33 @@ from __future__ import annotations
 import numpy as np
 
 from endocal.errors import ModelError
-from endocal.models._kernels import varplay_forward_jac, varplay_inverse
+from numba import njit
+
+from endocal.models._kernels import varplay_forward_jac
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import InputEffect
 from endocal.models.params import Parameter, fmt_value
+
+
+@njit(cache=True)
+def loadplay_inverse(v, w0, w1, run_starts):
+    """Commands whose play output is ``v`` for the width ``w_k = max(w0_k + w1_k |u_{k-1}|, 0)`` (exact, causal)."""
+    n = v.shape[0]
+    u = np.empty(n)
+    n_runs = run_starts.shape[0]
+    for r in range(n_runs):
+        a = run_starts[r]
+        b = run_starts[r + 1] if r + 1 < n_runs else n
+        u[a] = v[a]
+        for k in range(a + 1, b):
+            w = max(w0[k] + w1[k] * abs(u[k - 1]), 0.0)
+            if v[k] > v[k - 1]:
+                u[k] = v[k] + w
+            elif v[k] < v[k - 1]:
+                u[k] = v[k] - w
+            else:
+                u[k] = min(max(u[k - 1], v[k] - w), v[k] + w)
+    return u
 
 
 class Load(InputEffect):
@@ -45,7 +72,7 @@ class Load(InputEffect):
     signature = ("loop width (residual at reversals, with the sign of the motion) that changes with the "
                  "covariate; residual correlated with the covariate times the direction of motion")
     protocol = "the same motion repeated while the covariate changes (e.g. different sheath curvatures)"
-    units = {"up": "deg/unit", "down": "deg/unit", "lo": "", "hi": ""}
+    units = {"up": "deg/unit", "down": "deg/unit", "up_amp": "1/unit", "down_amp": "1/unit", "lo": "", "hi": ""}
 
     def __init__(self, column: str | None = None):
         if not isinstance(column, str) or not column.strip():
@@ -84,47 +111,63 @@ class Load(InputEffect):
 
     def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
         c = self.constants(data)
-        return [Parameter(f"{self.prefix}_up", 0.0, 0.0, np.inf), Parameter(f"{self.prefix}_down", 0.0, 0.0, np.inf),
+        return [Parameter(f"{self.prefix}_{k}", 0.0, 0.0, np.inf) for k in ("up", "down", "up_amp", "down_amp")] + [
                 Parameter(f"{self.prefix}_lo", c["lo"]), Parameter(f"{self.prefix}_hi", c["hi"])]
 
     def start_candidates(self, data: HysteresisData, u: np.ndarray) -> list[dict]:
         """Start values tried before the fit (the best is kept): extra play up to 5 % of the command span."""
         x = data.column(self.column)
         scale = float(np.ptp(u)) / float(np.ptp(x))
-        return [{"up": 0.0, "down": 0.0}] + [{side: f * scale, other: 0.0} for side, other in (("up", "down"), ("down", "up"))
-                                             for f in (0.01, 0.05)]
+        amp = scale / max(float(np.max(np.abs(u))), 1e-9)
+        zero = {"up": 0.0, "down": 0.0, "up_amp": 0.0, "down_amp": 0.0}
+        return [zero] + [{**zero, side: f * s} for side, s in (("up", scale), ("down", scale), ("up_amp", amp),
+                                                                ("down_amp", amp)) for f in (0.01, 0.05)]
 
-    def _width(self, p: dict, data: HysteresisData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _parts(self, p: dict, data: HysteresisData) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Width at zero knob angle ``w0`` and its growth per knob degree ``w1`` (n,), and ``x - lo``, ``hi - x``."""
         x = data.column(self.column)
         above, below = x - p["lo"], p["hi"] - x
-        return np.maximum(p["up"] * above + p["down"] * below, 0.0), above, below
+        w0 = p["up"] * above + p["down"] * below
+        w1 = p.get("up_amp", 0.0) * above + p.get("down_amp", 0.0) * below
+        return w0, w1, above, below
 
     def apply(self, p: dict, u: np.ndarray, data: HysteresisData) -> np.ndarray:
         v, _, _ = self.apply_jac(p, u, data, np.zeros((len(u), 0)))
         return v
 
     def apply_jac(self, p: dict, u: np.ndarray, data: HysteresisData, M: np.ndarray):
-        w, above, below = self._width(p, data)
+        w0, w1, above, below = self._parts(p, data)
+        u = np.asarray(u, dtype=float)
+        M = np.asarray(M, dtype=float)
         q = M.shape[1]
+        prev = np.concatenate([u[:1], u[:-1]])
+        Mprev = np.concatenate([M[:1], M[:-1]])
+        a = np.abs(prev)
+        raw = w0 + w1 * a
+        w = np.maximum(raw, 0.0)
+        on = (raw >= 0.0).astype(float)  # the width is clipped at zero only for covariates beyond the fitted range
         zeros = np.zeros((w.size, 2))  # lo and hi are held fixed: no derivative needed
-        raw = p["up"] * above + p["down"] * below
-        active = raw >= 0.0  # the width is clipped at zero only for covariates beyond the fitted range
-        Wg = np.column_stack([np.zeros((w.size, q)), np.where(active, above, 0.0), np.where(active, below, 0.0), zeros])
+        Wg = np.column_stack([(on * w1 * np.sign(prev))[:, None] * Mprev, on * above, on * below,
+                              on * above * a, on * below * a, zeros])
         v, J = varplay_forward_jac(np.ascontiguousarray(u, dtype=float), w, Wg, np.ascontiguousarray(M, dtype=float),
                                    data.run_starts)
         return v, J[:, q:], J[:, :q]
 
     def invert(self, p: dict, v: np.ndarray, data: HysteresisData) -> np.ndarray:
-        w, _, _ = self._width(p, data)
-        return varplay_inverse(np.ascontiguousarray(v, dtype=float), w, data.run_starts)
+        w0, w1, _, _ = self._parts(p, data)
+        return loadplay_inverse(np.ascontiguousarray(v, dtype=float), w0, w1, data.run_starts)
 
     def wrap(self, inner: str) -> str:
         return f"loadplay({inner})"
 
     def describe(self, p: dict, se: dict) -> str:
         x = self.column
-        return (f"loadplay = load[up={fmt_value(p['up'], se.get('up'), 'deg')}*({x}-{p['lo']:.4g}), "
-                f"down={fmt_value(p['down'], se.get('down'), 'deg')}*({p['hi']:.4g}-{x})]")
+        def gain(side):
+            c = fmt_value(p[side], se.get(side), "deg")
+            d = p.get(f"{side}_amp", 0.0)
+            return c if d == 0.0 else f"({c} + {fmt_value(d, se.get(f'{side}_amp'), '')}*|u|)"
+
+        return f"loadplay = load[up={gain('up')}*({x}-{p['lo']:.4g}), down={gain('down')}*({p['hi']:.4g}-{x})]"
 
     def is_zero(self, p: dict) -> bool:
-        return p["up"] == 0.0 and p["down"] == 0.0
+        return all(p.get(k, 0.0) == 0.0 for k in ("up", "down", "up_amp", "down_amp"))

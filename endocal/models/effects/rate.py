@@ -2,18 +2,23 @@
 
 Coulomb friction of the tendon in its sheath rises with sliding speed (lubricant
 drag, stick-slip), so the drive lags the knob by more backlash the faster the knob
-turns. Modelled as an extra play on the command whose half width grows with the
-knob speed::
+turns. Capstan friction is proportional to the tendon tension, and the tension grows with
+the bend away from neutral, so the speed-dependent play is also wider at large knob
+angles (the simulator's ``mu_eff = mu (1 + gain |u̇|)`` acts on a tension ∝ bend). Modelled
+as an extra play on the command whose half width grows with the knob speed, and with
+the knob's distance from neutral::
 
-    w_k = g · ŝ_k,        ŝ_k = ŝ_{k-1} + (1 - exp(-Δt_k / T_s)) (|u̇_{k-1}| - ŝ_{k-1})
+    w_k = ŝ_k · (g + h · |u_{k-1}|),   ŝ_k = ŝ_{k-1} + (1 - exp(-Δt_k / T_s)) (|u̇_{k-1}| - ŝ_{k-1})
     v_k = clip(v_{k-1}, u_k - w_k, u_k + w_k)
 
-``g`` (``rate_gain_s``, seconds: deg of play per deg/s of knob speed) is fitted;
+``g`` (``rate_gain_s``, seconds: deg of play per deg/s of knob speed) and ``h``
+(``rate_amp_s_per_deg``: the same per degree of knob angle, i.e. the tension-proportional
+share) are fitted, both >= 0;
 ``ŝ`` is the knob speed (deg/s) from the commands up to the previous sample,
 smoothed over ``T_s`` (``speed_filter_s``, a setting: the servo's own smoothing of the
 knob speed). In steady motion the drive lags by ``g·|u̇|`` knob degrees; when the
 knob stops the play closes (the loop narrows back to the base's). Using only past
-speeds keeps the inverse explicit: the command that produces a desired drive
+speeds and angles keeps the inverse explicit: the command that produces a desired drive
 position is exact and causal, so the effect streams (given the sample period).
 """
 
@@ -66,7 +71,7 @@ def smoothed_speed(u, t, tau, M, run_starts):
 
 
 @njit(cache=True)
-def rate_inverse(v, t, g, tau, run_starts):
+def rate_inverse(v, t, g, h, tau, run_starts):
     """Commands whose rate play output is ``v`` (exact, causal: the width uses past commands only)."""
     n = v.shape[0]
     u = np.empty(n)
@@ -80,7 +85,7 @@ def rate_inverse(v, t, g, tau, run_starts):
         for k in range(a + 1, b):
             dt = t[k] - t[k - 1]
             sk = sk + (1.0 - math.exp(-dt / tau)) * (prev_r - sk)
-            w = g * sk
+            w = sk * (g + h * abs(u[k - 1]))
             if v[k] > v[k - 1]:
                 u[k] = v[k] + w
             elif v[k] < v[k - 1]:
@@ -99,8 +104,9 @@ class Rate(InputEffect):
     speed_filter_s : float
         Time constant ``T_s`` (s) smoothing the knob speed that sets the play's width.
 
-    Fitted parameter (prefix ``rate_``): ``gain_s`` (s), play half width per deg/s of
-    knob speed.
+    Fitted parameters (prefix ``rate_``): ``gain_s`` (s), play half width per deg/s of
+    knob speed; ``amp_s_per_deg`` (s/deg), the same per deg/s and per degree of knob angle
+    from neutral (friction ∝ tendon tension ∝ bend).
     """
 
     name = "rate"
@@ -113,7 +119,7 @@ class Rate(InputEffect):
     signature = ("residual proportional to knob speed with the sign of the motion, vanishing when the knob "
                  "stops; loops wider at high frequency than at low")
     protocol = "the same motion at several frequencies (a chirp, or slow and fast sines)"
-    units = {"gain_s": "s"}
+    units = {"gain_s": "s", "amp_s_per_deg": "s/deg"}
 
     def __init__(self, speed_filter_s: float = 0.1):
         if not (isinstance(speed_filter_s, (int, float)) and math.isfinite(speed_filter_s) and speed_filter_s > 0):
@@ -130,12 +136,19 @@ class Rate(InputEffect):
         # the inverse feeds its own command jumps back into the width: keep that loop gain below 1/2
         return 0.5 * self.speed_filter_s
 
+    def _amp_upper(self, u: np.ndarray) -> float:
+        # g + h |u| stays below 0.9 T_s over the fitted commands (inverse loop gain < 0.9)
+        return 0.4 * self.speed_filter_s / max(float(np.max(np.abs(u))), 1e-9)
+
     def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
-        return [Parameter(f"{self.prefix}_gain_s", 0.05 * self._upper(), 0.0, self._upper())]
+        return [Parameter(f"{self.prefix}_gain_s", 0.05 * self._upper(), 0.0, self._upper()),
+                Parameter(f"{self.prefix}_amp_s_per_deg", 0.05 * self._amp_upper(u), 0.0, self._amp_upper(u))]
 
     def start_candidates(self, data: HysteresisData, u: np.ndarray) -> list[dict]:
-        """Start values tried before the fit (the best is kept)."""
-        return [{"gain_s": f * self._upper()} for f in (0.02, 0.2, 0.6)]
+        """Start values tried before the fit (the best is kept): uniform play, or play growing with the angle."""
+        ha = self._amp_upper(u)
+        return ([{"gain_s": f * self._upper(), "amp_s_per_deg": 0.01 * ha} for f in (0.02, 0.2, 0.6)]
+                + [{"gain_s": 0.01 * self._upper(), "amp_s_per_deg": f * ha} for f in (0.2, 0.6)])
 
     def _speed(self, u, data, M):
         t = data.require_time("effect 'rate'")
@@ -147,18 +160,25 @@ class Rate(InputEffect):
         return v
 
     def apply_jac(self, p: dict, u: np.ndarray, data: HysteresisData, M: np.ndarray):
-        g = float(p["gain_s"])
+        g, h = float(p["gain_s"]), float(p.get("amp_s_per_deg", 0.0))
         s, D = self._speed(u, data, M)
-        Wg = np.column_stack([g * D, s])
-        v, J = varplay_forward_jac(np.ascontiguousarray(u, dtype=float), g * s, Wg,
+        u = np.asarray(u, dtype=float)
+        M = np.asarray(M, dtype=float)
+        # the angle of the previous sample (the width at a run's first sample is 0 anyway: ŝ = 0)
+        prev = np.concatenate([u[:1], u[:-1]])
+        Mprev = np.concatenate([M[:1], M[:-1]])
+        a = np.abs(prev)
+        gain = g + h * a
+        Wg = np.column_stack([gain[:, None] * D + (h * s * np.sign(prev))[:, None] * Mprev, s, s * a])
+        v, J = varplay_forward_jac(np.ascontiguousarray(u, dtype=float), gain * s, Wg,
                                    np.ascontiguousarray(M, dtype=float), data.run_starts)
         q = M.shape[1]
         return v, J[:, q:], J[:, :q]
 
     def invert(self, p: dict, v: np.ndarray, data: HysteresisData) -> np.ndarray:
         t = data.require_time("effect 'rate'")
-        return rate_inverse(np.ascontiguousarray(v, dtype=float), t, float(p["gain_s"]), self.speed_filter_s,
-                            data.run_starts)
+        return rate_inverse(np.ascontiguousarray(v, dtype=float), t, float(p["gain_s"]),
+                            float(p.get("amp_s_per_deg", 0.0)), self.speed_filter_s, data.run_starts)
 
     def stream_state(self, p: dict, dt_s: float | None = None) -> np.ndarray:
         if dt_s is None or not dt_s > 0:
@@ -172,8 +192,8 @@ class Rate(InputEffect):
             return v
         alpha, dt = state[5], state[6]
         state[4] += alpha * (state[3] - state[4])
-        w = float(p["gain_s"]) * state[4]
         u_prev = state[2]
+        w = state[4] * (float(p["gain_s"]) + float(p.get("amp_s_per_deg", 0.0)) * abs(u_prev))
         if v > state[1]:
             u = v + w
         elif v < state[1]:
@@ -191,4 +211,4 @@ class Rate(InputEffect):
         return f"rateplay = rate{self._bracket(p, se)[:-1]}, T_s={self.speed_filter_s:g} s (fixed)]"
 
     def is_zero(self, p: dict) -> bool:
-        return p["gain_s"] == 0.0
+        return p["gain_s"] == 0.0 and p.get("amp_s_per_deg", 0.0) == 0.0
