@@ -526,7 +526,7 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
     notes = _ambiguities(suspects, errs, alpha)
     notes += [f"{k}: {v}" for k, v in untestable.items()]
     if stride > 1:
-        notes.append(f"scanned every {stride}th sample ({d.n_samples} of {data.n_samples})")
+        notes.append(f"scanned 1 sample in {stride} ({d.n_samples} of {data.n_samples})")
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), folds, stride,
                       d.n_samples, alpha, min_gain_pct)
 
