@@ -17,15 +17,18 @@ def effects(
 
     Add effects to a model with ``endocal fit hysteresis ... --effects envelope,delay,load:sheath_wrap_deg``.
     """
-    from rich.table import Table
-
     from endocal.models.effects import catalog
 
     entries = catalog()
     if as_json:
         out.print_json(json.dumps({"effects": [e.to_dict() for e in entries]}))
         return
-    table = Table("effect", "kind", "physical cause", "signature in residuals", "excited by", "needs", show_lines=True)
+    # One block per effect: the texts are sentences, which a many-column table squeezes unreadably.
     for e in entries:
-        table.add_row(e.usage, e.kind, e.cause, e.signature, e.protocol, ", ".join(e.needs) or "-")
-    out.print(table)
+        out.print(f"[bold]{e.usage}[/] ({e.kind} term)")
+        out.print(f"  cause:      {e.cause}", markup=False)
+        out.print(f"  signature:  {e.signature}", markup=False)
+        out.print(f"  excited by: {e.protocol}", markup=False)
+        if e.needs:
+            out.print(f"  needs:      {', '.join(e.needs)}", markup=False)
+        out.print()
