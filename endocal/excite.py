@@ -11,6 +11,7 @@ flushed, and ``run.json`` records how the run ended.
 from __future__ import annotations
 
 import io
+import json
 import os
 import shutil
 import sys
@@ -69,6 +70,14 @@ class ExciteResult:
         return self.logged_s / self.wall_s if self.wall_s > 0 else float("inf")
 
 
+def _is_run_folder(path: Path) -> bool:
+    """True when ``path`` holds a ``run.json`` of the endocal run format."""
+    try:
+        return json.loads((path / RUN_JSON).read_text()).get("format") == FORMAT_NAME
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
 def prepare_output(out: Path, force: bool) -> None:
     """Check that ``out`` can become a new run folder (without creating it).
 
@@ -85,6 +94,9 @@ def prepare_output(out: Path, force: bool) -> None:
             raise OutputExistsError(f"output {out} already exists: choose a new --out or pass --force to replace it")
         if not out.is_dir():
             raise OutputPathError(f"output {out} exists and is not a folder: choose another --out")
+        if any(out.iterdir()) and not _is_run_folder(out):
+            # --force replaces runs, never an arbitrary folder (think `--out . --force`).
+            raise OutputPathError(f"output {out} is a non-empty folder that is not an endocal run: --force only replaces runs")
     parent = out.parent if str(out.parent) else Path(".")
     probe_dir = parent
     while not probe_dir.exists():

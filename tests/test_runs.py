@@ -208,3 +208,14 @@ def test_backend_that_fails_to_open_leaves_no_run_folder(tmp_path, tee):
         excite(tmp_path, tee, backend=backend)
     assert backend.closed == 1  # torque-off path runs even when open fails
     assert not (tmp_path / "run").exists()
+
+
+def test_force_never_deletes_a_folder_that_is_not_a_run(tmp_path, tee):
+    from endocal.errors import OutputPathError
+
+    precious = tmp_path / "run"
+    precious.mkdir()
+    (precious / "thesis.tex").write_text("years of work")
+    with pytest.raises(OutputPathError, match="not an endocal run"):
+        excite(tmp_path, tee, force=True)
+    assert (precious / "thesis.tex").read_text() == "years of work"
