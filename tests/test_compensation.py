@@ -60,3 +60,18 @@ def test_task_space_excite_plays_desired_angles_through_the_inverse(model, tmp_p
     # Same bar as the playback above: the tip follows the desired angle, not the knob.
     assert np.sqrt(np.mean(err**2)) <= 0.6
     one_line_error(endocal("excite", "triangle", "--model", tmp_path / "ap.json", "--model", tmp_path / "ap.json", "--out", tmp_path / "x"), "two --model files")
+
+
+def test_validate_protocol_cli_prints_metrics_and_uncompensated(model, tmp_path):
+    import json
+
+    from endocal.models import save_model
+    from endocal.validation.metrics import METRIC_KEYS
+
+    save_model(model, tmp_path / "ap.json")
+    proc = endocal("validate", tmp_path / "ap.json", "--protocol", "triangle", "--set", "amplitude_deg=30", "--json")
+    assert proc.returncode == 0, proc.stderr
+    d = json.loads(proc.stdout)
+    assert set(METRIC_KEYS) <= set(d["metrics"]) and set(METRIC_KEYS) <= set(d["uncompensated"])
+    assert d["metrics"]["rmse_deg"] < d["uncompensated"]["rmse_deg"] / 5
+    one_line_error(endocal("validate", tmp_path / "ap.json", "--protocol", "triangle", "--set", "amplitude_deg=80"), "range")

@@ -22,6 +22,7 @@ import numpy as np
 from endocal.errors import ModelError
 from endocal.excite import run_excitation
 from endocal.models.base import HysteresisModel
+from endocal.planes.from_runs import compensate_trajectory
 from endocal.probe import ProbeConfig
 from endocal.protocols import Protocol, Trajectory
 from endocal.runs.aligned import load_aligned
@@ -73,11 +74,6 @@ class PlaybackResult:
 PREROLL_S = 2.0
 
 
-def _with_goal(traj: Trajectory, dof: str, goal: np.ndarray, preroll_s: float = PREROLL_S) -> Trajectory:
-    """A copy of ``traj`` whose ``dof`` follows ``goal``, after a pre-roll of ``preroll_s``."""
-    return _with_goals(traj, {dof: goal}, preroll_s)
-
-
 def _with_goals(traj: Trajectory, new_goals: dict, preroll_s: float = PREROLL_S) -> Trajectory:
     """A copy of ``traj`` whose DoFs in ``new_goals`` follow them, after a pre-roll of ``preroll_s``.
 
@@ -116,26 +112,6 @@ def slew_limit(cmd_deg: np.ndarray, t_s: np.ndarray, max_speed_dps: float) -> np
     return out
 
 
-def compensated_commands(
-    model: HysteresisModel, traj: Trajectory, probe: ProbeConfig, axis: str, planes=None
-) -> np.ndarray:
-    """Knob commands (deg) for ``axis`` so that the tip follows ``traj``'s desired angles.
-
-    With ``planes`` the desired standard-plane angles of both axes first go through the
-    orthogonal compensator (duodenoscope eqs. 3-4), then through the inverse hysteresis
-    model of ``axis`` (duodenoscope eqs. 9-11 for ``pi``; numerical for the others).
-    """
-    desired = traj.goal[axis]
-    if planes is not None:
-        first, second = probe.bending_axes
-        comp_first, comp_second = planes.compensate(traj.goal[first], traj.goal[second])
-        desired = comp_first if axis == first else comp_second
-    other = probe.bending_axes[1] if axis == probe.bending_axes[0] else probe.bending_axes[0]
-    cmd = np.asarray(model.inverse(desired, t_s=traj.t_s, extras={"other_cmd_deg": traj.goal[other]}), float)
-    # 0.99: stay strictly inside the speed limit that check_limits enforces.
-    return slew_limit(cmd, traj.t_s, 0.99 * probe.max_knob_speed_dps)
-
-
 def task_space_trajectory(traj: Trajectory, probe: ProbeConfig, models: dict, planes=None) -> Trajectory:
     """Knob goals that make the tip follow ``traj``'s goals read as desired bending angles.
 
@@ -153,14 +129,14 @@ def task_space_trajectory(traj: Trajectory, probe: ProbeConfig, models: dict, pl
     for axis in models:
         if axis not in probe.bending_axes:
             raise ModelError(f"a model is for axis {axis!r}, but probe '{probe.name}' has {', '.join(probe.bending_axes)}")
-    first, second = probe.bending_axes
-    desired = {first: traj.goal[first], second: traj.goal[second]}
     if planes is not None:
-        desired[first], desired[second] = (np.asarray(g, float) for g in planes.compensate(desired[first], desired[second]))
-    goals = dict(desired)
+        traj = compensate_trajectory(traj, probe, planes)
+    first, second = probe.bending_axes
+    goals = {}
     for axis, model in models.items():
         other = second if axis == first else first
-        cmd = np.asarray(model.inverse(desired[axis], t_s=traj.t_s, extras={"other_cmd_deg": desired[other]}), float)
+        cmd = np.asarray(model.inverse(traj.goal[axis], t_s=traj.t_s, extras={"other_cmd_deg": traj.goal[other]}), float)
+        # 0.99: stay strictly inside the speed limit that check_limits enforces.
         goals[axis] = slew_limit(cmd, traj.t_s, 0.99 * probe.max_knob_speed_dps)
     return _with_goals(traj, goals)
 
@@ -211,9 +187,9 @@ def validate_on_backend(
         )
     proto = protocol.with_overrides({"axes": [axis]}) if "axes" in protocol.params else protocol
     desired_traj = proto.trajectory(probe, seed=seed)
-    command = compensated_commands(model, desired_traj, probe, axis, planes)
-    comp_traj = _with_goal(desired_traj, axis, command)
-    uncomp_traj = _with_goal(desired_traj, axis, desired_traj.goal[axis])
+    comp_traj = task_space_trajectory(desired_traj, probe, {axis: model}, planes)
+    command = comp_traj.goal[axis][comp_traj.t_s >= PREROLL_S - 1e-9]  # the protocol's samples, after the pre-roll
+    uncomp_traj = _with_goals(desired_traj, {})
     comp_traj.check_limits(probe)  # both refused before anything moves
     uncomp_traj.check_limits(probe)
 
