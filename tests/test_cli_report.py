@@ -45,7 +45,8 @@ def _table(path, seed, cycles=6, rate_hz=20.0, period_s=10.0):
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     root = tmp_path_factory.mktemp("cli_report")
-    a, b = _table(root / "a.csv", 1), _table(root / "b.csv", 2)
+    a = _table(root / "a.csv", 1)
+    _table(root / "b.csv", 2)  # a second record for the tests that read it
     data = axis_data(load_aligned(a), "ap")
     for base in ("linear", "bspline"):
         save_model(make_model(base, axis="ap").fit(data), root / f"{base}.json")

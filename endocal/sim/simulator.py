@@ -28,7 +28,7 @@ import numpy as np
 from endocal.backends.base import StreamChunk, motor_columns
 from endocal.errors import ConfigError, LimitError, ProtocolError
 from endocal.kinematics import bending_angles_deg, tip_pose_in_base
-from endocal.probe import ROTATION, TRANSLATION, ProbeConfig
+from endocal.probe import ProbeConfig
 from endocal.sim import tendon
 from endocal.sim.config import SimConfig
 from endocal.sim.tracker import empty_frames, frame_indices, sensor_frames

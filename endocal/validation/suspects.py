@@ -457,9 +457,9 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
         for name in EFFECTS:
             if takes_column(name):
                 if load_columns is None:
-                    cols, constant = load_candidates(d, bending_axes)
+                    cols, _constant = load_candidates(d, bending_axes)
                 else:
-                    cols, constant = list(load_columns), []
+                    cols = list(load_columns)
                 cols = [c for c in cols if f"{name}:{c}" not in have]
                 if not cols:
                     untestable[name] = (f"no varying extra column: {name} cannot be identified "
