@@ -26,6 +26,7 @@ import numpy as np
 from endocal.errors import ModelError, OutputPathError
 from endocal.models.base import FitReport, HysteresisModel
 from endocal.models.effects import EFFECTS
+from endocal.runs.format import atomic_write_bytes
 
 FORMAT = "endocal-model"
 VERSION = 1
@@ -149,7 +150,7 @@ def save_model(model: HysteresisModel, path, provenance: dict | None = None) -> 
         d["provenance"] = prov
     text = json.dumps(d, indent=2, allow_nan=False)
     try:
-        Path(path).write_text(text + "\n")
+        atomic_write_bytes(Path(path), (text + "\n").encode())
     except OSError as exc:
         raise OutputPathError(f"cannot write model file {path}: {exc.strerror or exc}") from None
 

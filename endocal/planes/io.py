@@ -12,13 +12,12 @@ i.e. the header plus :meth:`PlanesCalibration.to_json`. Later commands take it w
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 
 from endocal.errors import ModelError, OutputExistsError, OutputPathError
 from endocal.planes.calibration import PlanesCalibration
 from endocal.planes.halfplanes import CalibrationError
+from endocal.runs.format import atomic_write_bytes
 
 FORMAT = "endocal-planes"
 VERSION = 1
@@ -77,10 +76,7 @@ def save_planes(calibration: PlanesCalibration, path: str | Path, *, force: bool
     text = json.dumps(planes_to_dict(calibration), indent=2, allow_nan=False) + "\n"
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
+        atomic_write_bytes(path, text.encode())
     except OSError as exc:
         raise OutputPathError(f"cannot write {path}: {exc.strerror or exc}") from None
     return path
