@@ -69,6 +69,13 @@ def test_report_writes_html_json_csv_and_prints_the_summary(files):
     assert held["best"] == "bspline" and held["significant"] is True
     assert held["sentence"] in res.stdout
     assert saved["provenance"]["command"].startswith("endocal ")
+    # the ladder refits each structure on rolling-origin folds of each record: the curve and the
+    # backlash are real, so bspline's held-out error is well below linear's, significantly
+    for data in ("a", "b"):
+        lin, bsp = [s for s in saved["ladder"] if s["data"] == data]
+        assert (lin["model"], bsp["model"]) == ("linear", "bspline")
+        assert bsp["heldout_rmse_deg"] < 0.8 * lin["heldout_rmse_deg"] and bsp["significant"] is True
+    assert "ladder b, ap (held-out RMSE deg" in res.stdout
 
 
 def test_json_output_carries_the_same_numbers(files):

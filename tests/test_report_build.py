@@ -15,12 +15,16 @@ import pytest
 
 from endocal.errors import ModelError, OutputExistsError, RunFormatError
 from endocal.models import load_model, make_model, save_model
-from endocal.planes import PlanesCalibration
+from endocal.planes import load_planes
+from endocal.planes.from_runs import segment_runs
 from endocal.report import build_report
+from endocal.report import figures as F
+from endocal.report.ladder import FOLDS, MAX_CV_SAMPLES
 from endocal.runs.aligned import load_aligned
-from endocal.validation.data import axis_data
+from endocal.validation.data import axis_data, prefix
 from endocal.validation.metrics import error_metrics
-from endocal.validation.offline import validate_offline
+from endocal.validation.offline import predict_clamped, validate_offline
+from endocal.validation.suspects import effect_labels, fold_bounds, heldout_errors
 from tests.test_cli_excite import endocal
 
 
@@ -44,26 +48,28 @@ def sim(tmp_path_factory):
     ml = axis_data(load_aligned(root / "mlrun"), "ml").decimate(5)
     paths["ml_linear"] = root / "ml_linear.json"
     save_model(make_model("linear", axis="ml").fit(ml), paths["ml_linear"])
+    # bending planes: one sweep per half-plane, then the same protocol through the compensator
+    # and the refit that measures the residuals (`fit planes RUN --after AFTER`)
+    cal = root / "cal"
+    for args in (("excite", "planes", "--set", "repetitions=1", "--out", cal / "planes", "--seed", "1", "--quiet"),
+                 ("fit", "planes", cal / "planes", "--out", cal / "before.json", "--bootstrap", "10"),
+                 ("excite", "planes", "--set", "repetitions=1", "--planes", cal / "before.json", "--out", cal / "after",
+                  "--seed", "5", "--quiet"),
+                 ("fit", "planes", cal / "planes", "--after", cal / "after", "--out", cal / "planes.json",
+                  "--bootstrap", "10")):
+        proc = endocal(*args)
+        assert proc.returncode == 0, proc.stderr
+    paths["planes"] = cal / "planes.json"
     return root, paths
 
 
 @pytest.fixture(scope="module")
 def report(sim):
     root, p = sim
-    planes = PlanesCalibration(
-        deviation_deg={"y+": 12.7, "y-": 20.2, "x+": 2.3, "x-": 15.6},
-        deviation_ci_deg={h: (v - 0.4, v + 0.4) for h, v in {"y+": 12.7, "y-": 20.2, "x+": 2.3, "x-": 15.6}.items()},
-        deviation_signed_deg={"y+": -12.7, "y-": 20.2, "x+": 2.3, "x-": -15.6},
-        deviation_signed_ci_deg={"y+": (-13.1, -12.3), "y-": (19.8, 20.6), "x+": (1.9, 2.7), "x-": (-16.0, -15.2)},
-        tilt_deg=dict.fromkeys(("y+", "y-", "x+", "x-"), 0.0), offset_deg=dict.fromkeys(("y+", "y-", "x+", "x-"), 0.0),
-        delta_deg=1.0, delta_ci_deg=(0.5, 1.5),
-        residual_deviation_deg={"y+": 0.3, "y-": 0.5, "x+": 0.2, "x-": 0.4},
-        residual_deviation_signed_deg={"y+": 0.3, "y-": -0.5, "x+": 0.2, "x-": -0.4},
-        residual_source="cross-validated")
     steps = []
     rep = build_report([p["linear"], p["pi_env"], p["ml_linear"]], [root / "fit", root / "held", root / "mlrun"],
-                       planes=planes, out=root / "out" / "report.html", regime_boot=0,
-                       progress=lambda step, done, total: steps.append((done, total)))
+                       planes=p["planes"], out=root / "out" / "report.html", regime_boot=0,
+                       progress=lambda step, done, total: steps.append((done, total, step)))
     return rep, steps
 
 
@@ -79,6 +85,9 @@ def test_summary_numbers_equal_validate_and_error_metrics(sim, report):
     model, ev = load_model(p["linear"]), g.evaluation("linear")
     validated = validate_offline(model, [aligned])  # linear: its effect scan is the quickest
     assert ev.metrics.to_dict() == validated.metrics.to_dict()
+    # the ladder's held-out RMSE is the one validate prints (same folds, same decimation, same refits)
+    step = next(s for s in rep.ladder if s["data"] == "held" and s["model"] == "linear")
+    assert step["heldout_rmse_deg"] == validated.scan.baseline_rmse_heldout_deg
     assert [r.metrics.rmse_deg for r in ev.regimes.regimes] == [r.metrics.rmse_deg for r in validated.regimes.regimes]
     # the summary quotes exactly these numbers
     f = g.finding
@@ -113,6 +122,10 @@ def test_identical_models_show_no_significant_difference(sim, tmp_path):
     assert g.comparison.p_value == 1.0 and g.comparison.effect_size == 0.0
     assert g.finding.significant is False and "not significant" in g.finding.sentence
     assert g.finding.margin_deg == 0.0
+    # the ladder refits both the same way: same held-out errors, no change, nothing significant
+    a, b = rep.ladder
+    assert a["heldout_rmse_deg"] == b["heldout_rmse_deg"] and b["change_pct"] == 0.0
+    assert b["p_value"] == 1.0 and b["significant"] is False
 
 
 def test_every_figure_present_nonempty_and_page_self_contained(sim, report):
@@ -132,6 +145,8 @@ def test_every_figure_present_nonempty_and_page_self_contained(sim, report):
     assert not re.search(r'(src|href)="(https?:)?//', html) and "<script" not in html
     assert "@media print" in html
     assert steps and steps[-1][0] == steps[-1][1]  # progress reached its total
+    assert [d for d, _, _ in steps] == sorted(d for d, _, _ in steps)  # and never went back
+    assert any(step.startswith("ladder:") for _, _, step in steps)  # the cross-validation is the long part
 
 
 def test_nothing_dropped_silently(report, sim):
@@ -164,3 +179,88 @@ def test_bad_inputs_are_domain_errors(sim, tmp_path):
     with pytest.raises(OutputExistsError):
         build_report([p["linear"]], [root / "held"], out=out, n_boot=0, regime_boot=0)
     assert out.read_text() == "keep" and not (tmp_path / "report.json").exists()
+
+
+def test_ladder_heldout_equals_a_direct_rolling_origin_computation(sim, report):
+    root, p = sim
+    rep, _ = report
+    hd = axis_data(load_aligned(root / "held"), "ap")
+    stride = -(-hd.n_samples // MAX_CV_SAMPLES)
+    d = hd.decimate(stride) if stride > 1 else hd
+    bounds = fold_bounds(d.n_samples, FOLDS)
+    for label in ("linear", "pi_env"):
+        model = load_model(p[label])
+        err, fitted = heldout_errors(model, effect_labels(model), d, bounds)
+        train = np.concatenate([predict_clamped(m, prefix(d, a))[0] - d.meas_deg[:a] for m, (a, _) in zip(fitted, bounds)])
+        step = next(s for s in rep.ladder if s["data"] == "held" and s["model"] == label)
+        assert step["heldout_rmse_deg"] == pytest.approx(np.sqrt(np.mean(err**2)), rel=1e-12)
+        assert step["train_rmse_deg"] == pytest.approx(np.sqrt(np.mean(train**2)), rel=1e-12)
+        assert step["stride"] == stride and step["n_samples"] == d.n_samples and step["folds"] == FOLDS
+        lo, hi = step["heldout_ci"]
+        assert lo <= step["heldout_rmse_deg"] <= hi
+        # the model file's own numbers stay beside them
+        assert step["file_rmse_deg"] == rep.group("held", "ap").evaluation(label).metrics.rmse_deg
+
+
+def test_ladder_falls_where_the_effect_is_real(report):
+    rep, _ = report
+    for data in ("fit", "held"):
+        lin, env = [s for s in rep.ladder if s["data"] == data and s["axis"] == "ap"]
+        assert (lin["step"], env["step"]) == ("linear", "pi+envelope")
+        # the simulated tendon stiffens with the bend: a straight line cannot follow it, the
+        # envelope can. The file models already differ by > 20 % (see above); refitted on
+        # half a record the gap must survive held out, and be significant.
+        assert env["change_pct"] < -20 and env["significant"] is True and env["p_adjusted"] < 0.05
+        # the triangle drive is stationary, so the held-out blocks are like the training data and
+        # the only systematic difference is the fit's optimism on the samples it was fitted to
+        for s in (lin, env):
+            assert s["train_rmse_deg"] < s["heldout_rmse_deg"]
+    assert any(line.startswith("ladder held, ap") and "-> pi+envelope" in line for line in rep.summary_lines())
+
+
+def test_planes_figure_scatters_every_measured_sweep_sample(sim, report):
+    root, p = sim
+    rep, _ = report
+    cal = load_planes(p["planes"])
+    view = rep.planes_view
+    assert cal.residual_source == "measured"
+    # before: exactly the frames the planes file says it was fitted on, from the run it names
+    recorded = sum(s["frames"] for s in cal.sweeps_used)
+    assert view.before.n_points == recorded and view.before.runs == [str(root / "cal" / "planes")]
+    # after: the compensated run, found because its refit reproduces the recorded residuals
+    seg_after, _ = segment_runs([root / "cal" / "after"], compensated=True)
+    assert view.after.n_points == sum(len(s.t_s) for s in seg_after.sweeps) > 0
+    assert view.after.runs == [str(root / "cal" / "after")]
+    seg, _ = segment_runs([root / "cal" / "planes"])
+    first = next(s for s in seg.sweeps if s.half_plane == "y+")
+    assert np.array_equal(view.before.tip_xy_mm["y+"][: len(first.t_s)], first.tip_in_base_mm[:, :2])
+    # the drawn figure scatters them all, one point per sample
+    fig = F.planes_figure(view.before.tip_xy_mm, view.after.tip_xy_mm, cal.deviation_signed_deg,
+                          cal.deviation_signed_ci_deg, cal.residual_deviation_signed_deg,
+                          {"y+": 90.0, "y-": -90.0, "x+": 0.0, "x-": 180.0}, ("before", "after"), "planes",
+                          offset_line=True)
+    before_ax, after_ax = fig.axes
+    assert sum(len(c.get_offsets()) for c in before_ax.collections) == recorded
+    assert sum(len(c.get_offsets()) for c in after_ax.collections) == view.after.n_points
+    # and the report's JSON says so
+    saved = json.loads((root / "out" / "report.json").read_text())["planes_sweeps"]
+    assert saved["before"]["n_points"] == recorded == saved["recorded_frames"]
+    assert saved["after"]["n_points"] == view.after.n_points and saved["notes"] == []
+    fig_meta = next(f for f in rep.figures if f.id == "planes")
+    assert "measured" in fig_meta.caption and "fitted geometry only" not in fig_meta.title
+
+
+def test_planes_without_their_runs_say_so(sim, tmp_path):
+    root, p = sim
+    alone = tmp_path / "planes.json"
+    shutil.copy(p["planes"], alone)
+    rep = build_report([p["linear"]], [root / "held"], planes=alone, out=tmp_path / "r.html", n_boot=0, regime_boot=0)
+    assert rep.planes_view.before is None and rep.planes_view.after is None
+    assert any("run folder(s) planes named in" in n and "were not found" in n for n in rep.notes)
+    assert any("does not name the runs" in n for n in rep.notes)
+    fig = next(f for f in rep.figures if f.id == "planes")
+    assert fig.title.endswith("(fitted geometry only)")
+    html = (tmp_path / "r.html").read_text()
+    assert "were not found" in html and "(fitted geometry only)" in html
+    saved = json.loads((tmp_path / "report.json").read_text())["planes_sweeps"]
+    assert saved["before"] is None and saved["after"] is None

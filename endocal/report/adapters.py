@@ -11,7 +11,7 @@ error metrics (:func:`endocal.validation.metrics.error_metrics`), the error by r
 from __future__ import annotations
 
 from endocal.validation.data import axis_data
-from endocal.validation.offline import _predict as predict_clamped
+from endocal.validation.offline import predict_clamped
 from endocal.validation.regimes import Regime, RegimeBreakdown, error_by_regime, turning_points
 
 __all__ = ["Regime", "RegimeBreakdown", "axis_data", "error_by_regime", "predict_clamped", "turning_points"]

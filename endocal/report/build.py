@@ -21,7 +21,9 @@ from endocal.models.data import OTHER_CMD
 from endocal.planes import PlanesCalibration, load_planes
 from endocal.planes.halfplanes import NOMINAL_AZIMUTH_DEG
 from endocal.report import figures as F
-from endocal.report.evaluate import DataEntry, Group, ModelEntry, Progress, evaluate, load_inputs
+from endocal.report.evaluate import DataEntry, Group, Progress, evaluate, load_inputs
+from endocal.report.ladder import ladder_size, model_ladder
+from endocal.report.planes import PlanesView, planes_view
 from endocal.report.result import Report, ReportFigure, check_output
 from endocal.runs.aligned import read_stream
 from endocal.runs.format import TRACKER, sha256_of, software_versions, utc_now
@@ -29,47 +31,6 @@ from endocal.runs.format import TRACKER, sha256_of, software_versions, utc_now
 
 def _slug(*parts: str) -> str:
     return "-".join(re.sub(r"[^A-Za-z0-9]+", "_", p).strip("_") for p in parts)
-
-
-def model_ladder(models: list[ModelEntry], groups: list[Group]) -> list[dict]:
-    """Steps of the model ladder: per axis, the models ordered by number of effects, scored on each record.
-
-    Models of one base come together (``pi``, ``pi+envelope``, ``pi+envelope+rate``...), bases
-    in the order first given; within a base, fewer effects first. Each step carries the
-    RMSE, its 95 % interval and whether the record was in the model's training data (then
-    the step is in-sample, not held out).
-
-    Returns
-    -------
-    list of dict with ``axis``, ``model``, ``step`` (name drawn on the axis), ``base``,
-    ``n_effects``, ``data``, ``rmse_deg``, ``ci``, ``in_sample``, ``change_pct`` (against the
-    previous step of the same base on the same record, None for the first).
-    """
-    steps = []
-    for axis in dict.fromkeys(m.axis for m in models):
-        ms = [m for m in models if m.axis == axis]
-        bases = list(dict.fromkeys(m.base for m in ms))
-        given = {m.label: i for i, m in enumerate(ms)}
-        ms = sorted(ms, key=lambda m: (bases.index(m.base), len(m.effects), given[m.label]))
-        names = [m.name for m in ms]
-        unique = len(set(names)) == len(names)
-        for g in (g for g in groups if g.axis == axis):
-            prev: dict[str, float] = {}
-            for m in ms:
-                try:
-                    e = g.evaluation(m.label)
-                except KeyError:
-                    continue
-                ci = e.metrics.ci.get("rmse_deg")
-                before = prev.get(m.base)
-                steps.append({
-                    "axis": axis, "model": m.label, "step": m.name if unique else m.label, "base": m.base,
-                    "n_effects": len(m.effects), "data": g.data, "rmse_deg": e.metrics.rmse_deg,
-                    "ci": None if ci is None else [ci[0], ci[1]], "in_sample": e.in_sample,
-                    "change_pct": None if before is None or before == 0 else 100.0 * (e.metrics.rmse_deg - before) / before,
-                })
-                prev[m.base] = e.metrics.rmse_deg
-    return steps
 
 
 def _other_axis(g: Group) -> tuple[str, np.ndarray] | None:
@@ -89,6 +50,40 @@ def _tip_path(d: DataEntry) -> np.ndarray:
     return tip_in_base_mm
 
 
+def _planes_job(view: PlanesView) -> tuple[ReportFigure, callable]:
+    """The bending-plane figure, titled and captioned for what was measured and what is only fitted."""
+    cal = view.calibration
+    b, a = view.before, view.after
+    if b is not None:
+        t0 = f"before compensation: measured, {b.n_points} tip points of {len(b.sweeps)} sweeps"
+    else:
+        t0 = "before compensation: FITTED planes only (measured sweeps not found)"
+    if a is not None:
+        t1 = f"after compensation: measured, {a.n_points} tip points of {len(a.sweeps)} sweeps"
+    else:
+        t1 = (f"after compensation: NOT measured ({cal.residual_source} prediction)"
+              if cal.residual_source != "measured" else "after compensation: recorded residuals, runs not found")
+    measured = [x for x in (b, a) if x is not None]
+    src = "; ".join(f"{x.phase}: {', '.join(x.runs)}" for x in measured)
+    caption = ("Looking down the probe axis (duodenoscope paper, fig. 8): the tip positions of the single-knob sweeps "
+               "in the base sensor's frame, projected on its x-y plane, per half-plane (dots); solid lines: each "
+               "half-plane's fitted trace (before: fitted deviation, wedge: 95 % interval; after: the residual "
+               f"deviation, {cal.residual_source})"
+               + (", drawn through the points' centroid: the fitted direction (bend-line model) need not pass "
+                  "through the probe axis when the other knob keeps a residual bend" if cal.model == "bend_line" else "")
+               + "; dashed: the standard planes. "
+               + (f"Measured points from {src}." if measured else "")
+               + ("" if b is not None and a is not None else
+                  " A panel without dots shows fitted geometry only, no measurement: see the notes above."))
+    title = "Bending planes before and after orthogonal compensation"
+    if b is None:
+        title += " (fitted geometry only)"
+    return (ReportFigure("planes", "planes", title, caption, b""),
+            lambda: F.planes(None if b is None else b.tip_xy_mm, None if a is None else a.tip_xy_mm,
+                             cal.deviation_signed_deg, cal.deviation_signed_ci_deg, cal.residual_deviation_signed_deg,
+                             NOMINAL_AZIMUTH_DEG, (t0, t1), title, offset_line=cal.model == "bend_line"))
+
+
 def build_report(
     models: Sequence,
     datas: Sequence,
@@ -101,6 +96,8 @@ def build_report(
     seed: int = 0,
     progress: Progress | None = None,
     command: str | None = None,
+    folds: int = 5,
+    planes_runs: Sequence[str | Path] = (),
 ) -> Report:
     """Evaluate and compare models on records and build the report (optionally writing it).
 
@@ -125,6 +122,12 @@ def build_report(
         ``progress(step, done, total)``.
     command : str, optional
         The command line, recorded in the provenance.
+    folds : int
+        Held-out blocks of the model ladder's rolling-origin cross-validation (``validate``'s
+        default, so the held-out RMSE equals the one it prints).
+    planes_runs : sequence of path
+        Where else to look for the planes runs (run folders or folders holding them) besides
+        the planes file's folder and the records' folders (see :mod:`endocal.report.planes`).
 
     Returns
     -------
@@ -154,20 +157,30 @@ def build_report(
             return None
         return lambda step, done, _n: progress(step, offset + done, total)
 
+    # the total grows as the work becomes known: evaluations, then ladder rungs (at most one
+    # per evaluation), then figures
     n_eval = sum(1 for d in data_entries for m in model_entries if m.axis in d.aligned.axes)
     n_groups = sum(1 for d in data_entries for a in d.aligned.axes if any(m.axis == a for m in model_entries))
     n_fig_est = 5 * n_groups + len(model_entries) + 2 + (planes is not None)
-    total = n_eval + n_fig_est
-    groups, skipped = evaluate(model_entries, data_entries, n_boot=n_boot, regime_boot=regime_boot, seed=seed, progress=stage(0, total))
+    groups, skipped = evaluate(model_entries, data_entries, n_boot=n_boot, regime_boot=regime_boot, seed=seed,
+                               progress=stage(0, 2 * n_eval + n_fig_est))
     if not groups:
         reasons = "; ".join(f"{s.model} on {s.data}: {s.reason}" for s in skipped)
         raise RunFormatError(f"no model could be evaluated on any record ({reasons})")
+    n_rungs = ladder_size(model_entries, groups)
+    ladder = model_ladder(model_entries, groups, folds=folds, n_boot=n_boot, seed=seed,
+                          progress=stage(n_eval, n_eval + n_rungs + n_fig_est))
+    n_done = n_eval + n_rungs
 
     colors = F.palette([m.label for m in model_entries])
     data_colors = F.palette([d.label for d in data_entries])
-    ladder = model_ladder(model_entries, groups)
     figs: list[ReportFigure] = []
     notes: list[str] = []
+    view: PlanesView | None = None
+    if cal is not None:
+        places = [Path(d.aligned.source).parent for d in data_entries] + [Path(p) for p in planes_runs]
+        view = planes_view(cal, planes_path, places=places)
+        notes += view.notes
     jobs: list[tuple[str, callable]] = []
 
     for g in groups:
@@ -204,14 +217,16 @@ def build_report(
              lambda g=g, head=head: F.regimes({e.model: e.regimes for e in g.evaluations}, colors, head)),
         ]
     for axis in dict.fromkeys(s["axis"] for s in ladder):
-        steps = [s for s in ladder if s["axis"] == axis]
+        steps = [dict(s, model=s["step"]) for s in ladder if s["axis"] == axis]
         if len({s["model"] for s in steps}) >= 2:
             jobs.append((ReportFigure(f"ladder-{_slug(axis)}", "ladder", f"Model ladder, axis {axis}",
-                                      "RMSE of each model ordered by its number of effects (base, base+effect, ...), "
-                                      "per record, with 95 % block-bootstrap intervals. Filled: held-out record; "
-                                      "hollow: the model was fitted on this record (in-sample).", b""),
-                         lambda steps=[dict(s, model=s["step"]) for s in steps]: F.ladder(steps, data_colors,
-                                                                                        f"Model ladder, axis {axis}")))
+                                      f"Each model structure (base, base+effect, ...) refitted on the first half of "
+                                      f"each record and on every rolling origin after it ({folds} folds, as `endocal "
+                                      "validate` does): solid, held-out RMSE of the blocks it was not fitted on, with "
+                                      "95 % block-bootstrap intervals; dashed, hollow: in-sample RMSE of the same fits "
+                                      "on their training data. Stars: the step's held-out gain over the previous "
+                                      "step is significant (one-sided paired test, Holm).", b""),
+                         lambda steps=steps, axis=axis: F.ladder(steps, data_colors, f"Model ladder, axis {axis}")))
     for m in model_entries:
         fixed = getattr(m.model, "fixed_", {})
         params = {n: (float(v), None if not np.isfinite(m.model.stderr_[n]) else float(m.model.stderr_[n]), n in fixed)
@@ -220,15 +235,8 @@ def build_report(
                                   "Each parameter with its 95 % interval (1.96 standard errors from the fit's "
                                   "Jacobian), relative to its estimate; red: the interval includes zero.", b"", m.label),
                      lambda m=m, params=params: F.parameters(params, f"{m.label} ({m.axis}): {m.name}", colors[m.label])))
-    if cal is not None:
-        jobs.append((ReportFigure("planes", "planes", "Bending planes before and after orthogonal compensation",
-                                  "Single-knob sweeps of the four half-planes seen from the base (duodenoscope paper, "
-                                  "fig. 8): before compensation each leaves along its fitted deviation (wedge: 95 % "
-                                  "interval); after, along the residual deviation "
-                                  f"({cal.residual_source}). Dashed: the standard planes.", b""),
-                     lambda: F.planes(cal.deviation_signed_deg, cal.deviation_signed_ci_deg,
-                                      cal.residual_deviation_signed_deg, NOMINAL_AZIMUTH_DEG,
-                                      "Bending planes (deviation angles, deg)")))
+    if view is not None:
+        jobs.append(_planes_job(view))
     paths = {}
     for d in data_entries:
         try:
@@ -240,10 +248,10 @@ def build_report(
                                   "Measured tip position in the base sensor's frame (EM tracker), per record.", b""),
                      lambda: F.tip_paths(paths, "Tip trajectories in the base frame")))
 
-    total = n_eval + len(jobs)
+    total = n_done + len(jobs)
     for k, (fig, draw) in enumerate(jobs, start=1):
         if progress:
-            progress(f"figure: {fig.title}", n_eval + k, total)
+            progress(f"figure: {fig.title}", n_done + k, total)
         fig.png = draw()
         figs.append(fig)
 
@@ -253,6 +261,7 @@ def build_report(
         "created_utc": utc_now(),
         "command": command,
         "bootstrap": {"n_boot": n_boot, "regime_boot": regime_boot, "seed": seed, "confidence": 0.95},
+        "ladder_cv": {"scheme": "rolling-origin blocked (endocal validate's)", "folds": folds},
         "models": [{"label": m.label, "path": None if m.path is None else str(m.path), "sha256": m.sha256,
                     "axis": m.axis, "model": m.name,
                     "training_data": list(getattr(m.model, "training_data_", []) or [])} for m in model_entries],
@@ -260,7 +269,7 @@ def build_report(
         "planes": None if cal is None else {"path": None if planes_path is None else str(planes_path),
                                             "sha256": None if planes_path is None else sha256_of(planes_path)},
     }
-    report = Report(model_entries, data_entries, groups, skipped, ladder, figs, cal, provenance, notes)
+    report = Report(model_entries, data_entries, groups, skipped, ladder, figs, cal, provenance, notes, view)
     if out is not None:
         report.write(out, force=force)
     return report

@@ -13,6 +13,7 @@ import io
 from collections.abc import Mapping, Sequence
 
 import numpy as np
+from matplotlib import patheffects
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
@@ -222,38 +223,48 @@ def regimes(rows: Mapping[str, object], colors: Mapping[str, str], title: str) -
 
 
 def ladder(steps: Sequence[dict], colors_by_data: Mapping[str, str], title: str) -> bytes:
-    """The model ladder: RMSE of base, base+effect, ... for each record, with 95 % intervals.
+    """The model ladder: held-out and in-sample RMSE of base, base+effect, ... on each record.
 
     Parameters
     ----------
     steps : sequence of dict
-        Keys ``model`` (x label, in ladder order), ``data``, ``rmse_deg``, ``ci`` ((lo, hi) or
-        None) and ``in_sample`` (hollow marker: fitted on this record, not held out).
+        From :func:`endocal.report.ladder.model_ladder`, with ``model`` the x label (in ladder
+        order): ``data``, ``heldout_rmse_deg`` (None: not cross-validated), ``heldout_ci``,
+        ``train_rmse_deg`` and ``p_adjusted`` / ``significant`` of the step's held-out gain.
     colors_by_data : mapping of record label to colour
     """
     order: list[str] = []
     for s in steps:
         if s["model"] not in order:
             order.append(s["model"])
-    fig = _new(max(5.0, 1.5 * len(order) + 2.5), 4.2)
+    fig = _new(max(5.5, 1.5 * len(order) + 3.0), 4.4)
     ax = fig.subplots()
     datas = list(dict.fromkeys(s["data"] for s in steps))
+    top = 0.0
     for k, d in enumerate(datas):
-        pts = [s for s in steps if s["data"] == d]
-        x = np.array([order.index(s["model"]) for s in pts], float) + (k - (len(datas) - 1) / 2) * 0.06
-        y = np.array([s["rmse_deg"] for s in pts])
+        pts = [s for s in steps if s["data"] == d and s["heldout_rmse_deg"] is not None]
+        if not pts:
+            continue
+        x = np.array([order.index(s["model"]) for s in pts], float) + (k - (len(datas) - 1) / 2) * 0.08
+        held = np.array([s["heldout_rmse_deg"] for s in pts])
+        train = np.array([s["train_rmse_deg"] for s in pts])
         c = colors_by_data[d]
-        ax.plot(x, y, color=c, lw=1.2, label=d)
+        ax.plot(x, held, color=c, lw=1.6, marker="o", ms=6, label=f"{d}: held-out")
+        ax.plot(x, train, color=c, lw=1.0, ls="--", marker="o", ms=5, mfc="white", label=f"{d}: in-sample")
         for xi, s in zip(x, pts):
-            if s.get("ci"):
-                lo, hi = s["ci"]
+            if s.get("heldout_ci"):
+                lo, hi = s["heldout_ci"]
                 ax.plot([xi, xi], [lo, hi], color=c, lw=1.0)
-            ax.scatter([xi], [s["rmse_deg"]], s=36, color="white" if s["in_sample"] else c, edgecolors=c, zorder=3)
+                top = max(top, hi)
+            if s.get("p_adjusted") is not None:
+                ax.annotate(stars(s["p_adjusted"]), (xi, s["heldout_rmse_deg"]), xytext=(6, 4),
+                            textcoords="offset points", fontsize=8, color=c)
+        top = max(top, float(np.max(held)), float(np.max(train)))
     ax.set_xticks(range(len(order)), order, rotation=12 if len(order) > 3 else 0)
-    ax.set_ylim(bottom=0)
+    ax.set_ylim(0, 1.12 * top if top > 0 else 1.0)
     ax.set_ylabel("RMSE (deg)")
     ax.grid(axis="y", alpha=0.3)
-    ax.legend(fontsize=8, title="record (hollow: in-sample)", title_fontsize=8)
+    ax.legend(fontsize=7.5, ncols=max(1, len(datas)))
     ax.set_title(title, loc="left", fontsize=10)
     return _png(fig)
 
@@ -304,43 +315,103 @@ def parameters(params: Mapping[str, tuple[float, float | None, bool]], title: st
     return _png(fig)
 
 
-def planes(deviation_signed_deg: Mapping[str, float], deviation_ci_deg: Mapping[str, tuple[float, float]],
-           residual_signed_deg: Mapping[str, float], nominal_azimuth_deg: Mapping[str, float], title: str,
-           amplitude_deg: float = 30.0) -> bytes:
-    """Bending-plane traces seen from the base, before and after orthogonal compensation (paper fig. 8).
+_HALF_COLORS = {"y+": "#1f77b4", "y-": "#2ca02c", "x+": "#d62728", "x-": "#ff7f0e"}
 
-    Each half-plane sweep is drawn as the bend-direction trace of a single-knob sweep of
-    ``amplitude_deg``: before compensation it leaves along its fitted (signed) deviation, with
-    the 95 % interval as a wedge; after compensation along the residual deviation. Dashed lines
-    are the standard planes.
+
+def _planes_panel(ax, points_mm: Mapping[str, np.ndarray] | None, signed_deg: Mapping[str, float],
+                  ci_deg: Mapping[str, tuple[float, float]] | None, nominal_azimuth_deg: Mapping[str, float],
+                  title: str, offset_line: bool, radius: float) -> None:
+    """One panel of :func:`planes_figure`: measured points (if any), fitted half-plane lines, standard planes."""
+    r = radius
+    lim = 1.12 * r
+    ax.plot([-lim, lim], [0, 0], color="#777", ls="--", lw=0.9, zorder=1)
+    ax.plot([0, 0], [-lim, lim], color="#777", ls="--", lw=0.9, zorder=1, label="standard planes")
+    for h, nom in nominal_azimuth_deg.items():
+        c = _HALF_COLORS.get(h, "k")
+        dev = signed_deg[h]
+        if points_mm:
+            p = points_mm[h]
+            ax.scatter(p[:, 0], p[:, 1], s=3, color=c, alpha=0.35, linewidths=0, rasterized=True, zorder=2,
+                       label=f"{h}: {len(p)} points")
+        u = np.array([np.cos(np.radians(nom + dev)), np.sin(np.radians(nom + dev))])
+        start, length = np.zeros(2), r
+        if points_mm and offset_line and len(points_mm[h]):
+            # bend_line fit: the trace is a direction, the sweep may sit off the axis (the other
+            # knob's residual bend); draw it along the points, through their centroid
+            centre = points_mm[h].mean(axis=0)
+            along = (points_mm[h] - centre) @ u
+            start, length = centre + u * along.min(), float(np.ptp(along))
+        if ci_deg is not None:
+            a = np.radians(nom + np.linspace(ci_deg[h][0], ci_deg[h][1], 20))
+            ax.fill(start[0] + np.r_[0, length * np.cos(a), 0], start[1] + np.r_[0, length * np.sin(a), 0],
+                    color=c, alpha=0.18, lw=0, zorder=1)
+        end = start + length * u
+        ax.plot([start[0], end[0]], [start[1], end[1]], color=c, lw=1.3, zorder=3,
+                path_effects=[patheffects.Stroke(linewidth=2.4, foreground="k"), patheffects.Normal()],
+                label=f"{h} fitted: {dev:+.2f} deg" if not points_mm else f"{h} fit {dev:+.2f} deg")
+    ax.set_aspect("equal")
+    ax.set_xlim(-lim, lim)
+    ax.set_ylim(-lim, lim)
+    if points_mm:
+        ax.set_xlabel("tip x in base frame (mm)")
+        ax.set_ylabel("tip y in base frame (mm)")
+    else:
+        ax.set_xlabel("x in base frame (fitted directions only, no measured points)")
+        ax.set_ylabel("y in base frame")
+    ax.set_title(title, fontsize=9.5, loc="left")
+    ax.legend(fontsize=6.5, loc="lower left", markerscale=3, ncols=2)
+    ax.grid(alpha=0.3)
+
+
+def planes_figure(before_mm: Mapping[str, np.ndarray] | None, after_mm: Mapping[str, np.ndarray] | None,
+                  deviation_signed_deg: Mapping[str, float], deviation_ci_deg: Mapping[str, tuple[float, float]],
+                  residual_signed_deg: Mapping[str, float], nominal_azimuth_deg: Mapping[str, float],
+                  titles: tuple[str, str], title: str, offset_line: bool = False) -> Figure:
+    """Bending planes seen down the probe axis, before and after orthogonal compensation (duodenoscope fig. 8).
+
+    Each panel scatters the measured tip positions of the single-knob sweeps (base frame,
+    projected on its x-y plane, mm), draws each half-plane's fitted trace (solid; before: the fitted signed deviation with its 95 % interval as a wedge; after: the
+    residual deviation) and the standard planes (dashed). A panel without measured points
+    draws the fitted lines only, at the other panel's scale, and its title must say so.
+
+    Parameters
+    ----------
+    before_mm, after_mm : mapping of half-plane to (n, 2) array, or None
+        Measured tip x-y (mm) per half-plane; None when not measured or not found.
+    deviation_signed_deg, deviation_ci_deg : mappings
+        Fitted signed deviations and their intervals (deg).
+    residual_signed_deg : mapping
+        Signed deviation left after compensation (deg).
+    nominal_azimuth_deg : mapping
+        Azimuth of each standard half-plane (deg).
+    titles : (str, str)
+        Panel titles (they carry what each panel shows: measured or fitted only).
+    title : str
+    offset_line : bool
+        The fit is a direction that need not pass through the probe axis (``bend_line``
+        model): with measured points, each trace is drawn along its points, through their
+        centroid; otherwise from the probe axis (the paper's plane through it).
+
+    Returns
+    -------
+    Figure
     """
-    fig = _new(10.0, 4.9)
+    fig = _new(10.5, 5.6)
     axes = fig.subplots(1, 2)
-    ramp = np.linspace(0, amplitude_deg, 16)
-    cols = {"y+": "#1f77b4", "y-": "#2ca02c", "x+": "#d62728", "x-": "#ff7f0e"}
-    for ax, (name, dev, ci) in zip(axes, (("before compensation", deviation_signed_deg, deviation_ci_deg),
-                                          ("after compensation", residual_signed_deg, None))):
-        lim = amplitude_deg * 1.25
-        ax.plot([-lim, lim], [0, 0], color="#999", ls="--", lw=0.8)
-        ax.plot([0, 0], [-lim, lim], color="#999", ls="--", lw=0.8)
-        for h, nom in nominal_azimuth_deg.items():
-            az = np.radians(nom + dev[h])
-            ax.scatter(ramp * np.cos(az), ramp * np.sin(az), s=10, color=cols.get(h, "k"), label=f"{h}: {dev[h]:+.1f} deg")
-            if ci is not None:
-                lo, hi = np.radians(nom + np.array(ci[h]))
-                a = np.linspace(lo, hi, 20)
-                ax.fill(np.r_[0, amplitude_deg * np.cos(a), 0], np.r_[0, amplitude_deg * np.sin(a), 0],
-                        color=cols.get(h, "k"), alpha=0.15, lw=0)
-        ax.set_aspect("equal")
-        ax.set_xlim(-lim, lim)
-        ax.set_ylim(-lim, lim)
-        ax.set_xlabel("bend toward +x (deg)")
-        ax.set_ylabel("bend toward +y (deg)")
-        ax.set_title(name, fontsize=10)
-        ax.legend(fontsize=7, loc="lower left")
-        ax.grid(alpha=0.3)
+    # one scale for both panels: the farthest measured point (lines-only panels borrow it)
+    radius = max((float(np.max(np.hypot(p[:, 0], p[:, 1]))) for pts in (before_mm, after_mm) if pts
+                  for p in pts.values() if len(p)), default=1.0)
+    _planes_panel(axes[0], before_mm, deviation_signed_deg, deviation_ci_deg, nominal_azimuth_deg, titles[0],
+                  offset_line, radius)
+    _planes_panel(axes[1], after_mm, residual_signed_deg, None, nominal_azimuth_deg, titles[1], offset_line,
+                  radius)
     fig.suptitle(title, x=0.01, ha="left", fontsize=11)
-    return _png(fig)
+    return fig
+
+
+def planes(*args, **kwargs) -> bytes:
+    """:func:`planes_figure` as PNG bytes."""
+    return _png(planes_figure(*args, **kwargs))
 
 
 def tip_paths(paths_mm: Mapping[str, np.ndarray], title: str) -> bytes:

@@ -130,14 +130,24 @@ def _tests(group) -> str:
 def _ladder_table(report) -> str:
     if not report.ladder:
         return ""
-    rows = "".join(
-        f'<tr><td class="l">{escape(s["axis"])}</td><td class="l">{escape(s["step"])}</td><td>{s["n_effects"]}</td>'
-        f'<td class="l">{escape(s["data"])}</td><td>{_f(s["rmse_deg"])}</td>'
-        f'<td>{_pct(s["change_pct"])}</td>'
-        f'<td class="l">{"in-sample" if s["in_sample"] else "held-out"}</td></tr>' for s in report.ladder)
-    return ('<table><thead><tr><th class="l">axis</th><th class="l">model</th><th>effects</th><th class="l">record</th>'
-            '<th>RMSE (deg)</th><th>change vs previous step</th><th class="l">record use</th></tr></thead>'
-            f"<tbody>{rows}</tbody></table>")
+    rows = []
+    for s in report.ladder:
+        ci = s["heldout_ci"]
+        held = ("<td>&ndash;</td>" if s["heldout_rmse_deg"] is None else
+                f'<td>{_f(s["heldout_rmse_deg"])}<span class="ci">{_f(ci[0]) if ci else "&ndash;"} &ndash; '
+                f'{_f(ci[1]) if ci else "&ndash;"}</span></td>')
+        why = "" if s["heldout_error"] is None else f'<span class="ci">{escape(s["heldout_error"])}</span>'
+        test = ("&ndash;" if s["p_adjusted"] is None else f'{_p(s["p_adjusted"])} {stars(s["p_adjusted"])}')
+        rows.append(
+            f'<tr><td class="l">{escape(s["axis"])}</td><td class="l">{escape(s["data"])}</td>'
+            f'<td class="l">{escape(s["step"])}{why}</td><td>{s["n_effects"]}</td><td>{_f(s["train_rmse_deg"])}</td>'
+            f'{held}<td>{_pct(s["change_pct"])}</td><td>{test}</td><td>{_f(s["file_rmse_deg"])}</td>'
+            f'<td class="l">{"in-sample" if s["file_fitted_on_record"] else "held-out"}</td></tr>')
+    return ('<table><thead><tr><th class="l">axis</th><th class="l">record</th><th class="l">model</th><th>effects</th>'
+            '<th>in-sample RMSE (deg)<br><span class="muted">fold fits, training data</span></th>'
+            '<th>held-out RMSE (deg)<br><span class="muted">95 % CI</span></th><th>held-out change vs previous step</th>'
+            '<th>p (one-sided, Holm)</th><th>model file RMSE (deg)</th><th class="l">model file fitted on record?</th>'
+            f'</tr></thead><tbody>{"".join(rows)}</tbody></table>')
 
 
 def _models(report) -> str:
@@ -229,12 +239,19 @@ def render_html(report) -> str:
         "pairwise Wilcoxon tests for more. Significance level 0.05.</p>" + "".join(_tests(g) for g in report.groups),
         '<h2 id="records">Records</h2>' + "".join(record_sections),
         '<h2 id="ladder">Model ladder</h2><p class="muted">Does adding an effect pay? Each step adds effects to a '
-        "base model; on held-out records the RMSE should fall step by step.</p>"
+        "base model. Every step's structure (base and effects, with its model file's settings) is refitted on each "
+        "record by blocked rolling-origin cross-validation, as <code>endocal validate</code> does: fitted on the first "
+        "half and on every later origin, scored on the next block it has not seen. In-sample error falls with every "
+        "parameter added; the held-out error falls only when the effect is real. The p-value tests the step's held-out "
+        "gain over the previous step (one-sided paired test on block-mean loss differentials, Wilcoxon signed-rank, "
+        "Holm-corrected over the steps of a record). The last columns give the model file as it was fitted.</p>"
         + (ladder_figs or "<p>Only one model per axis: no ladder to draw.</p>") + _ladder_table(report),
         '<h2 id="models">Models</h2>' + _models(report),
     ]
     if planes:
-        sections.append('<h2 id="planes">Bending planes</h2>' + planes)
+        pnotes = "".join(f'<div class="warn">{escape(n)}</div>' for n in
+                         (report.planes_view.notes if report.planes_view is not None else []))
+        sections.append('<h2 id="planes">Bending planes</h2>' + pnotes + planes)
     if task:
         sections.append('<h2 id="task-space">Task space</h2>' + task)
     sections.append('<h2 id="provenance">Provenance</h2>' + _provenance(report))

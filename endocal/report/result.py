@@ -14,6 +14,7 @@ from pathlib import Path
 from endocal.errors import OutputExistsError, OutputPathError
 from endocal.planes import PlanesCalibration
 from endocal.report.evaluate import DataEntry, Group, ModelEntry, NotEvaluated
+from endocal.report.planes import PlanesView
 from endocal.runs.format import atomic_write_bytes
 from endocal.validation.metrics import METRIC_KEYS
 
@@ -63,13 +64,16 @@ class Report:
     not_evaluated : list of NotEvaluated
         Every model x record that could not be scored, with the reason.
     ladder : list of dict
-        Steps of the model ladder (``axis``, ``model``, ``step``, ``n_effects``, ``data``,
-        ``rmse_deg``, ``ci``, ``in_sample``), in ladder order.
+        Steps of the model ladder in ladder order: each model structure cross-validated on each
+        record (held-out and in-sample RMSE, the step's gain and its test), see
+        :func:`endocal.report.ladder.model_ladder`.
     figures : list of ReportFigure
     planes : PlanesCalibration or None
     provenance : dict
     notes : list of str
         What the report could not draw and why (e.g. no tracker stream for tip paths).
+    planes_view : PlanesView or None
+        The measured sweeps behind ``planes`` that the bending-plane figure draws.
     """
 
     models: list[ModelEntry]
@@ -81,6 +85,7 @@ class Report:
     planes: PlanesCalibration | None = None
     provenance: dict = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    planes_view: PlanesView | None = None
 
     # ------------------------------------------------------------------ views
     @property
@@ -96,9 +101,30 @@ class Report:
     def summary_lines(self) -> list[str]:
         """The summary as plain sentences (terminal and HTML)."""
         lines = [f.sentence for f in self.findings]
+        lines += self.ladder_lines()
         lines += [f"not evaluated: {n.model} on {n.data} ({n.axis}): {n.reason}" for n in self.not_evaluated]
         lines += [f"note: {note}" for g in self.groups for e in g.evaluations for note in e.notes]
         return lines
+
+    def ladder_lines(self) -> list[str]:
+        """One sentence per record with two or more rungs: the held-out RMSE step by step."""
+        out = []
+        for key in dict.fromkeys((s["axis"], s["data"]) for s in self.ladder):
+            steps = [s for s in self.ladder if (s["axis"], s["data"]) == key]
+            if len(steps) < 2:
+                continue
+            parts = []
+            for s in steps:
+                if s["heldout_rmse_deg"] is None:
+                    parts.append(f"{s['step']} not cross-validated ({s['heldout_error']})")
+                    continue
+                txt = f"{s['step']} {s['heldout_rmse_deg']:.3g}"
+                if s["change_pct"] is not None:
+                    txt += f" ({s['change_pct']:+.0f} %, p = {s['p_adjusted']:.2g})"
+                parts.append(txt)
+            out.append(f"ladder {key[1]}, {key[0]} (held-out RMSE deg, {steps[0]['folds']}-fold rolling origin): "
+                       + " -> ".join(parts))
+        return out
 
     def __str__(self) -> str:
         return "\n".join(self.summary_lines())
@@ -133,6 +159,7 @@ class Report:
             "models": [m.to_dict() for m in self.models],
             "data": [d.to_dict() for d in self.datas],
             "planes": None if self.planes is None else self.planes.to_json(),
+            "planes_sweeps": None if self.planes_view is None else self.planes_view.to_dict(),
             "figures": [f.to_dict() for f in self.figures],
             "notes": list(self.notes),
             "provenance": self.provenance,

@@ -142,8 +142,23 @@ def _resolve_axis(model: HysteresisModel, datas: list[AlignedData]) -> str:
                      "refit the model with --axis")
 
 
-def _predict(model: HysteresisModel, data: HysteresisData) -> tuple[np.ndarray, int]:
-    """Predicted angle, clamping commands beyond the fitted range; returns (pred, samples clamped)."""
+def predict_clamped(model: HysteresisModel, data: HysteresisData) -> tuple[np.ndarray, int]:
+    """Predicted angle (deg), commands beyond the fitted range clamped to it, as ``validate`` scores a model.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        A fitted model (left unchanged: a shallow copy is switched to clamping).
+    data : HysteresisData
+        Commands (deg) and whatever else the model's effects read.
+
+    Returns
+    -------
+    predicted_deg : (n,) array
+        Predicted bending angle, deg.
+    n_clamped : int
+        Samples whose command lies beyond the model's fitted range ``cmd_range_deg_``.
+    """
     m = copy.copy(model)
     m.out_of_range = "clamp"
     lo, hi = model.cmd_range_deg_
@@ -221,7 +236,7 @@ def validate_offline(model: HysteresisModel, datas, *, axis: str | None = None, 
         check_columns(data, load_columns)
     check_cv_data(data, folds)
 
-    pred, clamped = _predict(model, data)
+    pred, clamped = predict_clamped(model, data)
     metrics = error_metrics(data.meas_deg, pred, n_boot=n_boot, seed=seed)
     regimes = error_by_regime(data, pred, seed=seed)
     resid = residual_tests(data, data.meas_deg - pred, alpha=alpha)
@@ -240,7 +255,7 @@ def validate_offline(model: HysteresisModel, datas, *, axis: str | None = None, 
     comp = None
     if compare is not None:
         compare._require_fitted()
-        old_pred, _ = _predict(compare, data)
+        old_pred, _ = predict_clamped(compare, data)
         stride = scan.stride
         d = data.decimate(stride) if stride > 1 else data
         bounds = fold_bounds(d.n_samples, folds)

@@ -1,0 +1,211 @@
+"""The model ladder: does each added effect pay on data the model was not fitted on?
+
+A rung is one model structure (``base + effects``, with the model file's settings). On every
+record of its axis the structure is refitted and scored by the blocked rolling-origin
+cross-validation that ``endocal validate`` uses for its held-out RMSE and its effect scan
+(:mod:`endocal.validation.suspects`): the first half of the record only trains, the rest is
+cut into ``folds`` contiguous test blocks, fold ``k`` is fitted on everything before block
+``k`` and predicts block ``k`` with the history it really had. The calls are those of
+``validate`` (:func:`~endocal.validation.suspects.fold_bounds`,
+:func:`~endocal.validation.suspects.heldout_errors`, same folds and decimation), so a rung's
+held-out RMSE equals the one ``validate`` prints for that model on that record.
+
+Beside it, the **in-sample** RMSE of the *same* fold fits on their own training prefixes:
+in-sample error falls with every parameter added, held-out error only when the effect is
+real, and the gap between them is the overfit. Each rung's held-out errors are tested
+against the previous rung on the same record (ladder order: models of one base together,
+fewer effects first) with the one-sided, autocorrelation-aware paired
+test of the effect scan (:func:`~endocal.validation.suspects.paired_test`: Diebold-Mariano
+loss differentials averaged over blocks of three correlation times, Wilcoxon signed-rank),
+Holm-corrected over the steps of one record.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from endocal.errors import EndocalError
+from endocal.models import HysteresisData, HysteresisModel
+from endocal.report.adapters import predict_clamped
+from endocal.report.evaluate import Group, ModelEntry
+from endocal.report.stats import holm
+from endocal.validation.data import prefix
+from endocal.validation.metrics import ErrorMetrics, error_metrics
+from endocal.validation.suspects import (
+    check_cv_data,
+    effect_labels,
+    fold_bounds,
+    heldout_errors,
+    one_blas_thread,
+    paired_test,
+)
+
+#: Held-out blocks and the longest record scored undecimated: ``endocal validate``'s defaults
+#: (``--folds``, ``max_scan_samples``), so the ladder's held-out RMSE is the one validate prints.
+FOLDS = 5
+MAX_CV_SAMPLES = 6000
+
+
+@dataclass
+class HeldOut:
+    """One model structure cross-validated on one record.
+
+    Attributes
+    ----------
+    metrics : ErrorMetrics
+        Of the held-out predictions (the record's second half, fold by fold), with
+        block-bootstrap intervals; ``metrics.rmse_deg`` is the held-out RMSE (deg).
+    train_rmse_deg : float
+        In-sample RMSE of the same fold fits on their training prefixes, pooled (deg).
+    errors_deg : (n_heldout,) array
+        Held-out ``predicted - measured`` (deg), for the paired tests; not serialised.
+    folds, stride, n_samples : int
+        Test blocks, decimation step and samples cross-validated.
+    """
+
+    metrics: ErrorMetrics
+    train_rmse_deg: float
+    errors_deg: np.ndarray
+    folds: int
+    stride: int
+    n_samples: int
+
+
+def cross_validate(model: HysteresisModel, data: HysteresisData, *, folds: int = FOLDS,
+                   max_samples: int = MAX_CV_SAMPLES, n_boot: int = 400, seed: int = 0) -> HeldOut:
+    """Refit ``model``'s structure on rolling-origin folds of ``data``; held-out and in-sample error.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        Gives the base, its settings, fixed parameters and effects (its fitted values are not used).
+    data : HysteresisData
+        The record (commands and measured angles in deg).
+    folds : int
+        Held-out blocks.
+    max_samples : int
+        Longer records are decimated to at most this many samples, as ``validate``'s scan does.
+    n_boot, seed : int
+        Bootstrap of the held-out metrics' intervals.
+
+    Returns
+    -------
+    HeldOut
+
+    Raises
+    ------
+    ModelError
+        The record is too short for the folds, or the structure cannot be fitted on a fold.
+    """
+    stride = max(1, math.ceil(data.n_samples / max_samples))
+    d = data.decimate(stride) if stride > 1 else data
+    check_cv_data(d, folds)
+    bounds = fold_bounds(d.n_samples, folds)
+    with one_blas_thread():
+        err, fitted = heldout_errors(model, effect_labels(model), d, bounds)
+    train_sq = [np.square(predict_clamped(m, prefix(d, a))[0] - d.meas_deg[:a]) for m, (a, _) in zip(fitted, bounds)]
+    meas = d.meas_deg[bounds[0][0]:bounds[-1][1]]
+    return HeldOut(metrics=error_metrics(meas, meas + err, n_boot=n_boot, seed=seed),
+                   train_rmse_deg=float(np.sqrt(np.mean(np.concatenate(train_sq)))), errors_deg=err,
+                   folds=folds, stride=stride, n_samples=d.n_samples)
+
+
+def _order(models: list[ModelEntry]) -> list[ModelEntry]:
+    """Models of one base together (bases in the order first given), fewer effects first."""
+    bases = list(dict.fromkeys(m.base for m in models))
+    given = {m.label: i for i, m in enumerate(models)}
+    return sorted(models, key=lambda m: (bases.index(m.base), len(m.effects), given[m.label]))
+
+
+def ladder_size(models: list[ModelEntry], groups: list[Group]) -> int:
+    """Rungs :func:`model_ladder` will cross-validate (for the progress bar)."""
+    names = {m.label for m in models}
+    return sum(1 for g in groups for e in g.evaluations if e.model in names)
+
+
+def model_ladder(models: list[ModelEntry], groups: list[Group], *, folds: int = FOLDS, n_boot: int = 400,
+                 seed: int = 0, alpha: float = 0.05,
+                 progress: Callable[[str, int, int], None] | None = None) -> list[dict]:
+    """Steps of the model ladder: per axis and record, each model structure cross-validated.
+
+    Parameters
+    ----------
+    models : list of ModelEntry
+    groups : list of Group
+        The evaluated records (:func:`endocal.report.evaluate.evaluate`); a model is laddered on
+        the records it was evaluated on.
+    folds : int
+        Held-out blocks of the rolling-origin cross-validation.
+    n_boot, seed : int
+        Bootstrap of the held-out intervals.
+    alpha : float
+        Level of the step tests (after Holm's correction over the steps of one record).
+    progress : callable, optional
+        ``progress(step, done, total)`` after each rung.
+
+    Returns
+    -------
+    list of dict
+        In ladder order, with ``axis``, ``data``, ``model`` (label), ``step`` (name drawn on the
+        axis), ``base``, ``n_effects``; the cross-validation: ``heldout_rmse_deg``,
+        ``heldout_ci``, ``train_rmse_deg`` (in-sample, same fold fits), ``folds``, ``stride``,
+        ``n_samples``; against the previous cross-validated step on the same record:
+        ``change_pct`` (held-out RMSE), ``p_value`` (one-sided, raw) and ``p_adjusted``
+        (Holm), ``significant``; ``heldout_error`` (why it could not be cross-validated, else
+        None); and the model file as given: ``file_rmse_deg``, ``file_ci``,
+        ``file_fitted_on_record``.
+    """
+    total = ladder_size(models, groups)
+    steps: list[dict] = []
+    done = 0
+    for axis in dict.fromkeys(m.axis for m in models):
+        ms = _order([m for m in models if m.axis == axis])
+        names = [m.name for m in ms]
+        unique = len(set(names)) == len(names)
+        for g in (g for g in groups if g.axis == axis):
+            prev: HeldOut | None = None
+            rows = []
+            for m in ms:
+                try:
+                    e = g.evaluation(m.label)
+                except KeyError:
+                    continue
+                done += 1
+                if progress:
+                    progress(f"ladder: {m.label} on {g.data}", done, total)
+                cv, why = None, None
+                try:
+                    cv = cross_validate(m.model, g.hdata, folds=folds, n_boot=n_boot, seed=seed)
+                except EndocalError as exc:
+                    why = str(exc)
+                ci = e.metrics.ci.get("rmse_deg")
+                hci = None if cv is None else cv.metrics.ci.get("rmse_deg")
+                row = {
+                    "axis": axis, "data": g.data, "model": m.label, "step": m.name if unique else m.label,
+                    "base": m.base, "n_effects": len(m.effects),
+                    "heldout_rmse_deg": None if cv is None else cv.metrics.rmse_deg,
+                    "heldout_ci": None if hci is None else [hci[0], hci[1]],
+                    "train_rmse_deg": None if cv is None else cv.train_rmse_deg,
+                    "folds": folds, "stride": None if cv is None else cv.stride,
+                    "n_samples": None if cv is None else cv.n_samples, "heldout_error": why,
+                    "change_pct": None, "p_value": None, "p_adjusted": None, "significant": None,
+                    "file_rmse_deg": e.metrics.rmse_deg, "file_ci": None if ci is None else [ci[0], ci[1]],
+                    "file_fitted_on_record": e.in_sample,
+                }
+                if prev is not None and cv is not None:
+                    if prev.metrics.rmse_deg > 0:
+                        row["change_pct"] = 100.0 * (cv.metrics.rmse_deg / prev.metrics.rmse_deg - 1.0)
+                    row["p_value"], _ = paired_test(prev.errors_deg, cv.errors_deg)
+                if cv is not None:
+                    prev = cv
+                rows.append(row)
+            tested = [r for r in rows if r["p_value"] is not None]
+            for r, q in zip(tested, holm([r["p_value"] for r in tested])):
+                r["p_adjusted"] = float(q)
+                r["significant"] = bool(q < alpha)
+            steps += rows
+    return steps
