@@ -57,7 +57,13 @@ CASES = {
     "rate": ({"rate": {"enabled": True, "gain_s_per_deg": 0.02}, **NO_LAG}, "chirp", {}, 1, "bspline", []),
     "creep": ({"creep": {"enabled": True}}, "staircase", {}, 2, "bspline", []),
     "load": ({"load": {"enabled": True, "amplitude_deg": 150.0}}, "sine", {"cycles": 6}, 1, "bspline", []),
-    "deadzone": ({"deadzone": {"enabled": True}}, "damped-sine", {}, 1, "bspline", []),
+    # The servo (critically damped, 2 x 30 ms) and the tracker (15 ms) always lag the command by
+    # ~80 ms. On the damped sine that lag opens loops in proportion to the decaying speed, which no
+    # static term can follow, and one frequency cannot reveal it to the scan. A user of this rig
+    # carries the `delay` term in every model (as the compensation test does), so this model has
+    # it; the slack is what is hidden. (With it, bspline+delay+deadzone fits the noise-free run to
+    # 0.015 deg: the lag, not the slack term, was the ~1.8x floor.)
+    "deadzone": ({"deadzone": {"enabled": True}}, "damped-sine", {}, 1, "bspline", ["delay"]),
     "envelope": ({"envelope": {"enabled": True}}, "damped-sine", {}, 1, "linear", []),
     # both knobs on a circle: the other axis's bend shifts this axis's tendon anchors
     "coupling": ({"coupling": {"enabled": True}}, "circle", {}, 1, "bspline", []),
@@ -86,12 +92,17 @@ def _gap(reason):
 # simulator's physics well enough; strict, so a fix shows up as an unexpected pass.
 RANK_GAPS: dict[str, str] = {}
 BAR_GAPS = {
-    "deadzone": "deadzone is ranked first but its refit on the B-spline cuts ~35 % and stays at ~1.8x the floor",
     # rolling-origin folds on a chirp hold out only faster motion than any training block saw;
     # the refit reaches 1.13x the floor in-sample but extrapolates to 1.46x held out (-43 %)
     "rate": "rate is ranked first and within 1.5x the floor held out, but cuts the held-out RMSE by ~43 %, not 50 %",
     "load": "load is ranked first and cuts ~62 %, but stays at ~1.54x the noise floor",
-    "envelope": "envelope on `linear` cuts ~57 % but straight branches stay at ~2.3x the noise floor",
+    # two things a static input shape f cannot do on `linear`: (1) the always-on ~80 ms servo and
+    # tracker lag (bspline alone, which fits any shape, stays at 1.85x on this run for that reason);
+    # (2) capstan friction grows with tension, so the simulator's loops are twice as tall at large
+    # bends, while linear(f(u)) keeps the vertical loop width constant (even a free-form f reaches
+    # only 0.52 deg on the noise-free run). A prototype envelope with the Duffing stiffening cubic
+    # and a tension-proportional capstan play reached 1.51x with `delay` in the model, not yet 1.5x.
+    "envelope": "envelope on `linear` cuts ~56 % but stays at ~2.4x the noise floor (lag, tension-proportional loop width)",
     # the simulator's coupling moves the tendon anchors (an input shift through friction and
     # the envelope, plus tension changes) and eq. 1 projects the other bend through unequal
     # plane deviations; the additive term a*x + b*|x| explains ~60 % of it
