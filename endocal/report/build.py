@@ -1,8 +1,10 @@
 """``build_report``: models + records (+ bending planes) -> a :class:`~endocal.report.result.Report`.
 
 The orchestration behind ``endocal report``: load and check the inputs, score every model on
-every record of its axis (:mod:`endocal.report.evaluate`), draw the figures
-(:mod:`endocal.report.figures`) and collect the provenance. Long work reports through a
+every record of its axis (:mod:`endocal.report.evaluate`), cross-validate every model
+structure for the ladder (:mod:`endocal.report.ladder`), find the measured sweeps behind a
+planes file (:mod:`endocal.report.planes`), draw the figures (:mod:`endocal.report.figures`)
+and collect the provenance. Long work reports through a
 ``progress(step, done, total)`` callback (the CLI shows it as a rich progress bar on stderr);
 the library itself never prints.
 """
@@ -64,7 +66,7 @@ def _planes_job(view: PlanesView) -> tuple[ReportFigure, callable]:
         t1 = (f"after compensation: NOT measured ({cal.residual_source} prediction)"
               if cal.residual_source != "measured" else "after compensation: recorded residuals, runs not found")
     measured = [x for x in (b, a) if x is not None]
-    src = "; ".join(f"{x.phase}: {', '.join(x.runs)}" for x in measured)
+    src = "; ".join(f"{x.phase} compensation from {', '.join(x.runs)}" for x in measured)
     caption = ("Looking down the probe axis (duodenoscope paper, fig. 8): the tip positions of the single-knob sweeps "
                "in the base sensor's frame, projected on its x-y plane, per half-plane (dots); solid lines: each "
                "half-plane's fitted trace (before: fitted deviation, wedge: 95 % interval; after: the residual "
@@ -72,7 +74,7 @@ def _planes_job(view: PlanesView) -> tuple[ReportFigure, callable]:
                + (", drawn through the points' centroid: the fitted direction (bend-line model) need not pass "
                   "through the probe axis when the other knob keeps a residual bend" if cal.model == "bend_line" else "")
                + "; dashed: the standard planes. "
-               + (f"Measured points from {src}." if measured else "")
+               + (f"Measured points: {src}." if measured else "")
                + ("" if b is not None and a is not None else
                   " A panel without dots shows fitted geometry only, no measurement: see the notes above."))
     title = "Bending planes before and after orthogonal compensation"
