@@ -64,3 +64,32 @@ def test_effect_catalog_entries_are_documented():
         assert e.cause and e.signature and e.protocol
     with pytest.raises(ModelError, match="takes no ':' argument"):
         make_effect("drift:foo")
+
+
+def test_slack_term_reproduces_the_simulators_tendon_slack_once_the_lag_is_modelled():
+    # Ground truth from the simulator's capstan physics (not from the effect's own equations):
+    # 1.5 mm of slack per tendon, default servo (2 x 30 ms) and tracker (15 ms) lag, no tracker
+    # noise, so there is no floor. The slack operator plus `delay` on the B-spline must explain
+    # the run almost exactly; without the slack term the plateaus at the neutral bend stay.
+    import pandas as pd
+
+    from endocal.probe import PRESETS
+    from endocal.protocols import load_protocol
+    from endocal.runs.aligned import align
+    from endocal.sim import SimConfig, Simulator
+
+    tee = PRESETS["tee"]
+    cfg = SimConfig.default().replace(tracker={"noise_mm": 0.0, "orientation_noise_deg": 0.0})
+    traj = load_protocol("damped-sine").trajectory(tee, seed=0)
+    chunk = Simulator(cfg, tee, seed=0).execute(traj.t_s, traj.goal)
+    df = align(pd.DataFrame(chunk.motor), pd.DataFrame(chunk.tracker), tee).table.iloc[::5]
+    data = HysteresisData(cmd_deg=df["ap_cmd_deg"].to_numpy(), meas_deg=df["ap_meas_deg"].to_numpy(),
+                          t_s=df["t_s"].to_numpy())
+    with_slack = make_model("bspline", ["delay", "deadzone"]).fit(data)
+    without = make_model("bspline", ["delay"]).fit(data)
+    # 0.1 deg: a tenth of the tracker's noise floor (0.33 deg); the fit reaches ~0.02 deg
+    assert with_slack.fit_report_.rmse_deg < 0.1 < 0.5 < without.fit_report_.rmse_deg
+    # the play is the slack wound in across neutral: 2 x 1.5 mm on a 10 mm pulley = 17 deg of knob,
+    # less the pretension stretch (2 x 0.5 mm), so ~11.5 deg; and the lag is ~80 ms
+    assert 2 * with_slack.params_["deadzone_slack_deg"] == pytest.approx(11.5, abs=1.0)
+    assert with_slack.params_["delay_s"] == pytest.approx(0.08, abs=0.01)
