@@ -328,7 +328,8 @@ def _planes_panel(ax, points_mm: Mapping[str, np.ndarray] | None, signed_deg: Ma
     ax.plot([0, 0], [-lim, lim], color="#777", ls="--", lw=0.9, zorder=1, label="standard planes")
     for h, nom in nominal_azimuth_deg.items():
         c = _HALF_COLORS.get(h, "k")
-        dev = signed_deg[h]
+        dev = float(signed_deg[h])
+        shown = round(dev, 2) + 0.0  # + 0.0: no "-0.00" in the legend
         if points_mm:
             p = points_mm[h]
             ax.scatter(p[:, 0], p[:, 1], s=3, color=c, alpha=0.35, linewidths=0, rasterized=True, zorder=2,
@@ -348,7 +349,7 @@ def _planes_panel(ax, points_mm: Mapping[str, np.ndarray] | None, signed_deg: Ma
         end = start + length * u
         ax.plot([start[0], end[0]], [start[1], end[1]], color=c, lw=1.3, zorder=3,
                 path_effects=[patheffects.Stroke(linewidth=2.4, foreground="k"), patheffects.Normal()],
-                label=f"{h} fitted: {dev:+.2f} deg" if not points_mm else f"{h} fit {dev:+.2f} deg")
+                label=f"{h} fitted: {shown:+.2f} deg" if not points_mm else f"{h} fit {shown:+.2f} deg")
     ax.set_aspect("equal")
     ax.set_xlim(-lim, lim)
     ax.set_ylim(-lim, lim)
