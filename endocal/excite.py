@@ -206,6 +206,8 @@ def run_excitation(
                 if delay > 0:
                     time.sleep(delay)
             chunk = backend.execute(t[sl], {dof: g[sl] for dof, g in trajectory.goal.items()})
+            for axis, angle in trajectory.desired.items():  # what the compensated goals were meant to reach
+                chunk.motor[f"{axis}_desired_deg"] = np.asarray(angle[sl], float)
             logger.append(chunk)
             if progress is not None:
                 progress(float(t[min(sl.stop, t.size) - 1]), trajectory.duration_s)

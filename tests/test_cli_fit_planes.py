@@ -7,6 +7,7 @@ import json
 import pytest
 
 from endocal.planes import load_planes
+from endocal.runs.aligned import load_aligned
 from endocal.sim import SimConfig
 from tests.test_cli_excite import endocal, one_line_error
 
@@ -75,3 +76,36 @@ def test_invalid_frames_dropped_and_counted_missing_base_named(tmp_path):
         df = pd.read_parquet(part)
         df[df["sensor"] == "tip"].to_parquet(part)
     one_line_error(endocal("fit", "planes", run, "--out", tmp_path / "q.json"), "base")
+
+
+def test_measured_residual_after_task_space_compensation_below_one_degree(planes_run, tmp_path):
+    # The paper's figure 8 "after", measured on the robot rather than predicted: play the
+    # planes protocol as desired standard-plane angles through the compensator and an inverse
+    # hysteresis model per knob (the tendon slack would otherwise swallow the small
+    # cross-knob correction), then fit the recorded sweeps' planes again.
+    assert endocal("fit", "planes", planes_run, "--out", tmp_path / "planes.json", "--bootstrap", "0").returncode == 0
+    models = []
+    for i, axis in enumerate(("ap", "ml")):
+        run = tmp_path / f"train-{axis}"
+        proc = endocal("excite", "damped-sine", "--set", f'axes=["axis{i + 1}"]', "--set", "period_s=10", "--set", "frequency_hz=0.1", "--amplitude", "85",
+                       "--out", run, "--seed", str(20 + i), "--quiet")
+        assert proc.returncode == 0, proc.stderr
+        models.append(tmp_path / f"{axis}.json")
+        proc = endocal("fit", "hysteresis", run, "--axis", axis, "--model", "bspline", "--effects", "deadzone,delay",
+                       "--planes", tmp_path / "planes.json", "--out", models[-1])
+        assert proc.returncode == 0, proc.stderr
+    after = tmp_path / "after"
+    proc = endocal("excite", "planes", "--set", "amplitude_deg=35", "--set", "repetitions=2", "--planes", tmp_path / "planes.json",
+                   "--model", models[0], "--model", models[1], "--out", after, "--seed", "12", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    # the run keeps what it asked for: the after-fit labels its sweeps by it, as both knobs move
+    table = load_aligned(after).table
+    assert {"ap_desired_deg", "ml_desired_deg"} <= set(table.columns) and table["ml_cmd_deg"].abs().max() > 5.0
+    proc = endocal("fit", "planes", planes_run, "--after", after, "--out", tmp_path / "p2.json", "--json", "--bootstrap", "0")
+    assert proc.returncode == 0, proc.stderr
+    residual = json.loads(proc.stdout)["residual_deviation_deg"]
+    # Each sweep reaches 35 deg of projected bend (~70 deg of tip direction); the models track
+    # each knob to ~0.4 deg RMS, mostly as up/down loop error that the plane fit averages out.
+    # The issue's bound: under 1 deg on every half-plane (the paper's knob-space compensation
+    # left up to 13.8 deg).
+    assert all(residual[h] < 1.0 for h in ("y+", "y-", "x+", "x-")), residual

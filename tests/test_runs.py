@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -24,6 +24,7 @@ class Traj:
     t_s: np.ndarray
     goal: dict
     sample_rate_hz: float
+    desired: dict = field(default_factory=dict)
 
     @property
     def duration_s(self):

@@ -36,8 +36,13 @@ def segment_runs(runs: list[Path], *, compensated: bool = False) -> tuple[Segmen
         if probe is not None and run_probe.bending_axes != probe.bending_axes:
             raise RunFormatError(f"{run}: recorded on probe '{run_probe.name}', the others on '{probe.name}'")
         probe = run_probe
+        # A compensated run moves both knobs in every sweep: label its frames by the angles it
+        # asked for (logged since the run format had them), else by the larger knob command.
+        logged = all(f"{a}_desired_deg" in data.table.columns for a in run_probe.bending_axes)
         seg = segment_planes_run(
-            data.table, read_stream(run, TRACKER), run_probe, run=run.name, other_max_deg=None if compensated else 1.0
+            data.table, read_stream(run, TRACKER), run_probe, run=run.name,
+            other_max_deg=None if compensated and not logged else 1.0,
+            label_from="desired" if compensated and logged else "cmd",
         )
         total = seg if total is None else total + seg
     if total is None:
@@ -79,4 +84,5 @@ def compensate_trajectory(traj, probe: ProbeConfig, calibration: PlanesCalibrati
     first, second = probe.bending_axes
     goal = dict(traj.goal)
     goal[first], goal[second] = (np.asarray(g, float) for g in calibration.compensate(traj.goal[first], traj.goal[second]))
-    return replace(traj, goal=goal)
+    desired = traj.desired or {axis: np.asarray(traj.goal[axis], float) for axis in (first, second)}
+    return replace(traj, goal=goal, desired=desired)

@@ -183,6 +183,7 @@ def segment_planes_run(
     run: str = "run",
     rest_deg: float = 2.0,
     other_max_deg: float | None = 1.0,
+    label_from: str = "cmd",
     min_frames: int = 10,
     max_pair_gap_s: float = 0.01,
 ) -> Segmentation:
@@ -207,7 +208,12 @@ def segment_planes_run(
     other_max_deg : float or None
         Largest command of the other knob during a single-knob sweep, degrees. ``None``
         labels each frame by the knob with the larger command instead, which is what a run
-        played through an orthogonal compensator needs (the other knob then moves a little).
+        played through an orthogonal compensator needs when it did not log what it asked
+        for (the other knob then moves a little).
+    label_from : {"cmd", "desired"}
+        Label frames by the knob commands (``<axis>_cmd_deg``) or by the desired angles a
+        compensated run logs (``<axis>_desired_deg``: single-axis sweeps even though both
+        knobs move). Only the labels change; the sweeps keep the knob commands.
     min_frames : int
         Excursions with fewer frames are dropped (counted as ``short_sweep``).
     max_pair_gap_s : float
@@ -223,23 +229,28 @@ def segment_planes_run(
         Missing command columns, tracker columns or sensors.
     """
     axes = probe.bending_axes
+    if label_from not in ("cmd", "desired"):
+        raise ValueError(f"label_from must be 'cmd' or 'desired', got {label_from!r}")
     cmd_cols = [f"{a}_cmd_deg" for a in axes]
-    missing = [c for c in ("t_s", *cmd_cols) if c not in aligned.columns]
+    label_cols = [f"{a}_{label_from}_deg" for a in axes]
+    missing = [c for c in ("t_s", *cmd_cols, *label_cols) if c not in aligned.columns]
     if missing:
-        raise RunFormatError(f"{run}: aligned table lacks column(s) {', '.join(missing)} (probe '{probe.name}')")
+        raise RunFormatError(f"{run}: aligned table lacks column(s) {', '.join(dict.fromkeys(missing))} (probe '{probe.name}')")
     t_s, tip_in_base, tip_dir, dropped = tip_in_base_from_tracker(tracker, max_pair_gap_s=max_pair_gap_s, where=run)
     t_cmd = aligned["t_s"].to_numpy(float)
     inside = (t_s >= t_cmd[0]) & (t_s <= t_cmd[-1])
     dropped["outside_commands"] = int((~inside).sum())
     t_s, tip_in_base, tip_dir = t_s[inside], tip_in_base[inside], tip_dir[inside]
     cmd = np.stack([np.interp(t_s, t_cmd, aligned[c].to_numpy(float)) for c in cmd_cols], axis=1)
-    active = np.abs(cmd) > rest_deg
+    asked = cmd if label_from == "cmd" else np.stack(
+        [np.interp(t_s, t_cmd, aligned[c].to_numpy(float)) for c in label_cols], axis=1)
+    active = np.abs(asked) > rest_deg
     if other_max_deg is None:
-        knob = np.argmax(np.abs(cmd), axis=1)
+        knob = np.argmax(np.abs(asked), axis=1)
         single = active.any(axis=1)
         mixed = np.zeros(len(t_s), bool)
     else:
-        quiet = np.abs(cmd) <= other_max_deg
+        quiet = np.abs(asked) <= other_max_deg
         first_only = active[:, 0] & quiet[:, 1]
         second_only = active[:, 1] & quiet[:, 0]
         knob = np.where(second_only, 1, 0)
@@ -247,7 +258,7 @@ def segment_planes_run(
         mixed = active.any(axis=1) & ~single
     labels = np.array([""] * len(t_s), dtype=object)
     for i in np.flatnonzero(single):
-        labels[i] = knob_half_plane(int(knob[i]), cmd[i, knob[i]])
+        labels[i] = knob_half_plane(int(knob[i]), asked[i, knob[i]])
     dropped["both_knobs"] = int(mixed.sum())
     dropped["short_sweep"] = 0
     sweeps = []

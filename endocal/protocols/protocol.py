@@ -181,6 +181,10 @@ class Trajectory:
         Name of the protocol it came from (for messages).
     segments : tuple of Segment
         What happens when, e.g. each sweep of ``planes``.
+    desired : dict of str to (n,) array
+        Bending angles the user asked for (deg), for axes whose ``goal`` is no longer the
+        protocol's own but a compensated knob command (orthogonal compensation, inverse
+        hysteresis models); empty otherwise. Logged as ``<axis>_desired_deg``.
     """
 
     t_s: np.ndarray
@@ -188,6 +192,7 @@ class Trajectory:
     sample_rate_hz: float
     protocol: str = ""
     segments: tuple[Segment, ...] = ()
+    desired: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
