@@ -37,7 +37,8 @@ TRUTH = {
     "coupling": ("coupling", {"coupling_linear": 0.12, "coupling_abs": 0.06}, "coupling["),
     "creep": ("creep", {"creep_fraction": 0.25, "creep_tau_s": 2.0}, "creep("),
     "load": ("load:wrap_deg", {"load_wrap_deg_up": 0.05, "load_wrap_deg_down": 0.0, "load_wrap_deg_up_amp": 0.0005,
-                               "load_wrap_deg_down_amp": 0.0, "load_wrap_deg_lo": 100.0, "load_wrap_deg_hi": 200.0},
+                               "load_wrap_deg_down_amp": 0.0, "load_wrap_deg_gain": -0.0005,
+                               "load_wrap_deg_lo": 100.0, "load_wrap_deg_hi": 200.0},
              "loadplay("),
 }
 
@@ -111,7 +112,8 @@ def test_effect_names_parse_and_bad_names_fail():
     assert make_effect("load:sheath_wrap_deg").label == "load:sheath_wrap_deg"
     assert make_effect("load:sheath_wrap_deg").full_names() == [
         "load_sheath_wrap_deg_up", "load_sheath_wrap_deg_down", "load_sheath_wrap_deg_up_amp",
-        "load_sheath_wrap_deg_down_amp", "load_sheath_wrap_deg_lo", "load_sheath_wrap_deg_hi"]
+        "load_sheath_wrap_deg_down_amp", "load_sheath_wrap_deg_gain", "load_sheath_wrap_deg_lo",
+        "load_sheath_wrap_deg_hi"]
     assert make_effect("coupling:ml_meas_deg").column == "ml_meas_deg"
     with pytest.raises(ModelError, match="load needs a column"):
         make_effect("load")

@@ -10,16 +10,25 @@ angle ``|u|`` (taken at the previous sample, which keeps the inverse explicit)::
 
     a_k = |u_{k-1}|
     w_k = max((c_up + d_up · a_k) · (x_k - x_lo) + (c_down + d_down · a_k) · (x_hi - x_k), 0)
-    v_k = clip(v_{k-1}, u_k - w_k, u_k + w_k)
+    p_k = clip(p_{k-1}, u_k - w_k, u_k + w_k)
+    v_k = (1 + g · (x_k - x_lo)) · p_k
 
 ``c_up`` (``load_<COLUMN>_up``) and ``c_down`` (``load_<COLUMN>_down``), both >= 0 (deg of
 play per unit of ``x``), are fitted: friction growing with the covariate, or falling
 with it; ``d_up``, ``d_down`` (``load_<COLUMN>_up_amp``, ``_down_amp``, >= 0, deg of play per
-unit of ``x`` and per knob degree) are their tension-proportional shares. ``x_lo``, ``x_hi`` (``load_<COLUMN>_lo``, ``_hi``) are the covariate's range in the
-fitted data, held fixed: the base model carries the width at the least-friction end,
-the term what the covariate adds. (Two one-signed gains rather than one signed gain keep
-the model smooth where the sign would change, so the fit does not stall at zero.) The inverse is exact for a logged covariate (the batch inverse needs the column);
-the future covariate is unknown to a control loop, so the effect does not stream.
+unit of ``x`` and per knob degree) are their tension-proportional shares. The same friction
+also costs transmission: while the tendon slips, the distal tension is the knob tension
+times ``e^{-mu Theta}`` (capstan), so a given bend needs more tendon stretch, i.e. more knob
+travel, the more the sheath wraps; the gain ``g`` (``load_<COLUMN>_gain``, per unit of ``x``,
+signed, bounded so the factor stays within 0.5..1.5 over the fitted range) scales the
+command that reaches the base. Without it the play alone would have to mimic a flatter loop
+by widening, which fits the covariate values it was fitted on but extrapolates wrongly
+beyond them. ``x_lo``, ``x_hi`` (``load_<COLUMN>_lo``, ``_hi``) are the covariate's range in the
+fitted data, held fixed: the base model carries the width and gain at the least-friction
+end, the term what the covariate adds. (Two one-signed play gains rather than one signed
+gain keep the model smooth where the sign would change, so the fit does not stall at zero.)
+The inverse is exact for a logged covariate (the batch inverse needs the column); the
+future covariate is unknown to a control loop, so the effect does not stream.
 """
 
 from __future__ import annotations
@@ -72,7 +81,8 @@ class Load(InputEffect):
     signature = ("loop width (residual at reversals, with the sign of the motion) that changes with the "
                  "covariate; residual correlated with the covariate times the direction of motion")
     protocol = "the same motion repeated while the covariate changes (e.g. different sheath curvatures)"
-    units = {"up": "deg/unit", "down": "deg/unit", "up_amp": "1/unit", "down_amp": "1/unit", "lo": "", "hi": ""}
+    units = {"up": "deg/unit", "down": "deg/unit", "up_amp": "1/unit", "down_amp": "1/unit", "gain": "1/unit",
+             "lo": "", "hi": ""}
 
     def __init__(self, column: str | None = None):
         if not isinstance(column, str) or not column.strip():
@@ -111,7 +121,9 @@ class Load(InputEffect):
 
     def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
         c = self.constants(data)
+        g_max = 0.5 / (c["hi"] - c["lo"])  # the gain factor stays within 0.5..1.5 over the fitted range
         return [Parameter(f"{self.prefix}_{k}", 0.0, 0.0, np.inf) for k in ("up", "down", "up_amp", "down_amp")] + [
+                Parameter(f"{self.prefix}_gain", 0.0, -g_max, g_max),
                 Parameter(f"{self.prefix}_lo", c["lo"]), Parameter(f"{self.prefix}_hi", c["hi"])]
 
     def start_candidates(self, data: HysteresisData, u: np.ndarray) -> list[dict]:
@@ -119,7 +131,7 @@ class Load(InputEffect):
         x = data.column(self.column)
         scale = float(np.ptp(u)) / float(np.ptp(x))
         amp = scale / max(float(np.max(np.abs(u))), 1e-9)
-        zero = {"up": 0.0, "down": 0.0, "up_amp": 0.0, "down_amp": 0.0}
+        zero = {"up": 0.0, "down": 0.0, "up_amp": 0.0, "down_amp": 0.0, "gain": 0.0}
         return [zero] + [{**zero, side: f * s} for side, s in (("up", scale), ("down", scale), ("up_amp", amp),
                                                                 ("down_amp", amp)) for f in (0.01, 0.05)]
 
@@ -146,16 +158,20 @@ class Load(InputEffect):
         raw = w0 + w1 * a
         w = np.maximum(raw, 0.0)
         on = (raw >= 0.0).astype(float)  # the width is clipped at zero only for covariates beyond the fitted range
-        zeros = np.zeros((w.size, 2))  # lo and hi are held fixed: no derivative needed
+        zeros = np.zeros((w.size, 3))  # gain: applied after the play; lo and hi are held fixed
         Wg = np.column_stack([(on * w1 * np.sign(prev))[:, None] * Mprev, on * above, on * below,
                               on * above * a, on * below * a, zeros])
-        v, J = varplay_forward_jac(np.ascontiguousarray(u, dtype=float), w, Wg, np.ascontiguousarray(M, dtype=float),
-                                   data.run_starts)
-        return v, J[:, q:], J[:, :q]
+        play, J = varplay_forward_jac(np.ascontiguousarray(u, dtype=float), w, Wg, np.ascontiguousarray(M, dtype=float),
+                                      data.run_starts)
+        f = 1.0 + p.get("gain", 0.0) * above
+        J = J * f[:, None]
+        J[:, q + 4] = play * above
+        return play * f, J[:, q:], J[:, :q]
 
     def invert(self, p: dict, v: np.ndarray, data: HysteresisData) -> np.ndarray:
-        w0, w1, _, _ = self._parts(p, data)
-        return loadplay_inverse(np.ascontiguousarray(v, dtype=float), w0, w1, data.run_starts)
+        w0, w1, above, _ = self._parts(p, data)
+        play = np.asarray(v, dtype=float) / (1.0 + p.get("gain", 0.0) * above)
+        return loadplay_inverse(np.ascontiguousarray(play), w0, w1, data.run_starts)
 
     def wrap(self, inner: str) -> str:
         return f"loadplay({inner})"
@@ -167,7 +183,10 @@ class Load(InputEffect):
             d = p.get(f"{side}_amp", 0.0)
             return c if d == 0.0 else f"({c} + {fmt_value(d, se.get(f'{side}_amp'), '')}*|u|)"
 
-        return f"loadplay = load[up={gain('up')}*({x}-{p['lo']:.4g}), down={gain('down')}*({p['hi']:.4g}-{x})]"
+        play = f"loadplay = load[up={gain('up')}*({x}-{p['lo']:.4g}), down={gain('down')}*({p['hi']:.4g}-{x})"
+        if p.get("gain", 0.0) != 0.0:
+            play += f", gain=1 + {fmt_value(p['gain'], se.get('gain'), '')}*({x}-{p['lo']:.4g})"
+        return play + "]"
 
     def is_zero(self, p: dict) -> bool:
-        return all(p.get(k, 0.0) == 0.0 for k in ("up", "down", "up_amp", "down_amp"))
+        return all(p.get(k, 0.0) == 0.0 for k in ("up", "down", "up_amp", "down_amp", "gain"))
