@@ -34,6 +34,8 @@ TRUTH = {
     # play of 0.03 s per deg/s at neutral, growing 1 %/deg with the knob angle (tension)
     "rate": ("rate", {"rate_gain_s": 0.03, "rate_amp_s_per_deg": 0.0003}, "rateplay("),
     "delay": ("delay", {"delay_s": 0.13}, "(t - tau)"),
+    # 6 % of the bend as extra backlash: ~3.6 deg of knob at a 60 deg bend, ~0 near neutral
+    "tension": ("tension", {"tension_friction": 0.06}, "tplay("),
     "coupling": ("coupling", {"coupling_linear": 0.12, "coupling_abs": 0.06}, "coupling["),
     "creep": ("creep", {"creep_fraction": 0.25, "creep_tau_s": 2.0}, "creep("),
     "load": ("load:wrap_deg", {"load_wrap_deg_up": 0.05, "load_wrap_deg_down": 0.0, "load_wrap_deg_up_amp": 0.0005,
@@ -103,7 +105,7 @@ def clean():
 def test_catalog_lists_every_effect_with_its_physics():
     names = [e.name for e in catalog()]
     assert names == list(EFFECTS)
-    assert {"envelope", "deadzone", "rate", "delay", "coupling", "drift", "creep", "load"} <= set(names)
+    assert {"envelope", "deadzone", "tension", "rate", "delay", "coupling", "drift", "creep", "load"} <= set(names)
     for e in catalog():
         assert e.cause and e.signature and e.protocol and e.parameters
 

@@ -105,6 +105,9 @@ BAR_GAPS = {
     # bends, while linear(f(u)) keeps the vertical loop width constant (even a free-form f reaches
     # only 0.52 deg on the noise-free run). A prototype envelope with the Duffing stiffening cubic
     # and a tension-proportional capstan play reached 1.51x with `delay` in the model, not yet 1.5x.
+    # with the rig's lag and the bend-proportional friction in the model (`linear` + delay,
+    # tension) the refit reaches 1.56x the floor but cuts 47 %: the paper's three-segment
+    # envelope (eq. 6) is not the simulator's cubic stiffening
     "envelope": "envelope on `linear` cuts ~56 % but stays at ~2.4x the noise floor (lag, tension-proportional loop width)",
     # the simulator's coupling moves the tendon anchors (an input shift through friction and
     # the envelope, plus tension changes) and eq. 1 projects the other bend through unequal

@@ -5,8 +5,8 @@ classes in :data:`EFFECTS`; ``load:COLUMN`` names an extra numeric column of the
 (``coupling:COLUMN`` optionally names the column with the other axis's position).
 
 Three kinds of term (see :mod:`endocal.models.base`): input transforms of the command
-(:class:`InputEffect`: ``delay``, ``rate``, ``load``, ``deadzone``, ``envelope``, applied
-in that order), a filter on the base's output (:class:`OutputFilter`: ``creep``) and
+(:class:`InputEffect`: ``delay``, ``rate``, ``load``, ``deadzone``, ``envelope``, ``tension``,
+applied in that order), a filter on the base's output (:class:`OutputFilter`: ``creep``) and
 additive output terms (:class:`OutputEffect`: ``coupling``, ``drift``).
 """
 
@@ -25,10 +25,11 @@ from endocal.models.effects.drift import Drift
 from endocal.models.effects.envelope import Envelope
 from endocal.models.effects.load import Load
 from endocal.models.effects.rate import Rate
+from endocal.models.effects.tension import Tension
 
 #: Catalog name -> effect class, in the order ``endocal effects`` lists them.
 EFFECTS: dict[str, type[Effect]] = {
-    "envelope": Envelope, "deadzone": Deadzone, "rate": Rate, "delay": Delay, "coupling": Coupling,
+    "envelope": Envelope, "deadzone": Deadzone, "tension": Tension, "rate": Rate, "delay": Delay, "coupling": Coupling,
     "drift": Drift, "creep": Creep, "load": Load,
 }
 
