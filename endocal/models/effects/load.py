@@ -11,7 +11,7 @@ angle ``|u|`` (taken at the previous sample, which keeps the inverse explicit)::
     a_k = |u_{k-1}|
     w_k = max((c_up + d_up · a_k) · (x_k - x_lo) + (c_down + d_down · a_k) · (x_hi - x_k), 0)
     p_k = clip(p_{k-1}, u_k - w_k, u_k + w_k)
-    v_k = (1 + g · (x_k - x_lo)) · p_k
+    v_k = (1 + g · (x_k - (x_lo + x_hi) / 2)) · p_k
 
 ``c_up`` (``load_<COLUMN>_up``) and ``c_down`` (``load_<COLUMN>_down``), both >= 0 (deg of
 play per unit of ``x``), are fitted: friction growing with the covariate, or falling
@@ -24,8 +24,9 @@ signed, bounded so the factor stays within 0.5..1.5 over the fitted range) scale
 command that reaches the base. Without it the play alone would have to mimic a flatter loop
 by widening, which fits the covariate values it was fitted on but extrapolates wrongly
 beyond them. ``x_lo``, ``x_hi`` (``load_<COLUMN>_lo``, ``_hi``) are the covariate's range in the
-fitted data, held fixed: the base model carries the width and gain at the least-friction
-end, the term what the covariate adds. (Two one-signed play gains rather than one signed
+fitted data, held fixed: the base model carries the width at the least-friction end and the
+gain at mid-range (centring keeps ``g`` from trading off against the base's own scale, which
+made the fit crawl), the term what the covariate adds. (Two one-signed play gains rather than one signed
 gain keep the model smooth where the sign would change, so the fit does not stall at zero.)
 The inverse is exact for a logged covariate (the batch inverse needs the column); the
 future covariate is unknown to a control loop, so the effect does not stream.
@@ -127,13 +128,13 @@ class Load(InputEffect):
                 Parameter(f"{self.prefix}_lo", c["lo"]), Parameter(f"{self.prefix}_hi", c["hi"])]
 
     def start_candidates(self, data: HysteresisData, u: np.ndarray) -> list[dict]:
-        """Start values tried before the fit (the best is kept): extra play up to 5 % of the command span."""
+        """Start values tried before the fit (the best is kept): extra play of 1 % of the command span on one side."""
         x = data.column(self.column)
         scale = float(np.ptp(u)) / float(np.ptp(x))
         amp = scale / max(float(np.max(np.abs(u))), 1e-9)
         zero = {"up": 0.0, "down": 0.0, "up_amp": 0.0, "down_amp": 0.0, "gain": 0.0}
         return [zero] + [{**zero, side: f * s} for side, s in (("up", scale), ("down", scale), ("up_amp", amp),
-                                                                ("down_amp", amp)) for f in (0.01, 0.05)]
+                                                                ("down_amp", amp)) for f in (0.01,)]
 
     def _parts(self, p: dict, data: HysteresisData) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Width at zero knob angle ``w0`` and its growth per knob degree ``w1`` (n,), and ``x - lo``, ``hi - x``."""
@@ -163,14 +164,15 @@ class Load(InputEffect):
                               on * above * a, on * below * a, zeros])
         play, J = varplay_forward_jac(np.ascontiguousarray(u, dtype=float), w, Wg, np.ascontiguousarray(M, dtype=float),
                                       data.run_starts)
-        f = 1.0 + p.get("gain", 0.0) * above
+        centred = above - 0.5 * (p["hi"] - p["lo"])
+        f = 1.0 + p.get("gain", 0.0) * centred
         J = J * f[:, None]
-        J[:, q + 4] = play * above
+        J[:, q + 4] = play * centred
         return play * f, J[:, q:], J[:, :q]
 
     def invert(self, p: dict, v: np.ndarray, data: HysteresisData) -> np.ndarray:
         w0, w1, above, _ = self._parts(p, data)
-        play = np.asarray(v, dtype=float) / (1.0 + p.get("gain", 0.0) * above)
+        play = np.asarray(v, dtype=float) / (1.0 + p.get("gain", 0.0) * (above - 0.5 * (p["hi"] - p["lo"])))
         return loadplay_inverse(np.ascontiguousarray(play), w0, w1, data.run_starts)
 
     def wrap(self, inner: str) -> str:
@@ -185,7 +187,7 @@ class Load(InputEffect):
 
         play = f"loadplay = load[up={gain('up')}*({x}-{p['lo']:.4g}), down={gain('down')}*({p['hi']:.4g}-{x})"
         if p.get("gain", 0.0) != 0.0:
-            play += f", gain=1 + {fmt_value(p['gain'], se.get('gain'), '')}*({x}-{p['lo']:.4g})"
+            play += f", gain=1 + {fmt_value(p['gain'], se.get('gain'), '')}*({x}-{0.5 * (p['lo'] + p['hi']):.4g})"
         return play + "]"
 
     def is_zero(self, p: dict) -> bool:
