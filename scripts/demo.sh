@@ -20,21 +20,26 @@ step "check run for the report, used by no fit: a chirp" \
   $E excite chirp --amplitude 50 --out "$OUT/check" --seed 4 --force --quiet
 step "fit the paper's modified Prandtl-Ishlinskii model" \
   $E fit hysteresis "$OUT/train" --axis ap --model pi --effects envelope --out "$OUT/pi-envelope.json" --force
-step "hold it against the held-out run: how far off, where, which effect is missing" \
-  $E validate "$OUT/pi-envelope.json" "$OUT/test"
-$E validate "$OUT/pi-envelope.json" "$OUT/test" --json > "$OUT/validate-pi-envelope.json"
-refit=$(python -c "import json,sys; s=json.load(open(sys.argv[1]))['suspects']; print(s[0]['command'] if s else '')" "$OUT/validate-pi-envelope.json")
-if [ -n "$refit" ]; then
-  new=$(python -c "import json,sys; print(json.load(open(sys.argv[1]))['suspects'][0]['command'].split('--out ')[1].split()[0])" "$OUT/validate-pi-envelope.json")
+# The loop: validate names the most likely missing effect and prints the command that adds it;
+# run that command, validate again (it shows the error falling), until nothing significant is
+# missing or three effects have been added.
+model="$OUT/pi-envelope.json"
+models=("$model")
+for round in 1 2 3 4; do
+  step "round $round: hold $(basename "$model") against the held-out run: how far off, where, which effect is missing" \
+    $E validate "$model" "$OUT/test" --json-out "$OUT/validate-$(basename "$model")"
+  refit=$(python -c "import json,sys; s=json.load(open(sys.argv[1]))['suspects']; print(s[0]['command'] if s else '')" "$OUT/validate-$(basename "$model")")
+  if [ -z "$refit" ]; then
+    echo "validate finds nothing significant missing: the loop ends"
+    break
+  fi
+  [ "$round" = 4 ] && break
+  model=$(python -c "import sys; print(sys.argv[1].split('--out ')[1].split()[0])" "$refit")
   step "add the suspected effect: the exact command validate printed" $refit --force
-  step "watch the error fall" $E validate "$new" "$OUT/test"
-  models=("$OUT/pi-envelope.json" "$new")
-else
-  echo "validate found nothing missing"
-  models=("$OUT/pi-envelope.json")
-fi
+  models+=("$model")
+done
 step "feedforward compensation on the simulator (desired vs reached angle)" \
-  $E validate "${models[-1]}" --protocol triangle --set amplitude_deg=40 --runs-out "$OUT/playback"
+  $E validate "$model" --protocol triangle --set amplitude_deg=40 --runs-out "$OUT/playback"
 step "report" \
   $E report "${models[@]}" --data "$OUT/check" --data "$OUT/test" --planes "$OUT/planes.json" --out "$OUT/report.html" --force
 printf '\nResults are in %s/: runs (run.json, motor/, tracker/, truth/, aligned.parquet), planes.json, model files, report.html\n' "$OUT"

@@ -74,11 +74,13 @@ def test_refitted_model_shows_the_error_falling(drifting):
     tmp, csv, aligned, noise = drifting
     # what the printed command does (the fit is the library's; the CLI command is the lead's)
     save_model(make_model("bspline", ["drift"], axis="ap").fit(axis_data(aligned, "ap")), tmp / "m-drift.json")
-    res = _invoke(tmp / "m-drift.json", csv)
+    res = _invoke(tmp / "m-drift.json", csv, "--json-out", tmp / "v.json")
     assert res.exit_code == 0, res.output
     assert "Watch the error fall" in res.stdout and "bspline -> " not in res.stdout
     assert "bspline+drift" in res.stdout and "nothing significant" in res.stdout
     d = json.loads(_invoke(tmp / "m-drift.json", csv, "--json").stdout)
+    # --json-out keeps the terminal view and writes the same object --json prints (what scripts parse)
+    assert json.loads((tmp / "v.json").read_text()) == d
     c = d["compare"]
     assert c["old_label"] == "bspline" and c["new_label"] == "bspline+drift"
     assert c["new_heldout_rmse_deg"] <= 0.5 * c["old_heldout_rmse_deg"]

@@ -89,6 +89,7 @@ def validate(
     model_path: Path = typer.Argument(..., help="Fitted model file (endocal fit hysteresis --out)."),
     data: Optional[list[Path]] = typer.Argument(None, help="Run folders or aligned tables (.parquet/.csv) to validate on."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (metrics, regimes, residuals, suspects, notes)."),
+    json_out: Optional[Path] = typer.Option(None, "--json-out", help="Also write that JSON object to this file (the terminal view still prints)."),
     folds: int = typer.Option(5, "--folds", help="Held-out blocks of the blocked cross-validation."),
     seed: int = typer.Option(0, "--seed", help="Seed of the bootstrap intervals (and of the backend with --protocol)."),
     compare: Optional[Path] = typer.Option(None, "--compare", help="A previous model: show its error beside this one's."),
@@ -116,7 +117,7 @@ def validate(
     if protocol is not None:
         if data:
             raise ModelError("give either DATA (offline validation) or --protocol (playback on a backend), not both")
-        _playback(model, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets, runs_out)
+        _playback(model, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets, runs_out, json_out)
         return
     if not data:
         raise ModelError("nothing to validate on: give run folders or aligned tables, or --protocol P")
@@ -134,15 +135,28 @@ def validate(
     refit_paths = list(dict.fromkeys(trained_on + [str(p) for p in data]))
     result = validate_offline(model, tables, folds=folds, seed=seed, compare=old, model_path=str(model_path),
                               data_paths=refit_paths, load_columns=load_column or None)
+    d = result.to_dict()
+    if old_path is not None:
+        d["compare"]["path"] = str(old_path)
+    text = json.dumps(_finite(d), allow_nan=False)
+    if json_out is not None:
+        _write_json(json_out, text)
     if as_json:
-        d = result.to_dict()
-        if old_path is not None:
-            d["compare"]["path"] = str(old_path)
-        out.print_json(json.dumps(_finite(d), allow_nan=False))
+        out.print_json(text)
         return
     render(result)
     if old_path is not None and compare is None:
         err.print(f"compared with {old_path} (the model this one was refitted from)")
+
+
+def _write_json(path: Path, text: str) -> None:
+    from endocal.errors import OutputPathError
+    from endocal.runs.format import atomic_write_bytes
+
+    try:
+        atomic_write_bytes(path, (text + "\n").encode())
+    except OSError as exc:
+        raise OutputPathError(f"cannot write {path}: {exc.strerror}") from None
 
 
 def _finite(obj):
@@ -156,7 +170,7 @@ def _finite(obj):
     return obj
 
 
-def _playback(model, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets, runs_out) -> None:
+def _playback(model, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets, runs_out, json_out) -> None:
     from endocal.backends.registry import make_backend
     from endocal.planes import load_planes
     from endocal.probe import load_probe
@@ -176,8 +190,11 @@ def _playback(model, protocol, backend, probe, sim_config, hardware_config, plan
         seed=seed,
         out_dir=runs_out,
     )
+    text = json.dumps(_finite(result.to_dict()), allow_nan=False)
+    if json_out is not None:
+        _write_json(json_out, text)
     if as_json:
-        out.print_json(json.dumps(_finite(result.to_dict()), allow_nan=False))
+        out.print_json(text)
         return
     out.print(_metrics_table(f"compensated: {protocol} on {backend}", result.metrics))
     out.print(_metrics_table("uncompensated", result.uncompensated))
