@@ -36,6 +36,7 @@ from endocal.report.stats import holm
 from endocal.validation.data import prefix
 from endocal.validation.metrics import ErrorMetrics, error_metrics
 from endocal.validation.suspects import (
+    MAX_SCAN_SAMPLES,
     check_cv_data,
     effect_labels,
     fold_bounds,
@@ -47,7 +48,7 @@ from endocal.validation.suspects import (
 #: Held-out blocks and the longest record scored undecimated: ``endocal validate``'s defaults
 #: (``--folds``, ``max_scan_samples``), so the ladder's held-out RMSE is the one validate prints.
 FOLDS = 5
-MAX_CV_SAMPLES = 6000
+MAX_CV_SAMPLES = MAX_SCAN_SAMPLES
 
 
 @dataclass

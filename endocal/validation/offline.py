@@ -22,6 +22,7 @@ from endocal.validation.metrics import ErrorMetrics, error_metrics
 from endocal.validation.regimes import RegimeBreakdown, error_by_regime
 from endocal.validation.residuals import ResidualTests, residual_tests
 from endocal.validation.suspects import (
+    MAX_SCAN_SAMPLES,
     ScanResult,
     check_cv_data,
     effect_labels,
@@ -172,7 +173,7 @@ def validate_offline(model: HysteresisModel, datas, *, axis: str | None = None, 
                      alpha: float = 0.05, min_gain_pct: float = 10.0, compare: HysteresisModel | None = None,
                      model_path: str | None = None, data_paths: Sequence[str] | None = None,
                      load_columns: Sequence[str] | None = None, bending_axes: Sequence[str] | None = None,
-                     max_scan_samples: int = 6000, n_boot: int = 400) -> ValidationResult:
+                     max_scan_samples: int = MAX_SCAN_SAMPLES, n_boot: int = 400) -> ValidationResult:
     """Validate a fitted model on measured data: metrics, regimes, residual tests, missing effects.
 
     Parameters

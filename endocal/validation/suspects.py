@@ -391,10 +391,17 @@ def refit_path(model_path: str | None, effect: str) -> str:
 
 
 # ---------------------------------------------------------------------------- the scan
+#: Longest record the scan fits at full rate (longer ones are decimated to about this many
+#: samples): a 600 s record at 100 Hz is scanned at 8 Hz, still >= 25 samples per cycle of
+#: the <= 0.3 Hz loops a knob draws, and the budget that keeps the scan of every catalog
+#: effect on 60 000 samples under 30 s (bench/bench_scan.py).
+MAX_SCAN_SAMPLES = 5000
+
+
 def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5, alpha: float = 0.05,
                  min_gain_pct: float = 10.0, candidates: Sequence[str] | None = None,
                  load_columns: Sequence[str] | None = None, bending_axes: Sequence[str] = (),
-                 max_samples: int = 6000, train_frac: float = 0.5, screen_pct: float = 0.5,
+                 max_samples: int = MAX_SCAN_SAMPLES, train_frac: float = 0.5, screen_pct: float = 0.5,
                  data_paths: Sequence[str] = ("DATA",), model_path: str | None = None) -> ScanResult:
     """Test every catalog effect the model lacks on held-out data; rank the significant ones.
 
