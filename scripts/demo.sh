@@ -6,7 +6,7 @@ export PATH="$PWD/.venv/bin:$PATH"  # the commands validate prints call `endocal
 E=endocal
 OUT=${1:-demo-out}
 mkdir -p "$OUT"
-step() { printf '\n\033[1m== %s\033[0m\n$ %s\n' "$1" "${*:2}"; "${@:2}"; }
+step() { local t0=$SECONDS; printf '\n\033[1m== %s\033[0m\n$ %s\n' "$1" "${*:2}"; "${@:2}"; printf '(%d s)\n' $((SECONDS - t0)); }
 
 step "bending planes: single-knob sweeps of the four half-planes" \
   $E excite planes --out "$OUT/planes" --seed 1 --force --quiet
@@ -14,10 +14,11 @@ step "fit the deviation angles and the orthogonal compensator" \
   $E fit planes "$OUT/planes" --out "$OUT/planes.json" --force
 step "identification run: the duodenoscope paper's damped sine" \
   $E excite damped-sine --amplitude 85 --out "$OUT/train" --seed 2 --force --quiet
-step "held-out run: band-limited random input" \
+step "held-out runs: band-limited random input, and a chirp (several speeds tell a delay from speed-dependent friction)" \
   $E excite random --amplitude 60 --out "$OUT/test" --seed 3 --force --quiet
-step "check run for the report, used by no fit: a chirp" \
-  $E excite chirp --amplitude 50 --out "$OUT/check" --seed 4 --force --quiet
+$E excite chirp --amplitude 50 --out "$OUT/chirp" --seed 4 --force --quiet
+step "check run for the report, used by no fit: the paper's triangle" \
+  $E excite triangle --amplitude 50 --out "$OUT/check" --seed 5 --force --quiet
 step "fit the paper's modified Prandtl-Ishlinskii model" \
   $E fit hysteresis "$OUT/train" --axis ap --model pi --effects envelope --out "$OUT/pi-envelope.json" --force
 # The loop: validate names the most likely missing effect and prints the command that adds it;
@@ -26,8 +27,8 @@ step "fit the paper's modified Prandtl-Ishlinskii model" \
 model="$OUT/pi-envelope.json"
 models=("$model")
 for round in 1 2 3 4; do
-  step "round $round: hold $(basename "$model") against the held-out run: how far off, where, which effect is missing" \
-    $E validate "$model" "$OUT/test" --json-out "$OUT/validate-$(basename "$model")"
+  step "round $round: hold $(basename "$model") against the held-out runs: how far off, where, which effect is missing" \
+    $E validate "$model" "$OUT/test" "$OUT/chirp" --json-out "$OUT/validate-$(basename "$model")"
   refit=$(python -c "import json,sys; s=json.load(open(sys.argv[1]))['suspects']; print(s[0]['command'] if s else '')" "$OUT/validate-$(basename "$model")")
   if [ -z "$refit" ]; then
     echo "validate finds nothing significant missing: the loop ends"

@@ -192,6 +192,7 @@ def test_ladder_heldout_equals_a_direct_rolling_origin_computation(sim, report):
         model = load_model(p[label])
         err, fitted = heldout_errors(model, effect_labels(model), d, bounds)
         train = np.concatenate([predict_clamped(m, prefix(d, a))[0] - d.meas_deg[:a] for m, (a, _) in zip(fitted, bounds)])
+        assert d.run_starts.size == 1  # one record: its folds are plain prefixes
         step = next(s for s in rep.ladder if s["data"] == "held" and s["model"] == label)
         assert step["heldout_rmse_deg"] == pytest.approx(np.sqrt(np.mean(err**2)), rel=1e-12)
         assert step["train_rmse_deg"] == pytest.approx(np.sqrt(np.mean(train**2)), rel=1e-12)

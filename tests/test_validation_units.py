@@ -17,7 +17,7 @@ from endocal.runs.aligned import AlignedData
 from endocal.validation.data import OTHER_CMD, axis_data, check_columns, load_candidates, prefix
 from endocal.validation.regimes import error_by_regime, hold_mask, reversal_distance_deg, turning_points
 from endocal.validation.residuals import residual_tests
-from endocal.validation.suspects import check_cv_data, fold_bounds, holm, paired_test, refit_command, refit_path
+from endocal.validation.suspects import check_cv_data, fold_bounds, fold_split, holm, paired_test, refit_command, refit_path
 
 FS = 100.0
 
@@ -148,3 +148,31 @@ def test_refit_command_and_path():
     assert refit_path("models/m.json", "load:sheath_wrap_deg") == "models/m-load-sheath_wrap_deg.json"
     cmd = refit_command(["runs/a", "b.csv"], "ap", "bspline", ["delay"], "m-delay.json")
     assert cmd == "endocal fit hysteresis runs/a b.csv --axis ap --model bspline --effects delay --out m-delay.json"
+
+
+def test_folds_of_several_runs_take_the_same_share_of_every_run():
+    # two runs of different kinds and lengths: every training block must hold some of each
+    u = np.concatenate([np.sin(np.arange(400) / 10.0), 2 * np.sin(np.arange(200) / 3.0)])
+    data = HysteresisData(cmd_deg=u, meas_deg=u + 1.0, t_s=np.arange(600) * 0.01, run_starts=np.array([0, 400]))
+    bounds = fold_bounds(data.n_samples, 4)
+    assert bounds[0] == (300, 375) and bounds[-1][1] == 600
+    train, evaluate, held = fold_split(data, bounds[0])
+    # half of each run trains (200 + 100), the next eighth of each is held out (50 + 25)
+    assert train.n_samples == 300 and list(train.run_starts) == [0, 200]
+    assert np.array_equal(train.cmd_deg, np.concatenate([u[:200], u[400:500]]))
+    assert list(evaluate.run_starts) == [0, 250] and held.size == 75
+    assert np.array_equal(evaluate.meas_deg[held], np.concatenate([u[200:250], u[500:525]]) + 1.0)
+    # the last fold reaches the end of both runs; together the folds hold out each run's second half once
+    helds = [evaluate.cmd_deg[h] for _, evaluate, h in (fold_split(data, b) for b in bounds)]
+    assert sum(h.size for h in helds) == 300
+    # one run: plain prefixes, as before
+    one = prefix(data, 400)
+    tr, ev, h = fold_split(one, (200, 250))
+    assert tr.n_samples == 200 and ev.n_samples == 250 and np.array_equal(h, np.arange(200, 250))
+    # runs that only reach the rest of their range later (a staircase up, then down) are laid
+    # end to end instead: no fold may ask for commands its training block never saw
+    stair = np.concatenate([np.linspace(0, 60, 150), np.linspace(60, -60, 150)])
+    two = HysteresisData(cmd_deg=np.tile(stair, 2), meas_deg=np.tile(stair, 2), t_s=np.arange(600) * 0.01,
+                         run_starts=np.array([0, 300]))
+    tr, ev, h = fold_split(two, (300, 375))
+    assert tr.n_samples == 300 and list(tr.run_starts) == [0] and np.array_equal(h, np.arange(300, 375))

@@ -33,13 +33,13 @@ from endocal.models import HysteresisData, HysteresisModel
 from endocal.report.adapters import predict_clamped
 from endocal.report.evaluate import Group, ModelEntry
 from endocal.report.stats import holm
-from endocal.validation.data import prefix
 from endocal.validation.metrics import ErrorMetrics, error_metrics
 from endocal.validation.suspects import (
     MAX_SCAN_SAMPLES,
     check_cv_data,
     effect_labels,
     fold_bounds,
+    fold_split,
     heldout_errors,
     one_blas_thread,
     paired_test,
@@ -108,7 +108,8 @@ def cross_validate(model: HysteresisModel, data: HysteresisData, *, folds: int =
     bounds = fold_bounds(d.n_samples, folds)
     with one_blas_thread():
         err, fitted = heldout_errors(model, effect_labels(model), d, bounds)
-    train_sq = [np.square(predict_clamped(m, prefix(d, a))[0] - d.meas_deg[:a]) for m, (a, _) in zip(fitted, bounds)]
+    trains = [fold_split(d, bd)[0] for bd in bounds]
+    train_sq = [np.square(predict_clamped(m, tr)[0] - tr.meas_deg) for m, tr in zip(fitted, trains)]
     meas = d.meas_deg[bounds[0][0]:bounds[-1][1]]
     return HeldOut(metrics=error_metrics(meas, meas + err, n_boot=n_boot, seed=seed),
                    train_rmse_deg=float(np.sqrt(np.mean(np.concatenate(train_sq)))), errors_deg=err,

@@ -166,10 +166,71 @@ class ScanResult:
 
 # ---------------------------------------------------------------------------- folds
 def fold_bounds(n_samples: int, folds: int, train_frac: float = 0.5) -> list[tuple[int, int]]:
-    """``(train_end, test_end)`` of each rolling-origin fold: train on ``[0, train_end)``, test ``[train_end, test_end)``."""
+    """``(train_end, test_end)`` of each rolling-origin fold: train on ``[0, train_end)``, test ``[train_end, test_end)``.
+
+    On data of several runs the bounds are read as fractions of ``n_samples`` and applied to
+    every run at once (:func:`fold_split`).
+    """
     first = int(round(train_frac * n_samples))
     edges = np.linspace(first, n_samples, folds + 1).round().astype(int)
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
+
+
+def fold_split(data: HysteresisData, bound: tuple[int, int]) -> tuple[HysteresisData, HysteresisData, np.ndarray]:
+    """Training data, the data to run the fitted model over, and the held-out positions in the latter.
+
+    One run: train on ``[0, a)``, run over ``[0, b)``, hold out ``[a, b)``. Several runs (a
+    random input and a chirp, say): the same fractions ``a/n`` and ``b/n`` of *every* run, so
+    each training block holds every kind of motion the held-out blocks do; rolling the origin
+    over the runs laid end to end would fit on the first runs and ask for the last. That
+    holds while the first half of every run already spans its command range
+    (:func:`runs_cover_their_range`); runs that go somewhere new later (a staircase up, then
+    down) are laid end to end instead, so no fold asks a model for commands it never saw.
+
+    Returns
+    -------
+    train, evaluate : HysteresisData
+        Each run's prefix up to its training end and up to its test end (runs kept apart).
+    held : ndarray of int
+        Positions in ``evaluate`` of the held-out samples, run by run.
+    """
+    a, b = bound
+    if data.run_starts.size <= 1 or not runs_cover_their_range(data):
+        return prefix(data, a), prefix(data, b), np.arange(a, b)
+    n = data.n_samples
+    train_idx, eval_idx, held = [], [], []
+    for sl in data.run_slices():
+        length = sl.stop - sl.start
+        ra, rb = int(round(a / n * length)), int(round(b / n * length))
+        train_idx.append(np.arange(sl.start, sl.start + ra))
+        held.append(sum(len(i) for i in eval_idx) + np.arange(ra, rb))
+        eval_idx.append(np.arange(sl.start, sl.start + rb))
+    return _take(data, train_idx), _take(data, eval_idx), np.concatenate(held)
+
+
+def runs_cover_their_range(data: HysteresisData, train_frac: float = 0.5, min_cover: float = 0.9) -> bool:
+    """True when the first ``train_frac`` of every run spans at least ``min_cover`` of that run's command range."""
+    for sl in data.run_slices():
+        u = data.cmd_deg[sl]
+        head = u[: max(1, int(round(train_frac * u.size)))]
+        span = float(np.ptp(u))
+        if span > 0 and float(np.ptp(head)) < min_cover * span:
+            return False
+    return True
+
+
+def _take(data: HysteresisData, parts: list[np.ndarray]) -> HysteresisData:
+    """The samples ``parts`` (one index array per run; empty ones dropped) as runs of their own."""
+    parts = [p for p in parts if p.size]
+    idx = np.concatenate(parts)
+    starts = np.concatenate([[0], np.cumsum([p.size for p in parts])[:-1]]).astype(data.run_starts.dtype)
+    return HysteresisData(
+        cmd_deg=data.cmd_deg[idx],
+        meas_deg=None if data.meas_deg is None else data.meas_deg[idx],
+        t_s=None if data.t_s is None else data.t_s[idx],
+        extras={k: v[idx] for k, v in data.extras.items()},
+        run_starts=starts,
+    )
 
 
 def check_cv_data(data: HysteresisData, folds: int, train_frac: float = 0.5, min_block: int = 30) -> None:
@@ -188,10 +249,10 @@ def check_cv_data(data: HysteresisData, folds: int, train_frac: float = 0.5, min
     if n < need:
         raise ModelError(f"data too short for {folds}-fold blocked cross-validation: {n} samples, need at least "
                          f"{need} ({min_block} per held-out block); give a longer run or fewer --folds")
-    train_end = fold_bounds(n, folds, train_frac)[0][0]
-    n_turns = int(np.sum(turning_points(data) < train_end))
+    first = fold_split(data, fold_bounds(n, folds, train_frac)[0])[0]
+    n_turns = int(turning_points(first).size)
     if n_turns < 2:
-        raise ModelError(f"data too short for blocked cross-validation: the first {train_end} samples (the first "
+        raise ModelError(f"data too short for blocked cross-validation: the first {first.n_samples} samples (the first "
                          f"training block) hold {n_turns} direction reversal(s), a hysteresis model needs at least 2; "
                          "give a longer run")
 
@@ -214,12 +275,12 @@ def fold_errors(model: HysteresisModel, effects: Sequence[str], data: Hysteresis
     The model is fitted on ``[0, train_end)`` and run over ``[0, test_end)`` from the record's
     start; the errors are those of ``[train_end, test_end)``.
     """
-    a, b = bound
-    m = _template(model, effects).fit(prefix(data, a))
+    train, evaluate, held = fold_split(data, bound)
+    m = _template(model, effects).fit(train)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OutOfRangeWarning)
-        pred = m.predict(prefix(data, b))
-    return pred[a:b] - data.meas_deg[a:b], m
+        pred = m.predict(evaluate)
+    return pred[held] - evaluate.meas_deg[held], m
 
 
 def heldout_errors(model: HysteresisModel, effects: Sequence[str], data: HysteresisData,
