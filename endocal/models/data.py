@@ -144,8 +144,13 @@ class HysteresisData:
 
     def decimate(self, step: int) -> HysteresisData:
         """Every ``step``-th sample of each run (each run keeps its first sample)."""
-        idx = np.concatenate([np.arange(sl.start, sl.stop, step) for sl in self.run_slices()])
-        starts = np.concatenate([[0], np.cumsum([len(range(sl.start, sl.stop, step)) for sl in self.run_slices()])[:-1]])
+        return self.take([np.arange(sl.start, sl.stop, step) for sl in self.run_slices()])
+
+    def take(self, parts: list[np.ndarray]) -> HysteresisData:
+        """The samples at ``parts`` (one index array per run, in order; empty ones dropped), each part a run."""
+        parts = [np.asarray(p, dtype=int) for p in parts if len(p)]
+        idx = np.concatenate(parts)
+        starts = np.concatenate([[0], np.cumsum([p.size for p in parts])[:-1]]).astype(self.run_starts.dtype)
         return HysteresisData(
             cmd_deg=self.cmd_deg[idx],
             meas_deg=None if self.meas_deg is None else self.meas_deg[idx],

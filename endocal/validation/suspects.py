@@ -205,7 +205,7 @@ def fold_split(data: HysteresisData, bound: tuple[int, int]) -> tuple[Hysteresis
         train_idx.append(np.arange(sl.start, sl.start + ra))
         held.append(sum(len(i) for i in eval_idx) + np.arange(ra, rb))
         eval_idx.append(np.arange(sl.start, sl.start + rb))
-    return _take(data, train_idx), _take(data, eval_idx), np.concatenate(held)
+    return data.take(train_idx), data.take(eval_idx), np.concatenate(held)
 
 
 def runs_cover_their_range(data: HysteresisData, train_frac: float = 0.5, min_cover: float = 0.9) -> bool:
@@ -217,20 +217,6 @@ def runs_cover_their_range(data: HysteresisData, train_frac: float = 0.5, min_co
         if span > 0 and float(np.ptp(head)) < min_cover * span:
             return False
     return True
-
-
-def _take(data: HysteresisData, parts: list[np.ndarray]) -> HysteresisData:
-    """The samples ``parts`` (one index array per run; empty ones dropped) as runs of their own."""
-    parts = [p for p in parts if p.size]
-    idx = np.concatenate(parts)
-    starts = np.concatenate([[0], np.cumsum([p.size for p in parts])[:-1]]).astype(data.run_starts.dtype)
-    return HysteresisData(
-        cmd_deg=data.cmd_deg[idx],
-        meas_deg=None if data.meas_deg is None else data.meas_deg[idx],
-        t_s=None if data.t_s is None else data.t_s[idx],
-        extras={k: v[idx] for k, v in data.extras.items()},
-        run_starts=starts,
-    )
 
 
 def check_cv_data(data: HysteresisData, folds: int, train_frac: float = 0.5, min_block: int = 30) -> None:
