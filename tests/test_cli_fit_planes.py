@@ -87,7 +87,7 @@ def test_measured_residual_after_task_space_compensation_below_one_degree(planes
     models = []
     for i, axis in enumerate(("ap", "ml")):
         run = tmp_path / f"train-{axis}"
-        proc = endocal("excite", "damped-sine", "--set", f'axes=["axis{i + 1}"]', "--set", "period_s=10", "--set", "frequency_hz=0.1", "--amplitude", "85",
+        proc = endocal("excite", "damped-sine", "--set", f'axes=["axis{i + 1}"]', "--set", "period_s=6", "--set", "frequency_hz=0.25", "--amplitude", "85",
                        "--out", run, "--seed", str(20 + i), "--quiet")
         assert proc.returncode == 0, proc.stderr
         models.append(tmp_path / f"{axis}.json")
