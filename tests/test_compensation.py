@@ -23,10 +23,11 @@ PROBE = PRESETS["tee"]
 
 @pytest.fixture(scope="module")
 def training(tmp_path_factory):
+    # identified on the duodenoscope paper's damped sine alone, as the paper does; the four
+    # signals below are then all unseen (the random one included)
     root = tmp_path_factory.mktemp("comp")
     assert endocal("excite", "damped-sine", "--amplitude", "85", "--out", root / "train", "--seed", "2", "--quiet").returncode == 0
-    assert endocal("excite", "random", "--amplitude", "60", "--out", root / "more", "--seed", "3", "--quiet").returncode == 0
-    return [root / "train", root / "more"]
+    return [root / "train"]
 
 
 @pytest.fixture(scope="module")
