@@ -338,20 +338,16 @@ class PIModel(HysteresisModel):
     def _base_forward_jac(self, structure: dict, p: dict, v: np.ndarray, run_starts: np.ndarray, M: np.ndarray):
         """Output, its Jacobian w.r.t. the base parameters (n, n_base) and w.r.t. upstream ones (n, q).
 
-        Analytic for exponential weights (eq. 8) via :func:`pi_exp_forward_jac`; None
-        for free weights (the fit then differentiates numerically).
+        Analytic for both weight laws: eq. 8 via :func:`pi_exp_forward_jac`, free weights via
+        :func:`pi_free_forward_jac`.
         """
+        v = np.ascontiguousarray(v, dtype=float)
         if structure["weights"] != "exponential":
             r, w = self._thresholds_weights(structure, p)
-            y, J = pi_free_forward_jac(np.ascontiguousarray(v, dtype=float), r, w, np.ascontiguousarray(M), run_starts)
-            q = M.shape[1]
-            Jb = J[:, q:]
-            if structure["offset"]:
-                y += p["offset_deg"]
-                Jb = np.column_stack([Jb, np.ones(y.size)])
-            return y, Jb, J[:, :q]
-        y, J = pi_exp_forward_jac(np.ascontiguousarray(v, dtype=float), p["r"], p["w"], p["beta"],
-                                  structure["n_operators"], np.ascontiguousarray(M), run_starts)
+            y, J = pi_free_forward_jac(v, r, w, np.ascontiguousarray(M), run_starts)
+        else:
+            y, J = pi_exp_forward_jac(v, p["r"], p["w"], p["beta"], structure["n_operators"], np.ascontiguousarray(M),
+                                      run_starts)
         q = M.shape[1]
         Jb = J[:, q:]
         if structure["offset"]:
