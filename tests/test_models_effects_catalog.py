@@ -202,7 +202,7 @@ def test_parameters_are_recovered():
 
 
 def test_streaming_compensator_matches_the_batch_inverse_or_refuses():
-    for effect in ("deadzone", "rate", "creep"):
+    for effect in ("deadzone", "tension", "rate", "creep"):  # the last one needs the sample period
         d = synthetic(effect)
         spec, values, _ = TRUTH[effect]
         m = make_model("pi", ["envelope", spec]).set_parameters({**PAPER_TABLE1, **values}, cmd_range_deg=(-70, 70))

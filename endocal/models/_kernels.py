@@ -480,12 +480,29 @@ def varplay_forward_jac(u, w, Wg, M, run_starts):
     return v, J
 
 
-@njit(cache=True)
-def varplay_inverse(v, w, run_starts):
-    """Commands whose :func:`varplay_forward_jac` output is ``v`` for known widths ``w`` (exact).
+def play_inverse_step(v, v_prev, u_prev, w):
+    """One sample of a play's inverse: the knob that moves the drive from ``v_prev`` to ``v`` with half width ``w``.
 
     The drive moving up means the knob pushes from below (``u = v + w``), down from above;
     a drive at rest leaves the knob where it was unless the window forces it.
+    """
+    if v > v_prev:
+        return v + w
+    if v < v_prev:
+        return v - w
+    return min(max(u_prev, v - w), v + w)
+
+
+play_inverse_step_jit = njit(cache=True)(play_inverse_step)
+
+
+@njit(cache=True)
+def causal_play_inverse(v, w0, w1, run_starts):
+    """Commands whose :func:`varplay_forward_jac` output is ``v`` (exact, causal).
+
+    The half width at sample ``k`` is ``max(w0_k + w1_k |u_{k-1}|, 0)``: known widths
+    (``w1 = 0``) or widths growing with the previous command (the ``load`` and ``tension``
+    effects), which keeps the inverse explicit.
     """
     n = v.shape[0]
     u = np.empty(n)
@@ -495,10 +512,5 @@ def varplay_inverse(v, w, run_starts):
         b = run_starts[r + 1] if r + 1 < n_runs else n
         u[a] = v[a]
         for k in range(a + 1, b):
-            if v[k] > v[k - 1]:
-                u[k] = v[k] + w[k]
-            elif v[k] < v[k - 1]:
-                u[k] = v[k] - w[k]
-            else:
-                u[k] = min(max(u[k - 1], v[k] - w[k]), v[k] + w[k])
+            u[k] = play_inverse_step_jit(v[k], v[k - 1], u[k - 1], max(w0[k] + w1[k] * abs(u[k - 1]), 0.0))
     return u

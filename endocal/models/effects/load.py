@@ -37,33 +37,10 @@ from __future__ import annotations
 import numpy as np
 
 from endocal.errors import ModelError
-from numba import njit
-
-from endocal.models._kernels import varplay_forward_jac
+from endocal.models._kernels import causal_play_inverse, varplay_forward_jac
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import InputEffect
 from endocal.models.params import Parameter, fmt_value
-
-
-@njit(cache=True)
-def loadplay_inverse(v, w0, w1, run_starts):
-    """Commands whose play output is ``v`` for the width ``w_k = max(w0_k + w1_k |u_{k-1}|, 0)`` (exact, causal)."""
-    n = v.shape[0]
-    u = np.empty(n)
-    n_runs = run_starts.shape[0]
-    for r in range(n_runs):
-        a = run_starts[r]
-        b = run_starts[r + 1] if r + 1 < n_runs else n
-        u[a] = v[a]
-        for k in range(a + 1, b):
-            w = max(w0[k] + w1[k] * abs(u[k - 1]), 0.0)
-            if v[k] > v[k - 1]:
-                u[k] = v[k] + w
-            elif v[k] < v[k - 1]:
-                u[k] = v[k] - w
-            else:
-                u[k] = min(max(u[k - 1], v[k] - w), v[k] + w)
-    return u
 
 
 class Load(InputEffect):
@@ -173,7 +150,7 @@ class Load(InputEffect):
     def invert(self, p: dict, v: np.ndarray, data: HysteresisData) -> np.ndarray:
         w0, w1, above, _ = self._parts(p, data)
         play = np.asarray(v, dtype=float) / (1.0 + p.get("gain", 0.0) * (above - 0.5 * (p["hi"] - p["lo"])))
-        return loadplay_inverse(np.ascontiguousarray(play), w0, w1, data.run_starts)
+        return causal_play_inverse(np.ascontiguousarray(play), w0, w1, data.run_starts)
 
     def wrap(self, inner: str) -> str:
         return f"loadplay({inner})"

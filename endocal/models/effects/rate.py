@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit
 
 from endocal.errors import ModelError
-from endocal.models._kernels import varplay_forward_jac
+from endocal.models._kernels import play_inverse_step, play_inverse_step_jit, varplay_forward_jac
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import InputEffect
 from endocal.models.params import Parameter
@@ -85,13 +85,7 @@ def rate_inverse(v, t, g, h, tau, run_starts):
         for k in range(a + 1, b):
             dt = t[k] - t[k - 1]
             sk = sk + (1.0 - math.exp(-dt / tau)) * (prev_r - sk)
-            w = sk * (g + h * abs(u[k - 1]))
-            if v[k] > v[k - 1]:
-                u[k] = v[k] + w
-            elif v[k] < v[k - 1]:
-                u[k] = v[k] - w
-            else:
-                u[k] = min(max(u[k - 1], v[k] - w), v[k] + w)
+            u[k] = play_inverse_step_jit(v[k], v[k - 1], u[k - 1], sk * (g + h * abs(u[k - 1])))
             prev_r = abs(u[k] - u[k - 1]) / dt
     return u
 
@@ -194,12 +188,7 @@ class Rate(InputEffect):
         state[4] += alpha * (state[3] - state[4])
         u_prev = state[2]
         w = state[4] * (float(p["gain_s"]) + float(p.get("amp_s_per_deg", 0.0)) * abs(u_prev))
-        if v > state[1]:
-            u = v + w
-        elif v < state[1]:
-            u = v - w
-        else:
-            u = min(max(u_prev, v - w), v + w)
+        u = play_inverse_step(v, state[1], u_prev, w)
         state[3] = abs(u - u_prev) / dt
         state[1], state[2] = v, u
         return u

@@ -24,10 +24,9 @@ then this, then eq. 10) and the effect streams.
 from __future__ import annotations
 
 import numpy as np
-from endocal.models._kernels import varplay_forward_jac
+from endocal.models._kernels import causal_play_inverse, play_inverse_step, varplay_forward_jac
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import InputEffect
-from endocal.models.effects.load import loadplay_inverse  # the same causal play, width c |x_{k-1}|
 from endocal.models.params import Parameter
 
 #: ``c`` above this would let the play swallow most of the knob's travel at large bends
@@ -37,7 +36,7 @@ C_MAX = 0.5
 def tension_inverse(v: np.ndarray, c: float, run_starts: np.ndarray) -> np.ndarray:
     """Commands ``x`` (n,) whose tension play output is ``v`` (exact, causal): ``x_k = v_k ± c |x_{k-1}|``."""
     v = np.ascontiguousarray(v, dtype=float)
-    return loadplay_inverse(v, np.zeros(v.size), np.full(v.size, float(c)), run_starts)
+    return causal_play_inverse(v, np.zeros(v.size), np.full(v.size, float(c)), run_starts)
 
 
 class Tension(InputEffect):
@@ -88,14 +87,7 @@ class Tension(InputEffect):
         if state[0] == 0.0:
             state[0], state[1], state[2] = 1.0, v, v
             return v
-        x_prev = state[2]
-        w = float(p["friction"]) * abs(x_prev)
-        if v > state[1]:
-            x = v + w
-        elif v < state[1]:
-            x = v - w
-        else:
-            x = min(max(x_prev, v - w), v + w)
+        x = play_inverse_step(v, state[1], state[2], float(p["friction"]) * abs(state[2]))
         state[1], state[2] = v, x
         return x
 
