@@ -113,6 +113,11 @@ def validate(
     """
     from endocal.models import load_model
 
+    if json_out is not None and not json_out.resolve().parent.is_dir():
+        from endocal.errors import OutputPathError
+
+        # before any work: a long validation must not end in an output that cannot be written
+        raise OutputPathError(f"cannot write {json_out}: folder {json_out.parent} does not exist; create it or pick another path")
     model = load_model(model_path)
     if protocol is not None:
         if data:
