@@ -12,6 +12,9 @@ step "bending planes: single-knob sweeps of the four half-planes" \
   $E excite planes --out "$OUT/planes" --seed 1 --force --quiet
 step "fit the deviation angles and the orthogonal compensator" \
   $E fit planes "$OUT/planes" --out "$OUT/planes.json" --force
+step "sweep again through the compensator (knob commands only) and measure what is left: the paper's figure 8" \
+  $E excite planes --planes "$OUT/planes.json" --out "$OUT/planes-after" --seed 6 --force --quiet
+$E fit planes "$OUT/planes" --after "$OUT/planes-after" --out "$OUT/planes.json" --force
 step "identification run: the duodenoscope paper's damped sine" \
   $E excite damped-sine --amplitude 85 --out "$OUT/train" --seed 2 --force --quiet
 step "held-out runs: band-limited random input, and a chirp (several speeds tell a delay from speed-dependent friction)" \
