@@ -31,8 +31,10 @@ DT_S = 0.02
 TRUTH = {
     # the slack is centred on the neutral bend, the zero of the paper's envelope (theta1 = 3.73 deg)
     "deadzone": ("deadzone", {"deadzone_slack_deg": 4.0, "deadzone_band_deg": 6.0, "deadzone_center_deg": 3.7}, "slack("),
-    # play of 0.03 s per deg/s at neutral, growing 1 %/deg with the knob angle (tension)
-    "rate": ("rate", {"rate_gain_s": 0.03, "rate_amp_s_per_deg": 0.0003}, "rateplay("),
+    # play of 0.03 s per deg/s at neutral, growing 1 %/deg with the knob angle (tension), and
+    # e^{0.005 s/deg * 60 deg/s} - 1 = 35 % more than linear at the fastest knob speed (capstan)
+    "rate": ("rate", {"rate_gain_s": 0.03, "rate_amp_s_per_deg": 0.0003, "rate_capstan_s_per_deg": 0.005},
+             "rateplay("),
     "delay": ("delay", {"delay_s": 0.13}, "(t - tau)"),
     # 6 % of the bend as extra backlash: ~3.6 deg of knob at a 60 deg bend, ~0 near neutral
     "tension": ("tension", {"tension_friction": 0.06}, "tplay("),

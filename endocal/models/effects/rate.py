@@ -4,16 +4,21 @@ Coulomb friction of the tendon in its sheath rises with sliding speed (lubricant
 drag, stick-slip), so the drive lags the knob by more backlash the faster the knob
 turns. Capstan friction is proportional to the tendon tension, and the tension grows with
 the bend away from neutral, so the speed-dependent play is also wider at large knob
-angles (the simulator's ``mu_eff = mu (1 + gain |u̇|)`` acts on a tension ∝ bend). Modelled
-as an extra play on the command whose half width grows with the knob speed, and with
-the knob's distance from neutral::
+angles (the simulator's ``mu_eff = mu (1 + gain |u̇|)`` acts on a tension ∝ bend). And
+the capstan makes friction exponential in the friction coefficient (tension ratio
+``e^{μΘ}`` over a wrap ``Θ``): a coefficient growing linearly with speed, ``μ (1 + γ|u̇|)``,
+widens the play by ``e^{μΘγ|u̇|} - 1``, more than linearly at high speed. Modelled as an
+extra play on the command whose half width grows with the knob speed, and with the knob's
+distance from neutral::
 
-    w_k = ŝ_k · (g + h · |u_{k-1}|),   ŝ_k = ŝ_{k-1} + (1 - exp(-Δt_k / T_s)) (|u̇_{k-1}| - ŝ_{k-1})
+    w_k = (g + h · |u_{k-1}|) · (exp(κ ŝ_k) - 1) / κ,
+    ŝ_k = ŝ_{k-1} + (1 - exp(-Δt_k / T_s)) (|u̇_{k-1}| - ŝ_{k-1})
     v_k = clip(v_{k-1}, u_k - w_k, u_k + w_k)
 
-``g`` (``rate_gain_s``, seconds: deg of play per deg/s of knob speed) and ``h``
+``g`` (``rate_gain_s``, seconds: deg of play per deg/s of slow knob speed), ``h``
 (``rate_amp_s_per_deg``: the same per degree of knob angle, i.e. the tension-proportional
-share) are fitted, both >= 0;
+share) and ``κ`` (``rate_capstan_s_per_deg``: ``μΘγ``, how fast the capstan exponent grows
+with speed; ``κ → 0`` is a play linear in speed, ``(e^{κs} - 1)/κ → s``) are fitted, all >= 0;
 ``ŝ`` is the knob speed (deg/s) from the commands up to the previous sample,
 smoothed over ``T_s`` (``speed_filter_s``, a setting: the servo's own smoothing of the
 knob speed). In steady motion the drive lags by ``g·|u̇|`` knob degrees; when the
@@ -71,7 +76,27 @@ def smoothed_speed(u, t, tau, M, run_starts):
 
 
 @njit(cache=True)
-def rate_inverse(v, t, g, h, tau, run_starts):
+def capstan_speed(s, kappa):
+    """``(exp(κ s) - 1) / κ`` (deg/s), the speed term of the play width; ``s`` at ``κ = 0`` (module docstring)."""
+    ks = kappa * s
+    if ks < 1e-8:
+        return s * (1.0 + 0.5 * ks)
+    return math.expm1(ks) / kappa
+
+
+def capstan_speed_jac(s: np.ndarray, kappa: float):
+    """``F = (e^{κs} - 1)/κ``, ``∂F/∂s = e^{κs}`` and ``∂F/∂κ = (κ s e^{κs} - (e^{κs} - 1))/κ²`` (series for small κs)."""
+    ks = kappa * s
+    small = ks < 1e-4
+    safe_k = kappa if kappa > 0 else 1.0
+    e = np.exp(ks)
+    F = np.where(small, s * (1.0 + ks / 2.0 + ks * ks / 6.0), np.expm1(ks) / safe_k)
+    dk = np.where(small, s * s * (0.5 + ks / 3.0 + ks * ks / 8.0), (ks * e - np.expm1(ks)) / safe_k**2)
+    return F, e, dk
+
+
+@njit(cache=True)
+def rate_inverse(v, t, g, h, kappa, tau, run_starts):
     """Commands whose rate play output is ``v`` (exact, causal: the width uses past commands only)."""
     n = v.shape[0]
     u = np.empty(n)
@@ -85,7 +110,7 @@ def rate_inverse(v, t, g, h, tau, run_starts):
         for k in range(a + 1, b):
             dt = t[k] - t[k - 1]
             sk = sk + (1.0 - math.exp(-dt / tau)) * (prev_r - sk)
-            u[k] = play_inverse_step_jit(v[k], v[k - 1], u[k - 1], sk * (g + h * abs(u[k - 1])))
+            u[k] = play_inverse_step_jit(v[k], v[k - 1], u[k - 1], capstan_speed(sk, kappa) * (g + h * abs(u[k - 1])))
             prev_r = abs(u[k] - u[k - 1]) / dt
     return u
 
@@ -100,7 +125,8 @@ class Rate(InputEffect):
 
     Fitted parameters (prefix ``rate_``): ``gain_s`` (s), play half width per deg/s of
     knob speed; ``amp_s_per_deg`` (s/deg), the same per deg/s and per degree of knob angle
-    from neutral (friction ∝ tendon tension ∝ bend).
+    from neutral (friction ∝ tendon tension ∝ bend); ``capstan_s_per_deg`` (s/deg), the
+    growth of the capstan exponent with knob speed (the play widens faster than linearly).
     """
 
     name = "rate"
@@ -113,7 +139,7 @@ class Rate(InputEffect):
     signature = ("residual proportional to knob speed with the sign of the motion, vanishing when the knob "
                  "stops; loops wider at high frequency than at low")
     protocol = "the same motion at several frequencies (a chirp, or slow and fast sines)"
-    units = {"gain_s": "s", "amp_s_per_deg": "s/deg"}
+    units = {"gain_s": "s", "amp_s_per_deg": "s/deg", "capstan_s_per_deg": "s/deg"}
 
     def __init__(self, speed_filter_s: float = 0.1):
         if not (isinstance(speed_filter_s, (int, float)) and math.isfinite(speed_filter_s) and speed_filter_s > 0):
@@ -134,15 +160,26 @@ class Rate(InputEffect):
         # g + h |u| stays below 0.9 T_s over the fitted commands (inverse loop gain < 0.9)
         return 0.4 * self.speed_filter_s / max(float(np.max(np.abs(u))), 1e-9)
 
+    def _capstan_upper(self, u: np.ndarray, data: HysteresisData) -> float:
+        # the play at the fastest fitted knob speed stays within e^2 (7.4x) of a linear law's
+        s, _ = self._speed(u, data, np.zeros((len(u), 0)))
+        return 2.0 / max(float(np.max(s)) if s.size else 0.0, 1e-9)
+
     def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
         return [Parameter(f"{self.prefix}_gain_s", 0.05 * self._upper(), 0.0, self._upper()),
-                Parameter(f"{self.prefix}_amp_s_per_deg", 0.05 * self._amp_upper(u), 0.0, self._amp_upper(u))]
+                Parameter(f"{self.prefix}_amp_s_per_deg", 0.05 * self._amp_upper(u), 0.0, self._amp_upper(u)),
+                Parameter(f"{self.prefix}_capstan_s_per_deg", 0.05 * self._capstan_upper(u, data), 0.0,
+                          self._capstan_upper(u, data))]
 
     def start_candidates(self, data: HysteresisData, u: np.ndarray) -> list[dict]:
         """Start values tried before the fit (the best is kept): uniform play, or play growing with the angle."""
         ha = self._amp_upper(u)
         return ([{"gain_s": f * self._upper(), "amp_s_per_deg": 0.01 * ha} for f in (0.02, 0.2, 0.6)]
                 + [{"gain_s": 0.01 * self._upper(), "amp_s_per_deg": f * ha} for f in (0.2, 0.6)])
+
+    @staticmethod
+    def _gains(p: dict) -> tuple[float, float, float]:
+        return float(p["gain_s"]), float(p["amp_s_per_deg"]), float(p["capstan_s_per_deg"])
 
     def _speed(self, u, data, M):
         t = data.require_time("effect 'rate'")
@@ -154,8 +191,9 @@ class Rate(InputEffect):
         return v
 
     def apply_jac(self, p: dict, u: np.ndarray, data: HysteresisData, M: np.ndarray):
-        g, h = float(p["gain_s"]), float(p.get("amp_s_per_deg", 0.0))
+        g, h, kappa = self._gains(p)
         s, D = self._speed(u, data, M)
+        F, dF_ds, dF_dk = capstan_speed_jac(s, kappa)
         u = np.asarray(u, dtype=float)
         M = np.asarray(M, dtype=float)
         # the angle of the previous sample (the width at a run's first sample is 0 anyway: ŝ = 0)
@@ -163,16 +201,17 @@ class Rate(InputEffect):
         Mprev = np.concatenate([M[:1], M[:-1]])
         a = np.abs(prev)
         gain = g + h * a
-        Wg = np.column_stack([gain[:, None] * D + (h * s * np.sign(prev))[:, None] * Mprev, s, s * a])
-        v, J = varplay_forward_jac(np.ascontiguousarray(u, dtype=float), gain * s, Wg,
+        Wg = np.column_stack([(gain * dF_ds)[:, None] * D + (h * F * np.sign(prev))[:, None] * Mprev,
+                              F, F * a, gain * dF_dk])
+        v, J = varplay_forward_jac(np.ascontiguousarray(u, dtype=float), gain * F, Wg,
                                    np.ascontiguousarray(M, dtype=float), data.run_starts)
         q = M.shape[1]
         return v, J[:, q:], J[:, :q]
 
     def invert(self, p: dict, v: np.ndarray, data: HysteresisData) -> np.ndarray:
         t = data.require_time("effect 'rate'")
-        return rate_inverse(np.ascontiguousarray(v, dtype=float), t, float(p["gain_s"]),
-                            float(p.get("amp_s_per_deg", 0.0)), self.speed_filter_s, data.run_starts)
+        return rate_inverse(np.ascontiguousarray(v, dtype=float), t, *self._gains(p), self.speed_filter_s,
+                            data.run_starts)
 
     def stream_state(self, p: dict, dt_s: float | None = None) -> np.ndarray:
         if dt_s is None or not dt_s > 0:
@@ -187,7 +226,8 @@ class Rate(InputEffect):
         alpha, dt = state[5], state[6]
         state[4] += alpha * (state[3] - state[4])
         u_prev = state[2]
-        w = state[4] * (float(p["gain_s"]) + float(p.get("amp_s_per_deg", 0.0)) * abs(u_prev))
+        g, h, kappa = self._gains(p)
+        w = capstan_speed(state[4], kappa) * (g + h * abs(u_prev))
         u = play_inverse_step(v, state[1], u_prev, w)
         state[3] = abs(u - u_prev) / dt
         state[1], state[2] = v, u
@@ -200,4 +240,5 @@ class Rate(InputEffect):
         return f"rateplay = rate{self._bracket(p, se)[:-1]}, T_s={self.speed_filter_s:g} s (fixed)]"
 
     def is_zero(self, p: dict) -> bool:
-        return p["gain_s"] == 0.0 and p.get("amp_s_per_deg", 0.0) == 0.0
+        g, h, _ = self._gains(p)
+        return g == 0.0 and h == 0.0
