@@ -10,9 +10,6 @@ flushed, and ``run.json`` records how the run ended.
 
 from __future__ import annotations
 
-import io
-import json
-import os
 import shutil
 import sys
 import time
@@ -21,13 +18,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
-import pyarrow as pa
-import pyarrow.parquet as pq
 
 from endocal.backends.base import Backend
-from endocal.errors import OutputExistsError, OutputPathError, RunFormatError
+from endocal.errors import OutputPathError
 from endocal.probe import ProbeConfig
-from endocal.runs.aligned import align, read_stream
 from endocal.runs.format import (
     ALIGNED,
     FORMAT_NAME,
@@ -36,12 +30,12 @@ from endocal.runs.format import (
     RUN_JSON,
     TRACKER,
     UNITS,
-    atomic_write_bytes,
+    prepare_output,
     software_versions,
     utc_now,
     write_json,
 )
-from endocal.runs.logger import StreamLogger
+from endocal.runs.logger import StreamLogger, finish_run
 
 if TYPE_CHECKING:
     from endocal.protocols import Trajectory
@@ -68,43 +62,6 @@ class ExciteResult:
     @property
     def speed_x_realtime(self) -> float:
         return self.logged_s / self.wall_s if self.wall_s > 0 else float("inf")
-
-
-def _is_run_folder(path: Path) -> bool:
-    """True when ``path`` holds a ``run.json`` of the endocal run format."""
-    try:
-        return json.loads((path / RUN_JSON).read_text()).get("format") == FORMAT_NAME
-    except (OSError, ValueError, AttributeError):
-        return False
-
-
-def prepare_output(out: Path, force: bool) -> None:
-    """Check that ``out`` can become a new run folder (without creating it).
-
-    Raises
-    ------
-    OutputExistsError
-        ``out`` exists and ``force`` is false.
-    OutputPathError
-        ``out`` exists as a file, or its parent cannot be created or written.
-    """
-    out = Path(out)
-    if out.exists():
-        if not force:
-            raise OutputExistsError(f"output {out} already exists: choose a new --out or pass --force to replace it")
-        if not out.is_dir():
-            raise OutputPathError(f"output {out} exists and is not a folder: choose another --out")
-        if any(out.iterdir()) and not _is_run_folder(out):
-            # --force replaces runs, never an arbitrary folder (think `--out . --force`).
-            raise OutputPathError(f"output {out} is a non-empty folder that is not an endocal run: --force only replaces runs")
-    parent = out.parent if str(out.parent) else Path(".")
-    probe_dir = parent
-    while not probe_dir.exists():
-        probe_dir = probe_dir.parent
-    if not probe_dir.is_dir():
-        raise OutputPathError(f"cannot create {out}: {probe_dir} is not a folder")
-    if not os.access(probe_dir, os.W_OK | os.X_OK):
-        raise OutputPathError(f"cannot create {out}: {probe_dir} is not writable")
 
 
 def run_excitation(
@@ -222,7 +179,7 @@ def run_excitation(
             backend.close()
         finally:
             logger.flush()
-            _finish(out, meta, logger, status, error, time.monotonic() - wall0, probe)
+            finish_run(out, meta, logger, status, error, time.monotonic() - wall0, probe)
     return ExciteResult(
         run_dir=out,
         status=status,
@@ -234,28 +191,3 @@ def run_excitation(
         wall_s=meta.get("wall_s", 0.0),
         alignment_error=meta.get("alignment_error"),
     )
-
-
-def _finish(out: Path, meta: dict, logger: StreamLogger, status: str, error: str | None, wall_s: float, probe) -> None:
-    """Write the aligned table (if anything was logged) and the final ``run.json``."""
-    meta["status"] = status
-    meta["ended_utc"] = utc_now()
-    meta["wall_s"] = round(wall_s, 3)
-    meta.setdefault("started_utc", meta["ended_utc"])
-    if error:
-        meta["error"] = error
-    counts = {"motor_rows": logger.rows_written[MOTOR], "tracker_rows": logger.rows_written[TRACKER]}
-    if logger.rows_written[MOTOR] and logger.rows_written[TRACKER]:
-        try:
-            alignment = align(read_stream(out, MOTOR), read_stream(out, TRACKER), probe)
-        except RunFormatError as exc:
-            # The streams stay on disk; say why there is no aligned table rather than lose the run.
-            meta["alignment_error"] = str(exc)
-        else:
-            buf = io.BytesIO()
-            pq.write_table(pa.Table.from_pandas(alignment.table, preserve_index=False), buf)
-            atomic_write_bytes(out / ALIGNED, buf.getvalue())
-            counts.update(alignment.counts())
-    meta["counts"] = counts
-    meta["logged_s"] = float(logger.last_t_s) if np.isfinite(logger.last_t_s) else 0.0
-    write_json(out / RUN_JSON, meta)

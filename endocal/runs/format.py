@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from endocal import __version__
-from endocal.errors import RunFormatError
+from endocal.errors import OutputExistsError, OutputPathError, RunFormatError
 
 FORMAT_NAME = "endocal-run"
 FORMAT_VERSION = 1
@@ -143,3 +143,40 @@ def read_run_json(run_dir: Path) -> dict:
             f"{path} has run format version {version!r}; this endocal reads up to {FORMAT_VERSION}: upgrade endocal"
         )
     return meta
+
+
+def _is_run_folder(path: Path) -> bool:
+    """True when ``path`` holds a ``run.json`` of the endocal run format."""
+    try:
+        return json.loads((path / RUN_JSON).read_text()).get("format") == FORMAT_NAME
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def prepare_output(out: Path, force: bool) -> None:
+    """Check that ``out`` can become a new run folder (without creating it).
+
+    Raises
+    ------
+    OutputExistsError
+        ``out`` exists and ``force`` is false.
+    OutputPathError
+        ``out`` exists as a file, or its parent cannot be created or written.
+    """
+    out = Path(out)
+    if out.exists():
+        if not force:
+            raise OutputExistsError(f"output {out} already exists: choose a new --out or pass --force to replace it")
+        if not out.is_dir():
+            raise OutputPathError(f"output {out} exists and is not a folder: choose another --out")
+        if any(out.iterdir()) and not _is_run_folder(out):
+            # --force replaces runs, never an arbitrary folder (think `--out . --force`).
+            raise OutputPathError(f"output {out} is a non-empty folder that is not an endocal run: --force only replaces runs")
+    parent = out.parent if str(out.parent) else Path(".")
+    probe_dir = parent
+    while not probe_dir.exists():
+        probe_dir = probe_dir.parent
+    if not probe_dir.is_dir():
+        raise OutputPathError(f"cannot create {out}: {probe_dir} is not a folder")
+    if not os.access(probe_dir, os.W_OK | os.X_OK):
+        raise OutputPathError(f"cannot create {out}: {probe_dir} is not writable")

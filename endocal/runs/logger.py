@@ -8,6 +8,7 @@ first and is renamed into place: readers never see half a part.
 
 from __future__ import annotations
 
+import io
 import os
 import time
 from pathlib import Path
@@ -17,7 +18,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from endocal.backends.base import StreamChunk
-from endocal.runs.format import STREAMS
+from endocal.errors import RunFormatError
+from endocal.runs.aligned import align, read_stream
+from endocal.runs.format import ALIGNED, MOTOR, RUN_JSON, STREAMS, TRACKER, atomic_write_bytes, utc_now, write_json
 
 
 class StreamLogger:
@@ -77,3 +80,28 @@ class StreamLogger:
             self._part += 1
         self._buffered_rows = 0
         self._last_flush = time.monotonic()
+
+
+def finish_run(out: Path, meta: dict, logger: StreamLogger, status: str, error: str | None, wall_s: float, probe) -> None:
+    """Write the aligned table (if anything was logged) and the final ``run.json``."""
+    meta["status"] = status
+    meta["ended_utc"] = utc_now()
+    meta["wall_s"] = round(wall_s, 3)
+    meta.setdefault("started_utc", meta["ended_utc"])
+    if error:
+        meta["error"] = error
+    counts = {"motor_rows": logger.rows_written[MOTOR], "tracker_rows": logger.rows_written[TRACKER]}
+    if logger.rows_written[MOTOR] and logger.rows_written[TRACKER]:
+        try:
+            alignment = align(read_stream(out, MOTOR), read_stream(out, TRACKER), probe)
+        except RunFormatError as exc:
+            # The streams stay on disk; say why there is no aligned table rather than lose the run.
+            meta["alignment_error"] = str(exc)
+        else:
+            buf = io.BytesIO()
+            pq.write_table(pa.Table.from_pandas(alignment.table, preserve_index=False), buf)
+            atomic_write_bytes(out / ALIGNED, buf.getvalue())
+            counts.update(alignment.counts())
+    meta["counts"] = counts
+    meta["logged_s"] = float(logger.last_t_s) if np.isfinite(logger.last_t_s) else 0.0
+    write_json(out / RUN_JSON, meta)
