@@ -7,6 +7,7 @@ from endocal.cli.effects import effects
 from endocal.cli.excite import excite
 from endocal.cli.info import info
 from endocal.cli.report import report
+from endocal.cli.ros import import_ros
 from endocal.cli.validate import validate
 
 app.command("excite")(excite)
@@ -14,5 +15,6 @@ app.command("info")(info)
 app.command("effects")(effects)
 app.command("validate")(validate)
 app.command("report")(report)
+app.command("import-ros")(import_ros)
 app.add_typer(_protocols.app, name="protocols")
 app.add_typer(_fit.app, name="fit")
