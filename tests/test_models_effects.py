@@ -93,3 +93,26 @@ def test_slack_term_reproduces_the_simulators_tendon_slack_once_the_lag_is_model
     # less the pretension stretch (2 x 0.5 mm), so ~11.5 deg; and the lag is ~80 ms
     assert 2 * with_slack.params_["deadzone_slack_deg"] == pytest.approx(11.5, abs=1.0)
     assert with_slack.params_["delay_s"] == pytest.approx(0.08, abs=0.01)
+
+
+def test_rate_inverse_is_exact_where_the_drive_can_follow_and_bounded_where_it_cannot():
+    # Parameters as fitted on the simulator's hidden-rate chirp: at 0.4 Hz and 45 deg the knob's
+    # own speed (113 deg/s) raises the friction e^{0.0119 * 113} = 3.8-fold.
+    from endocal.models.effects.rate import Rate
+
+    t = np.arange(0.0, 20.0, 0.01)
+    rate = Rate()
+    p = {"gain_s": 0.0078, "amp_s_per_deg": 0.00082, "capstan_s_per_deg": 0.0119}
+
+    def drive(u):
+        return rate.apply(p, u, HysteresisData(cmd_deg=u, t_s=t))
+
+    v = drive(45.0 * np.sin(2 * np.pi * 0.4 * t))  # a drive motion the knob can produce
+    u = rate.invert(p, v, HysteresisData(cmd_deg=v, t_s=t))
+    assert np.max(np.abs(drive(u) - v)) < 1e-9
+    # twice as fast: the friction the knob's speed adds outgrows its travel, the drive cannot
+    # follow; the inverse stays finite and within the commanded range instead of diverging
+    fast = 45.0 * np.sin(2 * np.pi * 0.8 * t)
+    u = rate.invert(p, fast, HysteresisData(cmd_deg=fast, t_s=t))
+    assert np.all(np.isfinite(u)) and np.max(np.abs(u)) <= 46.0
+    assert np.sqrt(np.mean((drive(u) - fast) ** 2)) <= np.sqrt(np.mean((drive(fast) - fast) ** 2))

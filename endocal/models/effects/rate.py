@@ -12,19 +12,28 @@ extra play on the command whose half width grows with the knob speed, and with t
 distance from neutral::
 
     w_k = (g + h · |u_{k-1}|) · (exp(κ ŝ_k) - 1) / κ,
-    ŝ_k = ŝ_{k-1} + (1 - exp(-Δt_k / T_s)) (|u̇_{k-1}| - ŝ_{k-1})
+    ŝ_k = ŝ_{k-1} + (1 - exp(-Δt_k / T_s)) (|u_k - u_{k-1}| / Δt_k - ŝ_{k-1})
     v_k = clip(v_{k-1}, u_k - w_k, u_k + w_k)
 
 ``g`` (``rate_gain_s``, seconds: deg of play per deg/s of slow knob speed), ``h``
 (``rate_amp_s_per_deg``: the same per degree of knob angle, i.e. the tension-proportional
 share) and ``κ`` (``rate_capstan_s_per_deg``: ``μΘγ``, how fast the capstan exponent grows
 with speed; ``κ → 0`` is a play linear in speed, ``(e^{κs} - 1)/κ → s``) are fitted, all >= 0;
-``ŝ`` is the knob speed (deg/s) from the commands up to the previous sample,
-smoothed over ``T_s`` (``speed_filter_s``, a setting: the servo's own smoothing of the
-knob speed). In steady motion the drive lags by ``g·|u̇|`` knob degrees; when the
-knob stops the play closes (the loop narrows back to the base's). Using only past
-speeds and angles keeps the inverse explicit: the command that produces a desired drive
-position is exact and causal, so the effect streams (given the sample period).
+``ŝ`` is the knob speed (deg/s) up to the current sample, smoothed over ``T_s``
+(``speed_filter_s``, a setting: the servo's own smoothing of the knob speed). The knob's
+speed, not the tip's: the tendon's proximal end slides with the pulley (the simulator's
+friction follows the motor speed too). In steady motion the drive lags by
+``(g + h|u|)(e^{κ|u̇|} - 1)/κ`` knob degrees; when the knob stops the play closes (the loop
+narrows back to the base's).
+
+The inverse solves one scalar equation per sample (:func:`knob_for_drive`): the knob that
+pushes the drive to the desired position given the friction its own speed adds, causal
+and exact wherever the drive can follow, so the effect streams (given the sample period).
+Where ``(g + h|u|) e^{κŝ} α/Δt`` exceeds 1 a faster knob would move the drive less within
+the sample: a desired drive faster than that cannot be reached, and the inverse pushes the
+knob to where the drive gets furthest. (Reading the speed one sample late instead makes
+the inverse feed its own jumps at reversals back into the width, which diverges once the
+capstan term is on.)
 """
 
 from __future__ import annotations
@@ -35,7 +44,7 @@ import numpy as np
 from numba import njit
 
 from endocal.errors import ModelError
-from endocal.models._kernels import play_inverse_step, play_inverse_step_jit, varplay_forward_jac
+from endocal.models._kernels import varplay_forward_jac
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import InputEffect
 from endocal.models.params import Parameter
@@ -43,7 +52,7 @@ from endocal.models.params import Parameter
 
 @njit(cache=True)
 def smoothed_speed(u, t, tau, M, run_starts):
-    """Smoothed knob speed ``ŝ`` (n,) (deg/s, from past samples only) and its Jacobian (n, q) via ``M``."""
+    """Smoothed knob speed ``ŝ`` (n,) (deg/s, up to the current sample) and its Jacobian (n, q) via ``M``."""
     n = u.shape[0]
     q = M.shape[1]
     s = np.zeros(n)
@@ -52,26 +61,16 @@ def smoothed_speed(u, t, tau, M, run_starts):
     for r in range(n_runs):
         a = run_starts[r]
         b = run_starts[r + 1] if r + 1 < n_runs else n
-        prev_r = 0.0
         sk = 0.0
-        for j in range(q):
-            D[a, j] = 0.0
         for k in range(a + 1, b):
             dt = t[k] - t[k - 1]
             alpha = 1.0 - math.exp(-dt / tau)
-            sk = sk + alpha * (prev_r - sk)
+            du = u[k] - u[k - 1]
+            sk += alpha * (abs(du) / dt - sk)
             s[k] = sk
-            # derivative: ŝ_k = (1-α) ŝ_{k-1} + α r_{k-1}
-            if k - 1 > a:
-                dtp = t[k - 1] - t[k - 2]
-                du = u[k - 1] - u[k - 2]
-                sg = 1.0 if du > 0 else (-1.0 if du < 0 else 0.0)
-                for j in range(q):
-                    D[k, j] = (1.0 - alpha) * D[k - 1, j] + alpha * sg * (M[k - 1, j] - M[k - 2, j]) / dtp
-            else:
-                for j in range(q):
-                    D[k, j] = (1.0 - alpha) * D[k - 1, j]
-            prev_r = abs(u[k] - u[k - 1]) / dt
+            sg = 1.0 if du > 0 else (-1.0 if du < 0 else 0.0)
+            for j in range(q):  # ŝ_k = (1-α) ŝ_{k-1} + α |u_k - u_{k-1}| / Δt_k
+                D[k, j] = (1.0 - alpha) * D[k - 1, j] + alpha * sg * (M[k, j] - M[k - 1, j]) / dt
     return s, D
 
 
@@ -79,8 +78,8 @@ def smoothed_speed(u, t, tau, M, run_starts):
 def capstan_speed(s, kappa):
     """``(exp(κ s) - 1) / κ`` (deg/s), the speed term of the play width; ``s`` at ``κ = 0`` (module docstring)."""
     ks = kappa * s
-    if ks < 1e-8:
-        return s * (1.0 + 0.5 * ks)
+    if ks < 1e-4:  # the series, as in capstan_speed_jac
+        return s * (1.0 + ks / 2.0 + ks * ks / 6.0)
     return math.expm1(ks) / kappa
 
 
@@ -96,8 +95,63 @@ def capstan_speed_jac(s: np.ndarray, kappa: float):
 
 
 @njit(cache=True)
+def _bisect_root(y, x_prev, s_rest, c, G, kappa, lo, hi):
+    """Root of ``x - y - G F(s_rest + c |x - x_prev|)`` in ``[lo, hi]`` (negative at lo, >= 0 at hi)."""
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid == lo or mid == hi:
+            break
+        if mid - y - G * capstan_speed(s_rest + c * abs(mid - x_prev), kappa) < 0.0:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
+@njit(cache=True)
+def knob_for_drive(v, v_prev, u_prev, s_prev, alpha, dt, G, kappa):
+    """One sample of the inverse: the knob ``u`` that moves the drive from ``v_prev`` to ``v``.
+
+    The width ``G F(ŝ)`` grows with the knob's own speed in this sample, ``ŝ = (1-α) s_prev +
+    α |u - u_prev| / Δt``, so ``u`` solves ``σ (u - v) = G F(ŝ(u))`` (σ the drive's direction;
+    a drive at rest keeps the knob inside its window). Writing ``x = σ u``, the residual
+    ``x - σv - G F`` rises while the knob turns back (``x < σ u_prev``) and is concave beyond;
+    its smallest root is bracketed and bisected. Where the residual stays negative the
+    desired drive is faster than the knob can push it (the friction the knob's speed adds
+    outgrows its travel): the knob goes to where the drive gets furthest.
+    """
+    c = alpha / dt
+    s_rest = (1.0 - alpha) * s_prev
+    w_rest = G * capstan_speed(s_rest, kappa)
+    if v == v_prev:
+        if abs(u_prev - v) <= w_rest:
+            return u_prev
+        sig = 1.0 if u_prev > v else -1.0  # the window closed past the knob: move it back in
+        x_prev, y = sig * u_prev, sig * v
+        # root of x - y - w(x) between y (negative) and x_prev (positive)
+        return sig * _bisect_root(y, x_prev, s_rest, c, G, kappa, y, x_prev)
+    sig = 1.0 if v > v_prev else -1.0
+    x_prev, y = sig * u_prev, sig * v
+    lo = y
+    if x_prev > y and x_prev - y - w_rest >= 0.0:
+        return sig * _bisect_root(y, x_prev, s_rest, c, G, kappa, lo, x_prev)
+    lo = max(y, x_prev)
+    slope = 1.0 - G * c * math.exp(kappa * (s_rest + c * (lo - x_prev)))
+    if slope <= 0.0:
+        return sig * lo  # the drive cannot advance faster: push as far as it helps
+    if kappa > 0.0:
+        s_star = math.log(1.0 / (G * c)) / kappa  # where the residual peaks
+        hi = x_prev + (s_star - s_rest) / c
+    else:
+        hi = lo + 2.0 * (G * capstan_speed(s_rest + c * (lo - x_prev), kappa) + 1.0) / slope
+    if hi - y - G * capstan_speed(s_rest + c * abs(hi - x_prev), kappa) < 0.0:
+        return sig * hi
+    return sig * _bisect_root(y, x_prev, s_rest, c, G, kappa, lo, hi)
+
+
+@njit(cache=True)
 def rate_inverse(v, t, g, h, kappa, tau, run_starts):
-    """Commands whose rate play output is ``v`` (exact, causal: the width uses past commands only)."""
+    """Commands whose rate play output is ``v`` (exact where the drive can follow; causal)."""
     n = v.shape[0]
     u = np.empty(n)
     n_runs = run_starts.shape[0]
@@ -105,13 +159,12 @@ def rate_inverse(v, t, g, h, kappa, tau, run_starts):
         a = run_starts[r]
         b = run_starts[r + 1] if r + 1 < n_runs else n
         u[a] = v[a]
-        prev_r = 0.0
         sk = 0.0
         for k in range(a + 1, b):
             dt = t[k] - t[k - 1]
-            sk = sk + (1.0 - math.exp(-dt / tau)) * (prev_r - sk)
-            u[k] = play_inverse_step_jit(v[k], v[k - 1], u[k - 1], capstan_speed(sk, kappa) * (g + h * abs(u[k - 1])))
-            prev_r = abs(u[k] - u[k - 1]) / dt
+            alpha = 1.0 - math.exp(-dt / tau)
+            u[k] = knob_for_drive(v[k], v[k - 1], u[k - 1], sk, alpha, dt, g + h * abs(u[k - 1]), kappa)
+            sk += alpha * (abs(u[k] - u[k - 1]) / dt - sk)
     return u
 
 
@@ -153,11 +206,11 @@ class Rate(InputEffect):
         data.require_time("effect 'rate'")
 
     def _upper(self) -> float:
-        # the inverse feeds its own command jumps back into the width: keep that loop gain below 1/2
+        # without the capstan term, g α/Δt < 1 keeps the knob -> drive map monotone (module docstring)
         return 0.5 * self.speed_filter_s
 
     def _amp_upper(self, u: np.ndarray) -> float:
-        # g + h |u| stays below 0.9 T_s over the fitted commands (inverse loop gain < 0.9)
+        # g + h |u| stays below 0.9 T_s over the fitted commands (still monotone at κ = 0)
         return 0.4 * self.speed_filter_s / max(float(np.max(np.abs(u))), 1e-9)
 
     def _capstan_upper(self, u: np.ndarray, data: HysteresisData) -> float:
@@ -216,7 +269,7 @@ class Rate(InputEffect):
     def stream_state(self, p: dict, dt_s: float | None = None) -> np.ndarray:
         if dt_s is None or not dt_s > 0:
             raise ModelError("effect 'rate' streams only with a fixed sample period: give dt_s (s) to the compensator")
-        # [started, v_prev, u_prev, speed_prev, smoothed speed, alpha]
+        # [started, v_prev, u_prev, (unused), smoothed knob speed, alpha, dt]
         return np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0 - math.exp(-dt_s / self.speed_filter_s), dt_s])
 
     def invert_step(self, p: dict, v: float, state: np.ndarray) -> float:
@@ -224,12 +277,10 @@ class Rate(InputEffect):
             state[0], state[1], state[2] = 1.0, v, v
             return v
         alpha, dt = state[5], state[6]
-        state[4] += alpha * (state[3] - state[4])
         u_prev = state[2]
         g, h, kappa = self._gains(p)
-        w = capstan_speed(state[4], kappa) * (g + h * abs(u_prev))
-        u = play_inverse_step(v, state[1], u_prev, w)
-        state[3] = abs(u - u_prev) / dt
+        u = knob_for_drive(v, state[1], u_prev, state[4], alpha, dt, g + h * abs(u_prev), kappa)
+        state[4] += alpha * (abs(u - u_prev) / dt - state[4])
         state[1], state[2] = v, u
         return u
 
