@@ -10,8 +10,6 @@ flushed, and ``run.json`` records how the run ended.
 
 from __future__ import annotations
 
-import shutil
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,15 +21,12 @@ from endocal.backends.base import Backend
 from endocal.errors import OutputPathError
 from endocal.probe import ProbeConfig
 from endocal.runs.format import (
-    ALIGNED,
-    FORMAT_NAME,
-    FORMAT_VERSION,
     MOTOR,
     RUN_JSON,
     TRACKER,
-    UNITS,
+    create_run_folder,
     prepare_output,
-    software_versions,
+    run_meta,
     utc_now,
     write_json,
 )
@@ -114,22 +109,9 @@ def run_excitation(
     out = Path(out)
     trajectory.check_limits(probe)  # refuse before anything moves
     prepare_output(out, force)
-    meta = {
-        "format": FORMAT_NAME,
-        "version": FORMAT_VERSION,
-        "status": "running",
-        "protocol": protocol_info,
-        "probe": probe.to_dict(),
-        "backend": {"name": backend.name},
-        "seed": seed,
-        "realtime": bool(realtime or backend.realtime),
-        "software": software_versions(),
-        "command": command or " ".join(sys.argv),
-        "sample_rate_hz": trajectory.sample_rate_hz,
-        "planned_duration_s": trajectory.duration_s,
-        "units": UNITS,
-        "streams": {"motor": MOTOR + "/", "tracker": TRACKER + "/", "aligned": ALIGNED},
-    }
+    meta = run_meta(protocol=protocol_info, probe=probe, backend={"name": backend.name}, seed=seed,
+                    realtime=realtime or backend.realtime, command=command,
+                    sample_rate_hz=trajectory.sample_rate_hz, planned_duration_s=trajectory.duration_s)
     # Connect first: a rig that fails to open leaves no run folder behind.
     try:
         backend.open()
@@ -137,12 +119,10 @@ def run_excitation(
         backend.close()
         raise
     try:
-        if out.exists():
-            shutil.rmtree(out)
-        out.mkdir(parents=True)
-    except OSError as exc:
+        create_run_folder(out)
+    except OutputPathError:
         backend.close()
-        raise OutputPathError(f"cannot create {out}: {exc.strerror}") from None
+        raise
 
     logger = StreamLogger(out, flush_interval_s=flush_interval_s)
     status, error = "running", None

@@ -25,6 +25,8 @@ import hashlib
 import json
 import os
 import platform
+import shutil
+import sys
 import tempfile
 from datetime import datetime, timezone
 from pathlib import Path
@@ -180,3 +182,34 @@ def prepare_output(out: Path, force: bool) -> None:
         raise OutputPathError(f"cannot create {out}: {probe_dir} is not a folder")
     if not os.access(probe_dir, os.W_OK | os.X_OK):
         raise OutputPathError(f"cannot create {out}: {probe_dir} is not writable")
+
+
+def run_meta(*, protocol: dict, probe, backend: dict, seed, realtime: bool, command: str | None,
+             sample_rate_hz, planned_duration_s: float) -> dict:
+    """The ``run.json`` of a run about to be logged (``status: running``; the logger completes it)."""
+    return {
+        "format": FORMAT_NAME,
+        "version": FORMAT_VERSION,
+        "status": "running",
+        "protocol": protocol,
+        "probe": probe.to_dict(),
+        "backend": backend,
+        "seed": seed,
+        "realtime": bool(realtime),
+        "software": software_versions(),
+        "command": command or " ".join(sys.argv),
+        "sample_rate_hz": sample_rate_hz,
+        "planned_duration_s": planned_duration_s,
+        "units": UNITS,
+        "streams": {"motor": MOTOR + "/", "tracker": TRACKER + "/", "aligned": ALIGNED},
+    }
+
+
+def create_run_folder(out: Path) -> None:
+    """Create ``out`` empty (replacing a run :func:`prepare_output` allowed to replace)."""
+    try:
+        if out.exists():
+            shutil.rmtree(out)
+        out.mkdir(parents=True)
+    except OSError as exc:
+        raise OutputPathError(f"cannot create {out}: {exc.strerror}") from None

@@ -24,8 +24,6 @@ same motor and tracker streams and aligned table as a simulated or hardware run
 from __future__ import annotations
 
 import math
-import shutil
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,19 +31,15 @@ from pathlib import Path
 import numpy as np
 
 from endocal.backends.base import StreamChunk
-from endocal.errors import OutputPathError, RunFormatError
+from endocal.errors import RunFormatError
 from endocal.probe import TRANSLATION, ProbeConfig
 from endocal.runs.format import (
-    ALIGNED,
-    FORMAT_NAME,
-    FORMAT_VERSION,
     MOTOR,
     RUN_JSON,
-    TRACKER,
-    UNITS,
+    create_run_folder,
     prepare_output,
+    run_meta,
     sha256_of,
-    software_versions,
     utc_now,
     write_json,
 )
@@ -262,33 +256,17 @@ def import_rosbag(bag: str | Path, out: str | Path, probe: ProbeConfig, joints: 
     tracker = {k: v[order] for k, v in tracker.items()}
 
     dt = np.diff(motor["t_s"])
-    meta = {
-        "format": FORMAT_NAME,
-        "version": FORMAT_VERSION,
-        "status": "running",
-        "protocol": {"name": "ros-import", "source": str(bag), "sha256": sha256_of(bag)},
-        "probe": probe.to_dict(),
-        "backend": {"name": "rosbag", "topics": {"joints": topics.joints, "goals": topics.goals, "tip": topics.tip,
-                                                 "base": topics.base},
-                    "joints": dict(joints), "pair_tolerance_s": pair_tolerance_s, "unpaired_tip_frames": unpaired,
-                    "command_source": "goal topic" if goal_msgs is not None else
-                    "knob position (no goal topic: the servo's lag is not in the data)"},
-        "seed": None,
-        "realtime": True,
-        "software": software_versions(),
-        "command": command or " ".join(sys.argv),
-        "sample_rate_hz": float(1.0 / np.median(dt)) if dt.size and np.median(dt) > 0 else None,
-        "planned_duration_s": float(motor["t_s"][-1]),
-        "units": UNITS,
-        "streams": {"motor": MOTOR + "/", "tracker": TRACKER + "/", "aligned": ALIGNED},
-        "started_utc": utc_now(),
-    }
-    try:
-        if out.exists():
-            shutil.rmtree(out)
-        out.mkdir(parents=True)
-    except OSError as exc:
-        raise OutputPathError(f"cannot create {out}: {exc.strerror}") from None
+    backend = {"name": "rosbag", "topics": {"joints": topics.joints, "goals": topics.goals, "tip": topics.tip,
+                                            "base": topics.base},
+               "joints": dict(joints), "pair_tolerance_s": pair_tolerance_s, "unpaired_tip_frames": unpaired,
+               "command_source": "goal topic" if goal_msgs is not None else
+               "knob position (no goal topic: the servo's lag is not in the data)"}
+    meta = run_meta(protocol={"name": "ros-import", "source": str(bag), "sha256": sha256_of(bag)}, probe=probe,
+                    backend=backend, seed=None, realtime=True, command=command,
+                    sample_rate_hz=float(1.0 / np.median(dt)) if dt.size and np.median(dt) > 0 else None,
+                    planned_duration_s=float(motor["t_s"][-1]))
+    meta["started_utc"] = utc_now()
+    create_run_folder(out)
     write_json(out / RUN_JSON, meta)
     logger = StreamLogger(out)
     logger.append(StreamChunk(motor=motor, tracker=tracker))
