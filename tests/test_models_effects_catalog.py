@@ -38,7 +38,9 @@ TRUTH = {
     "delay": ("delay", {"delay_s": 0.13}, "(t - tau)"),
     # 6 % of the bend as extra backlash: ~3.6 deg of knob at a 60 deg bend, ~0 near neutral
     "tension": ("tension", {"tension_friction": 0.06}, "tplay("),
-    "coupling": ("coupling", {"coupling_linear": 0.12, "coupling_abs": 0.06}, "coupling["),
+    # the other half-bend 0.8 deg per deg of the other knob, own half-planes deviated by +8.5 and -11.3 deg
+    "coupling": ("coupling", {"coupling_linear": 0.12, "coupling_abs": 0.06, "coupling_gain": 0.8,
+                              "coupling_tilt_pos": -0.15, "coupling_tilt_neg": 0.2}, "coupling["),
     "creep": ("creep", {"creep_fraction": 0.25, "creep_tau_s": 2.0}, "creep("),
     "load": ("load:wrap_deg", {"load_wrap_deg_up": 0.05, "load_wrap_deg_down": 0.0, "load_wrap_deg_up_amp": 0.0005,
                                "load_wrap_deg_down_amp": 0.0, "load_wrap_deg_gain": -0.0005,

@@ -1,50 +1,163 @@
 """``coupling``: the other bending axis moving this one.
 
-The tendons of one axis pass the bending section off its neutral plane (tendon-hole
-offsets), so bending the other axis pulls or slackens them; and a bending plane that
-deviates from its nominal direction (duodenoscope paper, sec. 3.2) projects part of the
-other axis's bend onto this axis's measured angle (thesis eq. 1), with a different
-deviation on each half-plane. Both show as a term in the other axis's position ``x``::
+Both bending axes bend one section, so the tip sits where the *sum* of their bends puts
+it, and the tracker reads each axis's angle from that one tip position (thesis eq. 1).
+In eq.-1 coordinates a constant-curvature arc of bending vector ``b`` (rad) has its tip at
+``p ∝ ((1 - cos α)/α² b, sin α/α)``, ``α = |b|``; with the half-bend ``h = b/2`` (one
+axis alone reads exactly half its bend) this axis reads::
 
-    y += a · x + b · |x|
+    θ = atan2(h_y · sin|h| / |h|,  cos|h|)            (thesis eq. 1 on a constant-curvature arc)
 
-``a`` (``coupling_linear``) is the part odd in ``x`` (anchor shift, symmetric deviation),
-``b`` (``coupling_abs``) the part even in ``x`` (unequal deviations of the two half-planes).
-``x`` is the extra column ``other_cmd_deg`` (the other knob's command, deg) unless another
-is named: ``coupling:ml_meas_deg`` uses the other axis's measured angle. The term does not
-depend on this axis's command, so the inverse subtracts it exactly; it needs the other
-axis's logged trajectory and therefore does not stream.
+so the other axis's bend ``h_x`` both enters through the magnitude ``|h|`` (the angle
+reads larger when the other axis bends: ``θ ≈ h_y (1 + |h|²/3)``) and, where the bending
+planes deviate from their nominal directions (duodenoscope paper, sec. 3.2: 2-20 deg,
+different on each half-plane), is projected onto this axis's plane and this axis's own
+bend onto the other's. The two half-bends, from this axis's output ``y`` (the base
+model's, deg) and the other axis's position ``x`` (deg)::
+
+    h_y = y + a · x + b · |x|        a, b: the other bend projected through its deviated
+                                     half-planes (odd and even part), and the shift of this
+                                     axis's tendon anchors by the other bend (tendon-hole
+                                     offsets) that the other knob's motion causes
+    h_x = g · x + c± · y             g: the other axis's half-bend per deg of x; c±: this
+                                     axis's own deviation on its + / - half-plane
+                                     (c = -tan(deviation))
+
+Parameters ``coupling_linear`` (``a``), ``coupling_abs`` (``b``), ``coupling_gain``
+(``g``), ``coupling_tilt_pos`` / ``coupling_tilt_neg`` (``c+`` / ``c-``). All zero is no
+coupling (``θ = y``). ``x`` is the extra column ``other_cmd_deg`` (the other knob's
+command, deg) unless another is named: ``coupling:ml_meas_deg`` uses the other axis's
+measured angle (then ``g ≈ 1``).
+
+The term acts on the base's output (an :class:`OutputFilter`): the magnification
+multiplies it. The anchor shift is, physically, an input of this axis's tendons (it
+passes through their friction); ``a · x`` is its first-order share on the output.
+``θ`` rises monotonically with ``y``, so the inverse solves one scalar equation per sample
+exactly (safeguarded Newton); it needs the other axis's logged (or planned) trajectory and
+therefore does not stream.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 from endocal.errors import ModelError
 from endocal.models.data import OTHER_CMD, HysteresisData
-from endocal.models.effects.base import OutputEffect
-from endocal.models.params import Parameter, fmt_value
+from endocal.models.effects.creep import OutputFilter
+from endocal.models.params import Parameter
+
+_D2R = math.pi / 180.0
 
 
-class Coupling(OutputEffect):
-    """Cross-coupling from the other axis (module docstring).
+@njit(cache=True)
+def _eq1(u, z):
+    """Thesis eq. 1 on a constant-curvature arc: ``atan2(u sinc r, cos r)``, ``r = hypot(u, z)``.
+
+    ``u``, ``z``: half-bend in and across this axis's plane (rad). Returns the angle (rad) and
+    its derivatives by ``u`` and ``z``; smooth at ``r = 0`` (series of ``sinc``).
+    """
+    r2 = u * u + z * z
+    r = math.sqrt(r2)
+    if r < 1e-4:
+        s = 1.0 - r2 / 6.0
+        ds_r = -1.0 / 3.0 + r2 / 30.0  # (d sinc / dr) / r
+    else:
+        s = math.sin(r) / r
+        ds_r = (r * math.cos(r) - math.sin(r)) / (r2 * r)
+    a = u * s
+    c = math.cos(r)
+    den = a * a + c * c
+    # d(cos r)/du = -sinc(r) u, d(cos r)/dz = -sinc(r) z
+    f_u = (c * (s + u * u * ds_r) + a * s * u) / den
+    f_z = (c * u * z * ds_r + a * s * z) / den
+    return math.atan2(a, c), f_u, f_z
+
+
+@njit(cache=True)
+def coupling_forward(y_deg, x_deg, a, b, g, c_pos, c_neg):
+    """Measured angle (deg) from the base output ``y`` and the other axis's ``x`` (deg).
+
+    Returns ``theta`` (n,), ``d theta / d y`` (n,) and the derivatives (n, 5) by
+    ``(a, b, g, c_pos, c_neg)`` (module docstring).
+    """
+    n = y_deg.shape[0]
+    out = np.empty(n)
+    dy = np.empty(n)
+    own = np.zeros((n, 5))
+    for k in range(n):
+        y = y_deg[k] * _D2R
+        x = x_deg[k] * _D2R
+        ax = abs(x)
+        c = c_pos if y >= 0.0 else c_neg
+        f, f_u, f_z = _eq1(y + a * x + b * ax, g * x + c * y)
+        out[k] = f / _D2R
+        dy[k] = f_u + f_z * c
+        own[k, 0] = f_u * x_deg[k]
+        own[k, 1] = f_u * abs(x_deg[k])
+        own[k, 2] = f_z * x_deg[k]
+        own[k, 3 if y >= 0.0 else 4] = f_z * y_deg[k]
+    return out, dy, own
+
+
+@njit(cache=True)
+def coupling_inverse(theta_deg, x_deg, a, b, g, c_pos, c_neg):
+    """Base output ``y`` (deg) whose coupled angle is ``theta`` (deg): safeguarded Newton per sample."""
+    n = theta_deg.shape[0]
+    out = np.empty(n)
+    for k in range(n):
+        th = theta_deg[k] * _D2R
+        x = x_deg[k] * _D2R
+        lo = -0.5 * math.pi
+        hi = 0.5 * math.pi
+        shift = a * x + b * abs(x)
+        y = min(max(th - shift, lo), hi)
+        for _ in range(200):
+            c = c_pos if y >= 0.0 else c_neg
+            f, f_u, f_z = _eq1(y + shift, g * x + c * y)
+            r = f - th
+            if r > 0.0:
+                hi = y
+            else:
+                lo = y
+            if r == 0.0 or hi - lo <= 1e-15:
+                break
+            d = f_u + f_z * c
+            yn = y - r / d if d > 0.0 else 0.5 * (lo + hi)
+            if not lo < yn < hi:
+                yn = 0.5 * (lo + hi)
+            if abs(yn - y) <= 1e-15:
+                y = yn
+                break
+            y = yn
+        out[k] = y / _D2R
+    return out
+
+
+class Coupling(OutputFilter):
+    """Cross-coupling from the other axis through the shared tip position (module docstring).
 
     Parameters
     ----------
     column : str
         Extra column holding the other axis's position (deg); default ``other_cmd_deg``.
 
-    Fitted parameters (prefix ``coupling_``): ``linear`` and ``abs`` (deg of this axis per
-    deg of the other).
+    Fitted parameters (prefix ``coupling_``): ``linear``, ``abs`` (deg of this axis's
+    half-bend per deg of the other's position), ``gain`` (the other axis's half-bend per
+    deg of its position), ``tilt_pos``, ``tilt_neg`` (out-of-plane share of this axis's
+    own bend on its + / - half-plane).
     """
 
     name = "coupling"
-    depends_on_command = False
-    cause = ("cross-coupling: the other axis's tendons and bend pull on this axis's tendons "
-             "(tendon-hole offsets), and deviated bending planes project the other bend onto this angle")
-    signature = "residual that follows the other axis's position (odd or even in it), not this axis's command"
-    protocol = "move the other knob alone, or both knobs at different frequencies"
-    units = {"linear": "deg/deg", "abs": "deg/deg"}
+    cause = ("cross-coupling: both axes bend one section, and eq. 1 reads each angle from the one tip position "
+             "(magnified by the other bend, projected through deviated bending planes); the other bend also "
+             "shifts this axis's tendon anchors (tendon-hole offsets)")
+    signature = ("residual that follows the other axis's position (odd or even in it) and grows with this "
+                 "axis's angle, not this axis's command alone")
+    protocol = "move the other knob alone, or both knobs at different frequencies (circle, lissajous)"
+    units = {"linear": "deg/deg", "abs": "deg/deg", "gain": "deg/deg", "tilt_pos": "", "tilt_neg": ""}
 
     def __init__(self, column: str = OTHER_CMD):
         if not isinstance(column, str) or not column:
@@ -70,24 +183,32 @@ class Coupling(OutputEffect):
             raise ModelError(f"effect '{self.label}' needs the other axis's position: {exc}") from None
 
     def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
-        return [Parameter(f"{self.prefix}_linear", 0.0), Parameter(f"{self.prefix}_abs", 0.0)]
+        # Bounds: projections and deviations below 45 deg (|a|, |b|, |c| < 1); the other
+        # half-bend up to 3 deg per deg of x.
+        return [Parameter(f"{self.prefix}_linear", 0.0, -1.0, 1.0), Parameter(f"{self.prefix}_abs", 0.0, -1.0, 1.0),
+                Parameter(f"{self.prefix}_gain", 0.5, 0.0, 3.0),
+                Parameter(f"{self.prefix}_tilt_pos", 0.0, -1.0, 1.0), Parameter(f"{self.prefix}_tilt_neg", 0.0, -1.0, 1.0)]
 
-    def _regressors(self, data: HysteresisData) -> np.ndarray:
-        x = data.column(self.column)
-        return np.column_stack([x, np.abs(x)])
+    def _x(self, data: HysteresisData) -> np.ndarray:
+        return np.ascontiguousarray(data.column(self.column), dtype=float)
 
-    def term(self, p: dict, cmd: np.ndarray, data: HysteresisData) -> np.ndarray:
-        return self._regressors(data) @ np.array([p["linear"], p["abs"]])
+    @staticmethod
+    def _args(p: dict) -> tuple[float, ...]:
+        return tuple(float(p[k]) for k in ("linear", "abs", "gain", "tilt_pos", "tilt_neg"))
 
-    def term_jac(self, p: dict, cmd: np.ndarray, data: HysteresisData):
-        X = self._regressors(data)
-        return X @ np.array([p["linear"], p["abs"]]), X
+    def apply(self, p: dict, y: np.ndarray, data: HysteresisData) -> np.ndarray:
+        return coupling_forward(np.ascontiguousarray(y, dtype=float), self._x(data), *self._args(p))[0]
+
+    def apply_jac(self, p: dict, y: np.ndarray, data: HysteresisData, J: np.ndarray):
+        """Coupled output, the upstream Jacobian through it (n, m) and the own columns (n, 5)."""
+        out, dy, own = coupling_forward(np.ascontiguousarray(y, dtype=float), self._x(data), *self._args(p))
+        return out, dy[:, None] * J, own
+
+    def invert(self, p: dict, y: np.ndarray, data: HysteresisData) -> np.ndarray:
+        return coupling_inverse(np.ascontiguousarray(y, dtype=float), self._x(data), *self._args(p))
 
     def describe(self, p: dict, se: dict) -> str:
-        x = self.column
-        parts = []
-        if p["linear"] != 0.0:
-            parts.append(f"{fmt_value(p['linear'], se.get('linear'))}*{x}")
-        if p["abs"] != 0.0:
-            parts.append(f"{fmt_value(p['abs'], se.get('abs'))}*|{x}|")
-        return "coupling[" + " + ".join(parts) + "]"
+        return "coupling" + self._bracket(p, se)
+
+    def wrap(self, inner: str) -> str:
+        return f"coupling({inner}; {self.column})"
