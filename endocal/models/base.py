@@ -5,7 +5,7 @@ A model is a *base* (the direction-dependent hysteresis: :mod:`~endocal.models.l
 (:mod:`endocal.models.effects`)::
 
     u = E_in(cmd)               input effects, in order (delay, rate, load, deadzone, envelope)
-    y = F(base(u)) + sum E_out  output filters (creep), then additive terms (coupling, drift)
+    y = F(base(u)) + sum E_out  output filters (creep, coupling), then additive terms (drift)
 
 Contract (scikit-learn / lmfit style): ``__init__`` only stores its arguments;
 ``fit`` returns ``self`` and sets the trailing-underscore attributes (``params_``,

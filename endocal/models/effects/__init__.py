@@ -6,8 +6,8 @@ classes in :data:`EFFECTS`; ``load:COLUMN`` names an extra numeric column of the
 
 Three kinds of term (see :mod:`endocal.models.base`): input transforms of the command
 (:class:`InputEffect`: ``delay``, ``rate``, ``load``, ``deadzone``, ``envelope``, ``tension``,
-applied in that order), a filter on the base's output (:class:`OutputFilter`: ``creep``) and
-additive output terms (:class:`OutputEffect`: ``coupling``, ``drift``).
+applied in that order), filters on the base's output (:class:`OutputFilter`: ``creep``,
+``coupling``) and additive output terms (:class:`OutputEffect`: ``drift``).
 """
 
 from __future__ import annotations
