@@ -32,7 +32,7 @@ from endocal.errors import ModelError
 from endocal.models.data import HysteresisData, as_data
 from endocal.models.effects import resolve_effects
 from endocal.models.effects.base import Effect, InputEffect, OutputEffect
-from endocal.models.effects.creep import OutputFilter
+from endocal.models.effects.base import OutputFilter
 from endocal.models.params import Parameter
 
 OUT_OF_RANGE_CHOICES = ("error", "clamp")
@@ -251,7 +251,7 @@ class HysteresisModel(ABC):
     @staticmethod
     def _ordered(effects: list[Effect]) -> list[Effect]:
         inputs = sorted((e for e in effects if isinstance(e, InputEffect)), key=lambda e: e.order)
-        filters = [e for e in effects if isinstance(e, OutputFilter)]
+        filters = sorted((e for e in effects if isinstance(e, OutputFilter)), key=lambda e: e.order)
         outputs = [e for e in effects if isinstance(e, OutputEffect)]
         return inputs + filters + outputs
 

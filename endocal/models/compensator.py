@@ -18,7 +18,7 @@ from endocal.errors import ModelError
 from endocal.models.base import HysteresisModel, OutOfRangeWarning
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import InputEffect
-from endocal.models.effects.creep import OutputFilter
+from endocal.models.effects.base import OutputFilter
 
 
 class StreamingCompensator:

@@ -16,9 +16,9 @@ from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 
 from endocal.errors import ModelError
-from endocal.models.effects.base import Effect, InputEffect, OutputEffect
+from endocal.models.effects.base import Effect, InputEffect, OutputEffect, OutputFilter
 from endocal.models.effects.coupling import Coupling
-from endocal.models.effects.creep import Creep, OutputFilter
+from endocal.models.effects.creep import Creep
 from endocal.models.effects.deadzone import Deadzone
 from endocal.models.effects.delay import Delay
 from endocal.models.effects.drift import Drift

@@ -127,6 +127,29 @@ class InputEffect(Effect):
                          "(it needs future or logged samples); use the batch inverse")
 
 
+class OutputFilter(Effect):
+    """An effect that transforms the base model's output sequence (applied before additive terms).
+
+    ``y = F(base(u)) + sum E_out``. Subclasses implement :meth:`apply` (``F``),
+    :meth:`invert` (``F⁻¹``) and may implement ``apply_jac`` for the analytic Jacobian.
+    """
+
+    kind: ClassVar[str] = "filter"
+    #: position in the output chain (lower acts first: the bend relaxes, then the tracker reads it)
+    order: ClassVar[int] = 50
+
+    @abstractmethod
+    def apply(self, p: dict, y: np.ndarray, data: HysteresisData) -> np.ndarray:
+        """Filtered output (n,) from the base output ``y`` (deg)."""
+
+    @abstractmethod
+    def invert(self, p: dict, y: np.ndarray, data: HysteresisData) -> np.ndarray:
+        """Base output (n,) whose filtered output is ``y`` (deg)."""
+
+    def wrap(self, inner: str) -> str:
+        return f"{self.name}({inner})"
+
+
 class OutputEffect(Effect):
     """An effect that adds a term (deg of bending) to the base model's output."""
 

@@ -46,7 +46,7 @@ from numba import njit
 
 from endocal.errors import ModelError
 from endocal.models.data import OTHER_CMD, HysteresisData
-from endocal.models.effects.creep import OutputFilter
+from endocal.models.effects.base import OutputFilter
 from endocal.models.params import Parameter
 
 _D2R = math.pi / 180.0
@@ -151,6 +151,7 @@ class Coupling(OutputFilter):
     """
 
     name = "coupling"
+    order = 20  # eq. 1 reads the tip where the (relaxed) bends put it: after creep
     cause = ("cross-coupling: both axes bend one section, and eq. 1 reads each angle from the one tip position "
              "(magnified by the other bend, projected through deviated bending planes); the other bend also "
              "shifts this axis's tendon anchors (tendon-hole offsets)")

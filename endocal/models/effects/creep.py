@@ -18,39 +18,16 @@ given the sample period.
 from __future__ import annotations
 
 import math
-from abc import abstractmethod
-from typing import ClassVar
 
 import numpy as np
 from numba import njit
 
 from endocal.errors import ModelError
 from endocal.models.data import HysteresisData
-from endocal.models.effects.base import Effect
+from endocal.models.effects.base import OutputFilter
 from endocal.models.params import Parameter
 
 _MAX_FRACTION = 0.95
-
-
-class OutputFilter(Effect):
-    """An effect that transforms the base model's output sequence (applied before additive terms).
-
-    ``y = F(base(u)) + sum E_out``. Subclasses implement :meth:`apply` (``F``),
-    :meth:`invert` (``F⁻¹``) and may implement ``apply_jac`` for the analytic Jacobian.
-    """
-
-    kind: ClassVar[str] = "filter"
-
-    @abstractmethod
-    def apply(self, p: dict, y: np.ndarray, data: HysteresisData) -> np.ndarray:
-        """Filtered output (n,) from the base output ``y`` (deg)."""
-
-    @abstractmethod
-    def invert(self, p: dict, y: np.ndarray, data: HysteresisData) -> np.ndarray:
-        """Base output (n,) whose filtered output is ``y`` (deg)."""
-
-    def wrap(self, inner: str) -> str:
-        return f"{self.name}({inner})"
 
 
 @njit(cache=True)
@@ -119,6 +96,7 @@ class Creep(OutputFilter):
     """
 
     name = "creep"
+    order = 10  # the bend relaxes before the tracker reads it (coupling)
     streamable = True
     stateful = True
     needs_period = True

@@ -75,23 +75,34 @@ def smoothed_speed(u, t, tau, M, run_starts):
 
 
 @njit(cache=True)
+def capstan_terms(s, kappa):
+    """``F = (e^{κs} - 1)/κ`` (deg/s; ``s`` at ``κ = 0``), ``∂F/∂s = e^{κs}`` and ``∂F/∂κ`` (module docstring).
+
+    ``∂F/∂κ = (κ s e^{κs} - (e^{κs} - 1))/κ²``; below ``κs = 1e-4`` both come from the series.
+    """
+    ks = kappa * s
+    e = math.exp(ks)
+    if ks < 1e-4:
+        return s * (1.0 + ks / 2.0 + ks * ks / 6.0), e, s * s * (0.5 + ks / 3.0 + ks * ks / 8.0)
+    em1 = math.expm1(ks)
+    return em1 / kappa, e, (ks * e - em1) / (kappa * kappa)
+
+
+@njit(cache=True)
 def capstan_speed(s, kappa):
-    """``(exp(κ s) - 1) / κ`` (deg/s), the speed term of the play width; ``s`` at ``κ = 0`` (module docstring)."""
-    ks = kappa * s
-    if ks < 1e-4:  # the series, as in capstan_speed_jac
-        return s * (1.0 + ks / 2.0 + ks * ks / 6.0)
-    return math.expm1(ks) / kappa
+    """``(e^{κs} - 1)/κ`` (deg/s), the speed term of the play width."""
+    return capstan_terms(s, kappa)[0]
 
 
-def capstan_speed_jac(s: np.ndarray, kappa: float):
-    """``F = (e^{κs} - 1)/κ``, ``∂F/∂s = e^{κs}`` and ``∂F/∂κ = (κ s e^{κs} - (e^{κs} - 1))/κ²`` (series for small κs)."""
-    ks = kappa * s
-    small = ks < 1e-4
-    safe_k = kappa if kappa > 0 else 1.0
-    e = np.exp(ks)
-    F = np.where(small, s * (1.0 + ks / 2.0 + ks * ks / 6.0), np.expm1(ks) / safe_k)
-    dk = np.where(small, s * s * (0.5 + ks / 3.0 + ks * ks / 8.0), (ks * e - np.expm1(ks)) / safe_k**2)
-    return F, e, dk
+@njit(cache=True)
+def capstan_speed_jac(s, kappa):
+    """:func:`capstan_terms` over an array of speeds: ``F``, ``∂F/∂s``, ``∂F/∂κ`` (each (n,))."""
+    F = np.empty(s.shape[0])
+    dF_ds = np.empty(s.shape[0])
+    dF_dk = np.empty(s.shape[0])
+    for i in range(s.shape[0]):
+        F[i], dF_ds[i], dF_dk[i] = capstan_terms(s[i], kappa)
+    return F, dF_ds, dF_dk
 
 
 @njit(cache=True)
@@ -246,7 +257,7 @@ class Rate(InputEffect):
     def apply_jac(self, p: dict, u: np.ndarray, data: HysteresisData, M: np.ndarray):
         g, h, kappa = self._gains(p)
         s, D = self._speed(u, data, M)
-        F, dF_ds, dF_dk = capstan_speed_jac(s, kappa)
+        F, dF_ds, dF_dk = capstan_speed_jac(s, float(kappa))
         u = np.asarray(u, dtype=float)
         M = np.asarray(M, dtype=float)
         # the angle of the previous sample (the width at a run's first sample is 0 anyway: ŝ = 0)
@@ -269,18 +280,18 @@ class Rate(InputEffect):
     def stream_state(self, p: dict, dt_s: float | None = None) -> np.ndarray:
         if dt_s is None or not dt_s > 0:
             raise ModelError("effect 'rate' streams only with a fixed sample period: give dt_s (s) to the compensator")
-        # [started, v_prev, u_prev, (unused), smoothed knob speed, alpha, dt]
-        return np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0 - math.exp(-dt_s / self.speed_filter_s), dt_s])
+        # [started, v_prev, u_prev, smoothed knob speed, alpha, dt]
+        return np.array([0.0, 0.0, 0.0, 0.0, 1.0 - math.exp(-dt_s / self.speed_filter_s), dt_s])
 
     def invert_step(self, p: dict, v: float, state: np.ndarray) -> float:
         if state[0] == 0.0:
             state[0], state[1], state[2] = 1.0, v, v
             return v
-        alpha, dt = state[5], state[6]
+        alpha, dt = state[4], state[5]
         u_prev = state[2]
         g, h, kappa = self._gains(p)
-        u = knob_for_drive(v, state[1], u_prev, state[4], alpha, dt, g + h * abs(u_prev), kappa)
-        state[4] += alpha * (abs(u - u_prev) / dt - state[4])
+        u = knob_for_drive(v, state[1], u_prev, state[3], alpha, dt, g + h * abs(u_prev), kappa)
+        state[3] += alpha * (abs(u - u_prev) / dt - state[3])
         state[1], state[2] = v, u
         return u
 
