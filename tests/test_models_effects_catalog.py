@@ -287,3 +287,21 @@ def test_simulator_latency_is_explained_by_delay():
     assert with_it <= 0.5 * without and with_it <= 1.5 * 0.37, (without, with_it, floor)
     d0, _ = _simulate(_sim_config(), u)
     assert heldout_rmse("bspline", ["envelope", "delay"], d0)[0] > 0.95 * heldout_rmse("bspline", ["envelope"], d0)[0]
+
+
+def test_coupling_fit_on_a_whole_circle_run_does_not_stall():
+    # Both knobs on the protocol's circle (3 turns, 7000 samples, the simulator's default servo
+    # and tracker lag), fitted on every sample: from the planes' nominal directions alone the
+    # fit stalled where the B-spline had bent its branches to mimic the coupling (3.6 deg, 9x
+    # the floor, on this seed). Fitted from the best of the coupling's start candidates it
+    # explains the run to 1.15x the floor in-sample (the ~80 ms lag the model lacks and the
+    # capstan transitions are the rest), so 1.4x separates the two by far.
+    from endocal.probe import PRESETS
+    from endocal.protocols import load_protocol
+    from endocal.sim import SimConfig
+
+    traj = load_protocol("circle").trajectory(PRESETS["tee"], seed=1)
+    cfg = SimConfig.default().replace(deadzone={"enabled": False}, coupling={"enabled": True})
+    d, floor = _simulate(cfg, traj.goal["ap"], traj.goal["ml"], seed=1)
+    m = make_model("bspline", ["coupling"]).fit(d)
+    assert m.fit_report_.rmse_deg <= 1.4 * floor, (m.fit_report_.rmse_deg, floor)

@@ -190,6 +190,16 @@ class Coupling(OutputFilter):
                 Parameter(f"{self.prefix}_gain", 0.5, 0.0, 3.0),
                 Parameter(f"{self.prefix}_tilt_pos", 0.0, -1.0, 1.0), Parameter(f"{self.prefix}_tilt_neg", 0.0, -1.0, 1.0)]
 
+    def start_candidates(self, data: HysteresisData, u: np.ndarray) -> list[dict]:
+        """Start values tried before the fit (the best is kept).
+
+        From the planes' nominal directions a fit on a full circle run can stall where the
+        base has bent its branches to mimic the coupling (seen on a 7000-sample run: 3.6 deg
+        in-sample, 0.49 deg from these starts). Besides that start: the other half-bend
+        twice as large, and both half-planes deviated by 17 deg (the paper's 2-20 deg).
+        """
+        return [{"gain": 0.5}, {"gain": 1.0}, {"tilt_pos": -0.3, "tilt_neg": -0.3}]
+
     def _x(self, data: HysteresisData) -> np.ndarray:
         return np.ascontiguousarray(data.column(self.column), dtype=float)
 
