@@ -123,7 +123,8 @@ class Creep(OutputFilter):
     def start_candidates(self, data: HysteresisData, u: np.ndarray) -> list[dict]:
         """Start values tried before the fit (the best is kept)."""
         lo, hi = self._tau_bounds(data)
-        return [{"fraction": a, "tau_s": tau} for a in (0.05, 0.2) for tau in (0.3, 1.0, 3.0, 10.0) if lo <= tau <= hi]
+        # the time constant is the nonlinear one; the fraction scales the term and is found from any start
+        return [{"fraction": 0.1, "tau_s": tau} for tau in (0.3, 1.0, 3.0, 10.0) if lo <= tau <= hi]
 
     def _run(self, p, y, data, J):
         t = data.require_time("effect 'creep'")
