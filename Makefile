@@ -17,7 +17,7 @@ install: $(STAMP)
 
 # One worker per core (pytest-xdist); a test file stays on one worker, so its module fixtures run once.
 test: $(STAMP)
-	$(BIN)/python -m pytest -n auto --dist loadfile
+	$(BIN)/python -m pytest -n auto --dist loadfile --durations=12
 
 demo: $(STAMP)
 	bash scripts/demo.sh $(DEMO)

@@ -33,7 +33,7 @@ def test_fit_prints_the_equation_and_saves_a_model_that_predicts_the_data(run, t
     assert rmse < 1.0
     assert rmse == pytest.approx(model.fit_report_.rmse_deg, rel=1e-6)
     meta = json.loads(out.read_text())
-    assert meta["format"] == "endocal-model" and meta["version"] == 1 and meta["axis"] == "ap"
+    assert meta["format"] == "endocal-model" and meta["version"] == 2 and meta["axis"] == "ap"
     assert meta["provenance"]["data"][0]["sha256"] == data.sha256
     assert meta["provenance"]["software"]["endocal"]
 

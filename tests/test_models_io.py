@@ -1,6 +1,7 @@
 """Model files: exact round trip, clear errors for wrong version, fields, base or effect."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -45,7 +46,7 @@ def test_set_parameters_model_round_trips(tmp_path):
 
 
 @pytest.mark.parametrize("mutate, message", [
-    (lambda d: d.update(version=2), "unknown model file version 2"),
+    (lambda d: d.update(version=3), "unknown model file version 3"),
     (lambda d: d.update(format="something"), "not an endocal model file"),
     (lambda d: d.pop("parameters"), "missing \\['parameters'\\]"),
     (lambda d: d.update(colour="red"), "unknown \\['colour'\\]"),
@@ -73,3 +74,29 @@ def test_unreadable_files(tmp_path):
 def test_unfitted_model_cannot_be_saved(tmp_path):
     with pytest.raises(ModelError, match="not fitted"):
         make_model("linear").save(tmp_path / "x.json")
+
+
+FIXTURES = Path(__file__).parent / "fixtures"
+
+
+def test_version_1_bspline_files_load_as_first_coefficient_and_increments(tmp_path):
+    # Saved by endocal before file version 2: coefficients bspline_up_c0..c7, the up branch
+    # falling at its low end (c0 > c1) where few samples lie on it.
+    old = json.loads((FIXTURES / "bspline_v1.json").read_text())
+    m = load_model(FIXTURES / "bspline_v1.json")
+    p = {k.removeprefix("bspline_"): v for k, v in m.params_.items()}
+    up, down = m._coefs(m.structure_, p)
+    c = {n: e["value"] for n, e in old["parameters"].items()}
+    assert np.allclose(up, [c[f"bspline_up_c{i}"] for i in range(8)], rtol=0, atol=1e-12)
+    assert np.allclose(down, [c[f"bspline_down_c{i}"] for i in range(8)], rtol=0, atol=1e-12)
+    assert p["up_dc1"] < 0  # the falling stretch is kept: the file predicts as before
+    # the increment's standard error from the version-1 covariance: var(c1 - c0)
+    names = old["correlation"]["names"]
+    r = np.array(old["correlation"]["matrix"], dtype=float)[names.index("bspline_up_c1"), names.index("bspline_up_c0")]
+    s0, s1 = (old["parameters"][f"bspline_up_c{i}"]["stderr"] for i in (0, 1))
+    assert m.stderr_["bspline_up_dc1"] == pytest.approx(np.sqrt(s0**2 + s1**2 - 2 * r * s0 * s1), rel=1e-9)
+    # saved again it is a version-2 file that predicts the same
+    m.save(tmp_path / "v2.json")
+    assert json.loads((tmp_path / "v2.json").read_text())["version"] == 2
+    u = np.linspace(-30, 30, 200)
+    assert np.array_equal(load_model(tmp_path / "v2.json").predict(u), m.predict(u))

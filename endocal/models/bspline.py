@@ -7,12 +7,20 @@ was on along a backlash transition of slope ``s`` until it meets the other branc
 (:mod:`endocal.models._directional`), so the switch is continuous. Fitting adjusts
 both splines' coefficients and ``s`` jointly by least squares, from per-direction
 linear least-squares splines as the start.
+
+Each branch is parameterised by its first coefficient and non-negative increments,
+``c_i = c_0 + Σ_{j<=i} Δc_j`` with ``Δc_j >= 0``: a B-spline with non-decreasing
+coefficients is non-decreasing (de Boor, *A Practical Guide to Splines*, ch. IX), so
+a branch rises with the command as the tip does, also at the ends of the range where
+few samples lie on it (just after a reversal the output is on the transition, not the
+branch), and the numerical inverse always has a unique answer.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from scipy.interpolate import BSpline
+from scipy.optimize import lsq_linear
 from scipy.sparse import csr_matrix
 
 from endocal.errors import ModelError
@@ -23,20 +31,29 @@ from endocal.models.params import Parameter, fmt_value
 
 
 def _lsq_spline(t: np.ndarray, k: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Spline coefficients by linear least squares, lightly regularised for empty knot spans."""
+    """A non-decreasing spline by bounded linear least squares, lightly regularised.
+
+    Returns ``(c_0, Δc_1, ..., Δc_{m-1})`` with ``Δc >= 0`` (coefficients ``cumsum``); a small
+    penalty on the increments' differences (the coefficients' second differences)
+    settles empty knot spans.
+    """
     B = BSpline.design_matrix(np.clip(x, t[k], t[-k - 1]), t, k).toarray()
     m = B.shape[1]
+    A = B @ np.tril(np.ones((m, m)))
     lam = 1e-8 * max(1.0, float(np.trace(B.T @ B)) / m)
-    D = np.diff(np.eye(m), 2, axis=0) if m > 2 else np.zeros((0, m))
-    A = B.T @ B + lam * (np.eye(m) + D.T @ D)
-    return np.linalg.solve(A, B.T @ y)
+    D = np.diff(np.eye(m), 1, axis=0)
+    D[:, 0] = 0.0
+    A = np.vstack([A, np.sqrt(lam) * D])
+    lower = np.r_[-np.inf, np.zeros(m - 1)]
+    return lsq_linear(A, np.r_[y, np.zeros(D.shape[0])], bounds=(lower, np.inf), method="bvls").x
 
 
 class BSplineModel(DirectionalModel):
     """Direction-dependent B-spline hysteresis model (thesis).
 
-    Parameters (prefix ``bspline_``): ``up_c0``… and ``down_c0``… (spline
-    coefficients, deg) and ``transition_slope``.
+    Parameters (prefix ``bspline_``): ``up_c0``, ``up_dc1``… and ``down_c0``,
+    ``down_dc1``… (each branch's first spline coefficient and its non-negative
+    increments, deg) and ``transition_slope``.
 
     Parameters
     ----------
@@ -85,7 +102,8 @@ class BSplineModel(DirectionalModel):
 
     def _base_names(self, structure: dict) -> list[str]:
         m = self._n_coef(structure)
-        return [f"up_c{i}" for i in range(m)] + [f"down_c{i}" for i in range(m)] + ["transition_slope"]
+        inc = [f"dc{i}" for i in range(1, m)]
+        return ["up_c0"] + [f"up_{n}" for n in inc] + ["down_c0"] + [f"down_{n}" for n in inc] + ["transition_slope"]
 
     def _base_initial(self, structure: dict, v: np.ndarray, data: HysteresisData) -> list[Parameter]:
         t = np.asarray(structure["knots"])
@@ -94,17 +112,19 @@ class BSplineModel(DirectionalModel):
         if inc.sum() < 2 or dec.sum() < 2:
             raise ModelError("backlash cannot be identified: the command never reverses")
         y = data.meas_deg
-        c_up = _lsq_spline(t, k, v[inc], y[inc])
-        c_dn = _lsq_spline(t, k, v[dec], y[dec])
+        x_up = _lsq_spline(t, k, v[inc], y[inc])
+        x_dn = _lsq_spline(t, k, v[dec], y[dec])
         slope = float(np.polyfit(v, y, 1)[0])
-        out = [Parameter(f"up_c{i}", float(c)) for i, c in enumerate(c_up)]
-        out += [Parameter(f"down_c{i}", float(c)) for i, c in enumerate(c_dn)]
+        out = []
+        for branch, x in (("up", x_up), ("down", x_dn)):
+            out.append(Parameter(f"{branch}_c0", float(x[0])))
+            out += [Parameter(f"{branch}_dc{i}", float(x[i]), 0.0, np.inf) for i in range(1, x.size)]
         out.append(Parameter("transition_slope", 0.2 * max(slope, 1e-6), 0.0, np.inf))
         return out
 
     def _coefs(self, structure: dict, p: dict) -> tuple[np.ndarray, np.ndarray]:
         m = self._n_coef(structure)
-        return (np.array([p[f"up_c{i}"] for i in range(m)]), np.array([p[f"down_c{i}"] for i in range(m)]))
+        return tuple(np.cumsum([p[f"{b}_c0"]] + [p[f"{b}_dc{i}"] for i in range(1, m)]) for b in ("up", "down"))
 
     def _branches(self, structure: dict, p: dict):
         t = np.asarray(structure["knots"], dtype=float)

@@ -1,8 +1,8 @@
 """Model files: versioned, human-readable JSON (never pickle).
 
-Layout (``format: endocal-model``, ``version: 1``)::
+Layout (``format: endocal-model``, ``version: 2``)::
 
-    {"format": "endocal-model", "version": 1,
+    {"format": "endocal-model", "version": 2,
      "axis": "ml", "base": "pi", "settings": {...}, "out_of_range": "error", "fixed": null,
      "effects": [{"name": "envelope", "settings": {}}],
      "structure": {...resolved settings, thresholds, knots...},
@@ -13,6 +13,11 @@ Layout (``format: endocal-model``, ``version: 1``)::
 
 Floats are written with Python's shortest round-trip repr, so a loaded model
 predicts exactly what the saved one did. Infinite or undefined numbers are ``null``.
+
+Version 2 changed one thing: a ``bspline`` branch is its first coefficient and
+non-negative increments (``bspline_up_c0``, ``bspline_up_dc1``, ...) instead of its
+coefficients (``bspline_up_c0``, ``bspline_up_c1``, ...). Version-1 files still load:
+:func:`upgrade_v1` rewrites them (values, standard errors and correlations alike).
 """
 
 from __future__ import annotations
@@ -29,7 +34,7 @@ from endocal.models.effects import EFFECTS
 from endocal.runs.format import atomic_write_bytes
 
 FORMAT = "endocal-model"
-VERSION = 1
+VERSION = 2
 #: Optional top-level fields: who made the file, from what (endocal version, data files and hashes, command).
 _OPTIONAL = {"provenance"}
 _KEYS = {"format", "version", "axis", "base", "settings", "out_of_range", "fixed", "effects", "structure",
@@ -83,13 +88,15 @@ def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
 
     if not isinstance(d, dict) or d.get("format") != FORMAT:
         raise ModelError(f"{where}: not an endocal model file (expected \"format\": \"{FORMAT}\")")
+    if d.get("version") == 1:
+        d = upgrade_v1(d, where)
     if d.get("version") != VERSION:
         raise ModelError(f"{where}: unknown model file version {d.get('version')!r}; this endocal reads version "
                          f"{VERSION} (upgrade endocal or refit the model)")
     unknown = set(d) - _KEYS - _OPTIONAL
     missing = _KEYS - set(d)
     if unknown or missing:
-        raise ModelError(f"{where}: wrong fields for a version-1 model file (unknown {sorted(unknown)}, "
+        raise ModelError(f"{where}: wrong fields for a version-{VERSION} model file (unknown {sorted(unknown)}, "
                          f"missing {sorted(missing)})")
     base = d["base"]
     if base not in BASES:
@@ -131,6 +138,58 @@ def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
     except (KeyError, TypeError, ValueError) as exc:
         raise ModelError(f"{where}: malformed model file ({type(exc).__name__}: {exc})") from None
     return model
+
+
+def upgrade_v1(d: dict, where: str = "model") -> dict:
+    """A version-1 model dict as version 2: B-spline coefficients become first value and increments.
+
+    ``Δc_i = c_i - c_(i-1)`` is linear in the coefficients, so the covariance maps exactly
+    (``A Σ Aᵀ``) and the standard errors and correlations are rewritten from it. Other
+    bases are unchanged. A version-1 B-spline may have a falling stretch (negative
+    increments): it predicts as before, a refit makes it monotone.
+    """
+    d = {**d, "version": 2}
+    if d.get("base") != "bspline":
+        return d
+    try:
+        params = dict(d["parameters"])
+        renames = {}
+        for branch in ("up", "down"):
+            i = 1
+            while f"bspline_{branch}_c{i}" in params:
+                renames[f"bspline_{branch}_c{i}"] = (f"bspline_{branch}_dc{i}", f"bspline_{branch}_c{i - 1}")
+                i += 1
+        if set(renames) & set(d.get("fixed") or {}):
+            raise ModelError(f"{where}: a version-1 B-spline with fixed coefficients cannot be converted; refit it")
+        names = list(d["correlation"]["names"])
+        se = np.array([_from_num(params[n]["stderr"], math.nan) for n in names])
+        corr = np.array([[_from_num(x, math.nan) for x in row] for row in d["correlation"]["matrix"]], dtype=float)
+        cov = corr.reshape(len(names), len(names)) * np.outer(se, se)
+        col = {n: i for i, n in enumerate(names)}
+        A = np.eye(len(names))
+        for old, (_, prev) in renames.items():
+            if old in col and prev in col:
+                A[col[old], col[prev]] = -1.0
+        cov = A @ cov @ A.T
+        new_se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            new_corr = cov / np.outer(new_se, new_se)
+        out = {}
+        for n, entry in params.items():
+            if n in renames:
+                new, prev = renames[n]
+                stderr = float(new_se[col[n]]) if n in col else entry["stderr"]
+                out[new] = {**entry, "value": float(entry["value"]) - float(params[prev]["value"]), "stderr": _num(stderr)}
+            else:
+                out[n] = entry
+        d["parameters"] = out
+        d["correlation"] = {"names": [renames.get(n, (n,))[0] for n in names],
+                            "matrix": [[_num(x) for x in row] for row in new_corr]}
+    except ModelError:
+        raise
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ModelError(f"{where}: malformed version-1 model file ({type(exc).__name__}: {exc})") from None
+    return d
 
 
 def save_model(model: HysteresisModel, path, provenance: dict | None = None) -> None:
