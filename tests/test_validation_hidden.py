@@ -27,7 +27,6 @@ from endocal.runs.aligned import AlignedData, align, check_aligned, load_aligned
 from endocal.sim import SimConfig, Simulator
 from endocal.validation.data import axis_data
 from endocal.validation.offline import validate_offline
-from endocal.validation.suspects import MAX_SCAN_SAMPLES
 
 TEE = PRESETS["tee"]
 PIEZO = Path(__file__).resolve().parents[1] / "data_samples" / "piezo" / "piezo_aligned.csv"
@@ -55,9 +54,13 @@ NO_LAG = {"motor": {"knob_time_constant_s": 0.0}, "tracker": {"latency_s": 0.0}}
 CASES = {
     "drift": ({"drift": {"enabled": True, "rate_deg_per_min": [3.0, -1.0]}}, "sine", {"cycles": 6}, 1, "bspline", []),
     "delay": ({"delay": {"enabled": True}}, "random", {}, 1, "bspline", []),
-    # friction coefficient mu (1 + 0.02 s/deg |knob speed|): a 45 deg chirp to 0.4 Hz reaches
-    # 113 deg/s, where the sheath's capstan exponent mu*Theta has grown 3.3-fold
-    "rate": ({"rate": {"enabled": True, "gain_s_per_deg": 0.02}, **NO_LAG}, "chirp", {"f1_hz": 0.4}, 1, "bspline", []),
+    # friction coefficient mu (1 + 0.02 s/deg |knob speed|): a 45 deg sine alternating between
+    # 0.1 and 0.4 Hz (two cycles each, three times) reaches 113 deg/s, where the sheath's
+    # capstan exponent mu*Theta has grown 3.3-fold, and every held-out block holds both
+    # speeds (on a chirp the last blocks are faster than anything their fit saw, and the
+    # exponential width extrapolates: 1.45-1.49x the floor on four seeds, against 1.35-1.37x)
+    "rate": ({"rate": {"enabled": True, "gain_s_per_deg": 0.02}, **NO_LAG}, "sine-varying",
+             {"axes": ["axis1"], "frequencies_hz": [0.1, 0.4] * 3, "cycles": 2, "rest_s": 0.0}, 1, "bspline", []),
     "creep": ({"creep": {"enabled": True}}, "staircase", {}, 2, "bspline", []),
     "load": ({"load": {"enabled": True, "amplitude_deg": 150.0}}, "sine", {"cycles": 6}, 1, "bspline", []),
     # The servo (critically damped, 2 x 30 ms) and the tracker (15 ms) always lag the command by
@@ -88,12 +91,7 @@ CASES = {
 }
 
 
-SCAN_SAMPLES = 3000  # the scan's decimation budget: 10-25 Hz here, loops <= 0.3 Hz (see scan_effects)
-# The rate term's width follows the knob speed smoothed on the scan's grid; at 20 Hz a grid
-# step is a tenth of the chirp's last half cycle (1.25 s at 0.4 Hz) and the speed the width
-# reads is smeared over it. The rate case scans at validate's default budget (5000 samples:
-# 33 Hz on this 120 s run); at 3000 the refit stays at 1.68x the floor (-51 %).
-SCAN_BUDGET = {"rate": MAX_SCAN_SAMPLES}
+SCAN_SAMPLES = 3000  # the scan's decimation budget: 10-33 Hz here, loops <= 0.4 Hz (see scan_effects)
 
 
 @functools.lru_cache(maxsize=None)
@@ -104,8 +102,7 @@ def _run_case(hidden):
     aligned = [a for a, _ in runs]
     noise = float(np.sqrt(np.mean([nf**2 for _, nf in runs])))
     model = make_model(base, effects, axis="ap").fit(axis_data(aligned, "ap"))
-    budget = SCAN_BUDGET.get(hidden, SCAN_SAMPLES)
-    return validate_offline(model, aligned, max_scan_samples=budget, model_path="m.json"), noise
+    return validate_offline(model, aligned, max_scan_samples=SCAN_SAMPLES, model_path="m.json"), noise
 
 
 def _gap(reason):
@@ -146,9 +143,12 @@ def test_rate_refit_finds_the_capstan_exponent():
     # kappa should be mu * Theta * gamma = 0.2 * pi * 0.02 s/deg = 0.0126 s/deg. The play is a
     # knob-side proxy of the distributed profile and the speed it reads is smoothed, so only
     # the order of magnitude is asserted (no other term in the model can take the curvature).
+    # A chirp to 0.4 Hz sweeps every speed up to 113 deg/s, so the curvature of width against
+    # speed is sampled throughout (fitted: 0.87x the truth); the two speeds of the hidden case
+    # pin it less well (1.45x).
     cfg = SimConfig.default()
-    sections, protocol, overrides, *_ = CASES["rate"]
-    aligned, _ = simulate(cfg.replace(**NO_SLACK).replace(**sections), protocol, overrides)
+    sections = CASES["rate"][0]
+    aligned, _ = simulate(cfg.replace(**NO_SLACK).replace(**sections), "chirp", {"f1_hz": 0.4})
     refit = make_model("bspline", ["rate"], axis="ap").fit(axis_data([aligned], "ap"))
     kappa_true = cfg.tendon.mu * np.radians(cfg.tendon.wrap_deg) * sections["rate"]["gain_s_per_deg"]
     assert 0.67 * kappa_true <= refit.params_["rate_capstan_s_per_deg"] <= 1.5 * kappa_true
