@@ -262,16 +262,21 @@ def _multisine(duration_s=150.0, fs_hz=100.0):
 
 
 def test_simulator_tendon_slack_is_explained_by_deadzone():
+    # The modified PI with `tension`: the simulator's capstan friction grows with the bend,
+    # which congruent PI loops cannot shape (as in the compensation test); without it the
+    # slack term also takes up part of that misfit (-10 % on data without slack).
     u = _multisine()
+    model = ["envelope", "tension"]
     d, floor = _simulate(_sim_config(deadzone={"enabled": True}), u)
-    without, _ = heldout_rmse("pi", ["envelope"], d)
-    with_it, m = heldout_rmse("pi", ["envelope", "deadzone"], d)
+    without, _ = heldout_rmse("pi", model, d)
+    with_it, m = heldout_rmse("pi", model + ["deadzone"], d)
     # the simulator's 1.5 mm slack minus 0.53 mm pretension stretch, per tendon, through a
     # 10 mm pulley: 5.5 deg of knob play on each side
     assert m.params_["deadzone_slack_deg"] == pytest.approx(5.5, abs=1.0)
     assert with_it <= 0.5 * without and with_it <= 1.5 * floor, (without, with_it, floor)
+    # on data without slack the term gains less than validate's 10 % bar for a suspect (~4 %)
     d0, _ = _simulate(_sim_config(), u)
-    assert heldout_rmse("pi", ["envelope", "deadzone"], d0)[0] > 0.95 * heldout_rmse("pi", ["envelope"], d0)[0]
+    assert heldout_rmse("pi", model + ["deadzone"], d0)[0] > 0.9 * heldout_rmse("pi", model, d0)[0]
 
 
 def test_simulator_latency_is_explained_by_delay():

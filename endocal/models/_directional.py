@@ -22,6 +22,7 @@ import numpy as np
 
 from endocal.models._kernels import (
     gplay_forward,
+    gplay_forward_jac,
     gplay_inverse,
     gplay_inverse_step,
     gplay_midline_inverse,
@@ -83,6 +84,21 @@ class DirectionalModel(HysteresisModel):
         v = np.ascontiguousarray(v, dtype=float)
         up, down = self._eval_branches(structure, p, v)
         return gplay_forward(v, up, down, p["transition_slope"], run_starts)
+
+    @abstractmethod
+    def _branch_jac(self, structure: dict, p: dict, v: np.ndarray):
+        """Branches at ``v``, their derivatives by the branch parameters and by ``v``.
+
+        ``(up, down, J_up, J_down, dup_dv, ddown_dv)``; the columns of ``J_up``/``J_down``
+        follow :meth:`_base_names` without ``transition_slope`` (the last name).
+        """
+
+    def _base_forward_jac(self, structure: dict, p: dict, v: np.ndarray, run_starts: np.ndarray, M: np.ndarray):
+        v = np.ascontiguousarray(v, dtype=float)
+        up, down, J_up, J_dn, d_up, d_dn = self._branch_jac(structure, p, v)
+        return gplay_forward_jac(v, up, down, np.ascontiguousarray(J_up, dtype=float),
+                                 np.ascontiguousarray(J_dn, dtype=float), d_up, d_dn, float(p["transition_slope"]),
+                                 np.ascontiguousarray(M, dtype=float), run_starts)
 
     def _base_inverse(self, structure: dict, p: dict, y: np.ndarray, run_starts: np.ndarray, v_range) -> np.ndarray:
         t_up, c_up, t_dn, c_dn, deg = self._branches(structure, p)

@@ -180,6 +180,55 @@ def gplay_forward(v, lower, upper, slope, run_starts):
 
 
 @njit(cache=True)
+def gplay_forward_jac(v, lower, upper, Jl, Ju, dl, du, slope, M, run_starts):
+    """:func:`gplay_forward` and its Jacobian.
+
+    ``Jl``, ``Ju`` (n, p): derivatives of the two branches at ``v`` by the base's branch
+    parameters; ``dl``, ``du`` (n,): the branches' slopes in ``v``; ``M`` (n, q): ``dv/dθ``
+    of the upstream (input-effect) parameters. Returns ``y`` (n,), ``dy/d(branch
+    parameters, slope)`` (n, p + 1) and ``dy/dθ`` (n, q): on a branch ``y`` follows it, in
+    a transition it carries the previous sample's derivatives plus the slope's step.
+    """
+    n = v.shape[0]
+    p = Jl.shape[1]
+    q = M.shape[1]
+    y = np.empty(n)
+    Jb = np.zeros((n, p + 1))
+    Jm = np.zeros((n, q))
+    n_runs = run_starts.shape[0]
+    for r in range(n_runs):
+        a = run_starts[r]
+        b = run_starts[r + 1] if r + 1 < n_runs else n
+        yk = 0.5 * (lower[a] + upper[a])
+        y[a] = yk
+        for j in range(p):
+            Jb[a, j] = 0.5 * (Jl[a, j] + Ju[a, j])
+        for j in range(q):
+            Jm[a, j] = 0.5 * (dl[a] + du[a]) * M[a, j]
+        for k in range(a + 1, b):
+            low_is_l = lower[k] <= upper[k]
+            lo = lower[k] if low_is_l else upper[k]
+            hi = upper[k] if low_is_l else lower[k]
+            yk = yk + slope * (v[k] - v[k - 1])
+            if yk < lo or yk > hi:
+                on_l = (yk < lo) == low_is_l  # the branch the output is clipped to
+                yk = lo if yk < lo else hi
+                for j in range(p):
+                    Jb[k, j] = Jl[k, j] if on_l else Ju[k, j]
+                d = dl[k] if on_l else du[k]
+                for j in range(q):
+                    Jm[k, j] = d * M[k, j]
+            else:
+                for j in range(p + 1):
+                    Jb[k, j] = Jb[k - 1, j]
+                Jb[k, p] += v[k] - v[k - 1]
+                for j in range(q):
+                    Jm[k, j] = Jm[k - 1, j] + slope * (M[k, j] - M[k - 1, j])
+            y[k] = yk
+    return y, Jb, Jm
+
+
+@njit(cache=True)
 def _gplay_g(u, u_prev, y_prev, slope, t_up, c_up, t_dn, c_dn, deg):
     a = bspline_eval(t_up, c_up, deg, u)
     b = bspline_eval(t_dn, c_dn, deg, u)

@@ -484,8 +484,21 @@ class HysteresisModel(ABC):
             base_p, eff_p = self._grouped(values)
             return self._forward(ds, base_p, eff_p, structure, effects) - ds.meas_deg
 
+        jac = "2-point"
+        analytic = self._forward_jac(ds, *self._grouped(values), structure, effects)
+        if analytic is not None:
+            col = {n: i for i, n in enumerate(analytic[2])}
+            free_cols = [col[n] for n in free]
+
+            def jac(x):
+                for n, v in zip(free, x):
+                    values[n] = float(v)
+                base_p, eff_p = self._grouped(values)
+                return self._forward_jac(ds, base_p, eff_p, structure, effects)[1][:, free_cols]
+
         try:
-            res = least_squares(residual, x0, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=8 * (1 + len(free)))
+            res = least_squares(residual, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac",
+                                max_nfev=8 * (1 + len(free)))
         except (ValueError, FloatingPointError):
             return math.inf, start
         refined = dict(start)

@@ -141,6 +141,25 @@ class BSplineModel(DirectionalModel):
             C += ext @ np.column_stack([c_up, c_dn])
         return np.ascontiguousarray(C[:, 0]), np.ascontiguousarray(C[:, 1])
 
+    def _branch_jac(self, structure: dict, p: dict, v: np.ndarray):
+        t = np.asarray(structure["knots"], dtype=float)
+        k = structure["degree"]
+        c_up, c_dn = self._coefs(structure, p)
+        m = c_up.size
+        B, ext = self._design(t, k, v)
+        D = B.toarray() if ext is None else (B + ext).toarray()
+        J = D @ np.tril(np.ones((m, m)))  # the coefficients are cumulative sums of the parameters
+        # slopes in v: f' = Σ k (c_{i+1} - c_i)/(t_{i+k+1} - t_{i+1}) B_{i,k-1} (de Boor), at v
+        # clipped to the base interval: beyond it the branches continue along their end tangents
+        vc = np.clip(v, t[k], t[-k - 1])
+        B1 = BSpline.design_matrix(vc, t[1:-1], k - 1)
+        scale = k / (t[k + 1:k + m] - t[1:m])
+        d_up = B1 @ (scale * np.diff(c_up))
+        d_dn = B1 @ (scale * np.diff(c_dn))
+        zero = np.zeros_like(J)
+        return (D @ c_up, D @ c_dn, np.hstack([J, zero]), np.hstack([zero, J]),
+                np.asarray(d_up, dtype=float).ravel(), np.asarray(d_dn, dtype=float).ravel())
+
     def _design(self, t: np.ndarray, k: int, v: np.ndarray):
         """Design matrix at ``v`` (clipped to the base interval) and the linear-extension correction.
 

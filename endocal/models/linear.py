@@ -71,6 +71,13 @@ class LinearModel(DirectionalModel):
     def _eval_branches(self, structure: dict, p: dict, v: np.ndarray):
         return p["up_slope"] * v + p["up_offset_deg"], p["down_slope"] * v + p["down_offset_deg"]
 
+    def _branch_jac(self, structure: dict, p: dict, v: np.ndarray):
+        one, zero = np.ones_like(v), np.zeros_like(v)
+        up, down = self._eval_branches(structure, p, v)
+        J_up = np.column_stack([v, one, zero, zero])
+        J_dn = np.column_stack([zero, zero, v, one])
+        return up, down, J_up, J_dn, p["up_slope"] * one, p["down_slope"] * one
+
     def _branches(self, structure: dict, p: dict):
         # a straight line as a degree-1 B-spline on [0, 1], extrapolated both ways
         t = np.array([0.0, 0.0, 1.0, 1.0])
