@@ -350,45 +350,10 @@ class HysteresisModel(ABC):
         lo = np.array([start[n].lower for n in free])
         hi = np.array([start[n].upper for n in free])
         values = {n: float(start[n].value) for n in names}
-        meas = d.meas_deg
-
-        def residual(x):
-            for n, v in zip(free, x):
-                values[n] = float(v)
-            base_p, eff_p = self._grouped(values)
-            return self._forward(d, base_p, eff_p, structure, effects) - meas
-
-        base_p0, eff_p0 = self._grouped(values)
-        analytic = self._forward_jac(d, base_p0, eff_p0, structure, effects)
-        jac = "2-point"
-        if analytic is not None:
-            col = {n: i for i, n in enumerate(analytic[2])}
-            free_cols = [col[n] for n in free]
-
-            def jac(x):
-                for n, v in zip(free, x):
-                    values[n] = float(v)
-                base_p, eff_p = self._grouped(values)
-                return self._forward_jac(d, base_p, eff_p, structure, effects)[1][:, free_cols]
-
+        residual, jac = self._residual_fns(d, values, free, structure, effects)
         nfev = njev = 0
         if stride >= 2:
-            meas_d = dd.meas_deg
-
-            def residual_d(x):
-                for n, v in zip(free, x):
-                    values[n] = float(v)
-                base_p, eff_p = self._grouped(values)
-                return self._forward(dd, base_p, eff_p, structure, effects) - meas_d
-
-            jac_d = "2-point"
-            if analytic is not None:
-                def jac_d(x):
-                    for n, v in zip(free, x):
-                        values[n] = float(v)
-                    base_p, eff_p = self._grouped(values)
-                    return self._forward_jac(dd, base_p, eff_p, structure, effects)[1][:, free_cols]
-
+            residual_d, jac_d = self._residual_fns(dd, values, free, structure, effects)
             pre = least_squares(residual_d, x0, jac=jac_d, bounds=(lo, hi), method="trf", x_scale="jac",
                                 max_nfev=max_nfev)
             x0 = np.clip(pre.x, lo, hi)
@@ -429,6 +394,33 @@ class HysteresisModel(ABC):
             n_free=n_free, rank_deficient=rank_def,
         )
         return self
+
+    def _residual_fns(self, data: HysteresisData, values: dict, free: list[str], structure: dict,
+                      effects: list[Effect]):
+        """The fit's residual (deg) over the ``free`` parameters and its Jacobian (analytic, else "2-point").
+
+        Both write the trial values into ``values`` (shared with the caller, which reads the
+        solution back from it).
+        """
+        def residual(x):
+            for n, v in zip(free, x):
+                values[n] = float(v)
+            base_p, eff_p = self._grouped(values)
+            return self._forward(data, base_p, eff_p, structure, effects) - data.meas_deg
+
+        analytic = self._forward_jac(data, *self._grouped(values), structure, effects)
+        if analytic is None:
+            return residual, "2-point"
+        col = {n: i for i, n in enumerate(analytic[2])}
+        free_cols = [col[n] for n in free]
+
+        def jac(x):
+            for n, v in zip(free, x):
+                values[n] = float(v)
+            base_p, eff_p = self._grouped(values)
+            return self._forward_jac(data, base_p, eff_p, structure, effects)[1][:, free_cols]
+
+        return residual, jac
 
     def _start(self, dd: HysteresisData, effects: list[Effect], fixed: dict, overrides: dict):
         """Start values (input effects in chain order, each seeing the command the chain gives it), structure, owners."""
@@ -478,24 +470,7 @@ class HysteresisModel(ABC):
         lo = np.array([start[n].lower for n in free])
         hi = np.array([start[n].upper for n in free])
 
-        def residual(x):
-            for n, v in zip(free, x):
-                values[n] = float(v)
-            base_p, eff_p = self._grouped(values)
-            return self._forward(ds, base_p, eff_p, structure, effects) - ds.meas_deg
-
-        jac = "2-point"
-        analytic = self._forward_jac(ds, *self._grouped(values), structure, effects)
-        if analytic is not None:
-            col = {n: i for i, n in enumerate(analytic[2])}
-            free_cols = [col[n] for n in free]
-
-            def jac(x):
-                for n, v in zip(free, x):
-                    values[n] = float(v)
-                base_p, eff_p = self._grouped(values)
-                return self._forward_jac(ds, base_p, eff_p, structure, effects)[1][:, free_cols]
-
+        residual, jac = self._residual_fns(ds, values, free, structure, effects)
         try:
             res = least_squares(residual, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac",
                                 max_nfev=8 * (1 + len(free)))
