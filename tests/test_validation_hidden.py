@@ -79,7 +79,7 @@ CASES = {
     # carries `delay`; without it the envelope refit stays at 2.6x the floor (-57 %). No servo
     # or tracker lag, as in the rate case: with it the model needs `delay`, which at one
     # frequency takes up part of the stiffened loop's shape. `bspline` cannot test this at all:
-    # its free branch shapes absorb any static shape. -64 %, 1.35x the floor (seeds 1, 2:
+    # its free branch shapes absorb any static shape. -63 %, 1.35x the floor (seeds 1, 2:
     # -60 %, 1.40x).
     "envelope": ({"envelope": {"enabled": True}, **NO_LAG}, "sine", {"amplitude_deg": 75.0, "cycles": 4}, 1,
                  "linear", ["tension"]),
