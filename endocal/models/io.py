@@ -91,7 +91,7 @@ def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
     if d.get("version") == 1:
         d = upgrade_v1(d, where)
     if d.get("version") != VERSION:
-        raise ModelError(f"{where}: unknown model file version {d.get('version')!r}; this endocal reads version "
+        raise ModelError(f"{where}: unknown model file version {d.get('version')!r}; this endocal reads versions 1 to "
                          f"{VERSION} (upgrade endocal or refit the model)")
     unknown = set(d) - _KEYS - _OPTIONAL
     missing = _KEYS - set(d)
