@@ -2,46 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
-from endocal.errors import ModelError
-from endocal.models import HysteresisData, make_model
+from endocal.models import make_model
 from endocal.models.base import HysteresisModel
-from endocal.runs.aligned import AlignedData, load_aligned
+from endocal.runs.aligned import load_aligned
 from endocal.validation.data import axis_data
-
-
-def hysteresis_data(datas: list[AlignedData], axis: str, planes=None) -> HysteresisData:
-    """One axis of several aligned tables as a multi-run :class:`HysteresisData`.
-
-    The conversion is :func:`endocal.validation.data.axis_data` (the same one ``validate``
-    and ``report`` use, so a model file's training-data hashes match the records they
-    evaluate). With ``planes`` the measured standard-plane angles are mapped into the
-    twisted half-planes the knobs actually drive: the orthogonal compensator of duodenoscope
-    eqs. 3-4 maps an output in the standard planes to the input along the twisted planes that
-    produces it, so the hysteresis model sees one knob against its own plane.
-
-    Raises
-    ------
-    ModelError
-        ``axis`` is missing from a table, or ``planes`` is given for a table without both
-        bending axes.
-    """
-    if planes is None:
-        return axis_data(datas, axis)
-    runs = []
-    for data in datas:
-        if len(data.axes) != 2:
-            raise ModelError(f"{data.source}: --planes needs both bending axes in the data")
-        first, second = data.axes
-        comp = planes.compensate(data.meas_deg(first), data.meas_deg(second))
-        table = data.table.copy()
-        table[f"{axis}_meas_deg"] = np.asarray(comp[0] if axis == first else comp[1], float)
-        runs.append(replace(data, table=table))
-    return axis_data(runs, axis)
 
 
 @dataclass
@@ -74,6 +41,6 @@ def fit_hysteresis(
         Passed to the model (e.g. ``n_operators``, ``out_of_range``).
     """
     datas = [load_aligned(p) for p in paths]
-    data = hysteresis_data(datas, axis, planes)
+    data = axis_data(datas, axis, planes)
     model = make_model(base, effects=effects or (), axis=axis, **settings).fit(data)
     return HysteresisFit(model, [d.source for d in datas], [d.sha256 for d in datas], len(data.cmd_deg))

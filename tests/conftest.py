@@ -6,12 +6,18 @@ geometry without depending on the physics simulator.
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
 from endocal.backends.base import StreamChunk, motor_columns
 from endocal.kinematics import tip_pose_in_base
 from endocal.probe import PRESETS
+
+# pytest-xdist already runs one worker per core: the effect scan's fits stay in each worker
+# (see endocal/validation/parallel.py).
+os.environ.setdefault("ENDOCAL_JOBS", "1")
 
 
 class GeometryBackend:

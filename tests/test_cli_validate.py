@@ -108,10 +108,15 @@ def test_bad_input_is_one_line_and_exit_2(drifting, tmp_path):
     _one_line_exit_2(_invoke(tmp_path / "bad.json", csv), "unknown effect 'warp'")
     # --json-out into a folder that does not exist: refused before the validation runs
     _one_line_exit_2(_invoke(tmp / "m.json", csv, "--json-out", tmp_path / "no" / "v.json"), "does not exist")
-    # data too short for cross-validation
+    # data too short for cross-validation, with no estimation data: the metrics, regimes and
+    # residual tests still run; the scan says why it cannot and what to give it
     short = tmp_path / "short.csv"
     pd.read_csv(csv).iloc[:300].to_csv(short, index=False)
-    _one_line_exit_2(_invoke(tmp / "m.json", short), "too short")
+    res = _invoke(tmp / "m.json", short)
+    assert res.exit_code == 0, res.output
+    assert "rmse_deg" in res.stdout and "not tested" in res.stdout and "--train" in res.stdout
+    # estimation data that never reverses: nothing can be fitted, one line, exit 2
+    _one_line_exit_2(_invoke(tmp / "m.json", csv, "--train", short), "never reverses")
     # nothing to validate on
     _one_line_exit_2(_invoke(tmp / "m.json"), "nothing to validate on")
 

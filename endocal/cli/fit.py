@@ -75,7 +75,7 @@ def hysteresis(
 
     from endocal.fitting import fit_hysteresis
     from endocal.models import model_to_dict, save_model
-    from endocal.runs.format import software_versions, utc_now
+    from endocal.runs.format import sha256_of, software_versions, utc_now
 
     if out_path.exists() and not force:
         raise OutputExistsError(f"{out_path} already exists: choose another --out or pass --force")
@@ -92,6 +92,7 @@ def hysteresis(
         "command": "endocal " + " ".join(sys.argv[1:]),
         "data": [{"path": str(p), "sha256": h} for p, h in zip(result.sources, result.hashes)],
         "planes": None if planes_file is None else str(planes_file),
+        "planes_sha256": None if planes_file is None else sha256_of(planes_file),
     }
     save_model(result.model, out_path, provenance=provenance)
     if as_json:
@@ -106,4 +107,6 @@ def hysteresis(
         f"{rep.nfev} evaluations; {rep.message}",
         markup=False,
     )
+    for w in rep.warnings:
+        out.print(f"warning: {w}", markup=False)
     err.print(f"wrote {out_path}")

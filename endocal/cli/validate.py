@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Optional
 
 import typer
+from rich.markup import escape
 from rich.table import Table
 
 from endocal.cli._common import cli_errors, err, out
@@ -44,19 +45,40 @@ def _metrics_table(title: str, metrics) -> Table:
     return t
 
 
+_SCHEME_WORDS = {
+    "estimation/validation": "candidates fitted on the estimation data, scored on the validation data",
+    "rolling-origin": "rolling-origin cross-validation on the validation data",
+    "none": "no effect scan",
+}
+
+
+def heldout_label(scan) -> str:
+    """What the scan's held-out RMSE is, in words."""
+    if scan.scheme == "estimation/validation":
+        return "validation RMSE (structure fitted on the estimation data)"
+    return f"held-out RMSE (model refitted on earlier data, rolling origin, {scan.folds} blocks)"
+
+
 def render(result) -> None:
     """Print the terminal summary of a :class:`~endocal.validation.offline.ValidationResult`."""
     m = result.model
+    scan = result.scan
     out.print(f"[bold]{m['label']}[/] on axis {result.axis}: {sum(d['n_samples'] for d in result.data)} samples "
               f"from {len(result.data)} table(s)")
     out.print(m["equation"], markup=False)
+    if scan.scheme != "none":
+        out.print(f"scheme: {_SCHEME_WORDS[scan.scheme]} ({scan.scheme_reason})", markup=False)
+    if result.estimation:
+        out.print(f"  estimation data: {', '.join(str(d['source']) for d in result.estimation)} "
+                  f"({sum(d['n_samples'] for d in result.estimation)} samples)", markup=False)
     out.print(_metrics_table("How far off (measured vs predicted)", result.metrics))
-    out.print(f"held-out RMSE (model refitted on earlier data, rolling origin, {result.scan.folds} blocks): "
-              f"{result.scan.baseline_rmse_heldout_deg:.3g} deg")
+    if scan.scheme != "none":
+        out.print(f"{heldout_label(scan)}: {scan.baseline_rmse_heldout_deg:.3g} deg", markup=False)
     c = result.compare
     if c is not None:
         arrow = "fell" if c.change_pct < 0 else "rose"
-        out.print(f"[bold]Watch the error fall:[/] held-out RMSE {c.old_label} {c.old_heldout_rmse_deg:.3g} deg -> "
+        what = "validation" if scan.scheme == "estimation/validation" else "held-out"
+        out.print(f"[bold]Watch the error fall:[/] {what} RMSE {c.old_label} {c.old_heldout_rmse_deg:.3g} deg -> "
                   f"{c.new_label} {c.new_heldout_rmse_deg:.3g} deg ({arrow} {abs(c.change_pct):.0f} %); "
                   f"on all data {c.old_rmse_deg:.3g} -> {c.new_rmse_deg:.3g} deg")
     out.print("[bold]Where it fails[/] (worst regimes, RMSE relative to the whole record):")
@@ -69,17 +91,34 @@ def render(result) -> None:
     for x in result.residuals.significant():
         out.print(f"  correlates with {x.signal} (|r| = {x.max_abs_corr:.2f} at lag {x.lag_s:+.3g} s): {x.hint}",
                   markup=False)
+    what = "validation" if scan.scheme == "estimation/validation" else "held-out"
     if result.suspects:
-        out.print("[bold]Which effect is missing[/] (held-out gain, Holm-corrected p):")
+        thin = not any(s.significant for s in result.suspects)
+        head = (f"candidates by {what} gain (not enough evidence for significance)" if thin else
+                f"{what} gain, Holm-corrected p")
+        out.print(f"[bold]Which effect is missing[/] ({head}):")
         for i, s in enumerate(result.suspects, 1):
-            out.print(f"  {i}. {s.effect}: -{s.gain_pct:.0f} % held-out RMSE ({s.base_rmse_heldout_deg:.3g} -> "
-                      f"{s.rmse_heldout_deg:.3g} deg), p = {s.p_value:.2g}", markup=False)
+            stat = s.evidence if thin else f"p = {s.p_value:.2g}"
+            out.print(f"  {i}. {s.effect}: -{s.gain_pct:.0f} % {what} RMSE ({s.base_rmse_heldout_deg:.3g} -> "
+                      f"{s.rmse_heldout_deg:.3g} deg), {stat}", markup=False)
             out.print(f"     {s.cause}; signature: {s.signature}", markup=False)
-        out.print("[bold]Next:[/] refit with the first suspect, then validate the new model:")
+        out.print("[bold]Next:[/] refit with the first " + ("candidate" if thin else "suspect") +
+                  ", then validate the new model:")
         out.print("  " + result.suspects[0].command, markup=False)
+    elif scan.scheme == "none":
+        out.print("[bold]Which effect is missing:[/] not tested: " + escape(scan.scheme_reason))
+    elif result.pointers:
+        out.print("[bold]Which effect is missing:[/] no catalog effect confirmed by the scan, but the residual "
+                  "points at effects it could not settle (below).")
     else:
         out.print("[bold]Which effect is missing:[/] nothing significant; the model explains this data as well as "
-                  "any catalog effect would.")
+                  "any catalog effect would, and the residual points at nothing the scan could not test.")
+    if result.pointers:
+        out.print("[bold]Untested suspects[/] (the residual points at them; the scan did not confirm them):")
+        for p in result.pointers:
+            out.print(f"  {p.effect} ({p.status}): {p.evidence}", markup=False)
+            out.print(f"     why not confirmed: {p.why}", markup=False)
+            out.print(f"     to test it: {p.experiment}", markup=False)
     for note in result.notes:
         out.print(f"note: {note}", markup=False)
 
@@ -93,23 +132,28 @@ def validate(
     folds: int = typer.Option(5, "--folds", help="Held-out blocks of the blocked cross-validation."),
     seed: int = typer.Option(0, "--seed", help="Seed of the bootstrap intervals (and of the backend with --protocol)."),
     compare: Optional[Path] = typer.Option(None, "--compare", help="A previous model: show its error beside this one's."),
+    train: list[Path] = typer.Option([], "--train", help="Estimation data (repeatable): candidate effects are fitted on it and scored on DATA. Default: the records the model file names, when found and unchanged."),
+    cv: str = typer.Option("auto", "--cv", help="How effects are tested: `auto` (estimation/validation split when there is estimation data, else rolling origin), `rolling` (rolling-origin cross-validation on DATA alone), `split` (require estimation data)."),
+    out_of_range: str = typer.Option("error", "--out-of-range", help="With --protocol: a desired angle the model cannot reach within its fitted range is an `error`, or is `clamp`ed to the range."),
     load_column: list[str] = typer.Option([], "--load-column", help="Try load:COLUMN on this column (repeatable; default: every varying extra column)."),
     protocol: Optional[str] = typer.Option(None, "--protocol", help="Play this desired-angle protocol through the inverse model on a backend instead."),
     backend: str = typer.Option("sim", "--backend", "-b", help="Backend for --protocol: `sim` or `hardware`."),
     probe: str = typer.Option("tee", "--probe", help="Probe preset or .toml for --protocol."),
     sim_config: Optional[Path] = typer.Option(None, "--sim-config", help="Simulator TOML for --backend sim."),
     hardware_config: Optional[Path] = typer.Option(None, "--hardware-config", help="Rig TOML for --backend hardware."),
-    planes: Optional[Path] = typer.Option(None, "--planes", help="planes.json (endocal fit planes) for --protocol."),
+    planes: Optional[Path] = typer.Option(None, "--planes", help="planes.json (endocal fit planes): for --protocol; offline, overrides the planes the model was fitted through."),
     sets: list[str] = typer.Option([], "--set", help="Override a parameter of --protocol, e.g. --set amplitude_deg=40 (repeatable)."),
     runs_out: Optional[Path] = typer.Option(None, "--runs-out", help="With --protocol: keep the played runs here (compensated/, uncompensated/)."),
 ) -> None:
     """Compare a model with measurements: how far off, where it fails, which physical effect is missing.
 
     Offline (DATA given): error metrics with 95 % block-bootstrap intervals, the error by regime,
-    residual whiteness and cross-correlations, and every catalog effect the model lacks tested
-    on held-out data (blocked cross-validation, Holm-corrected); prints the command that refits
-    with the most likely missing effect. With --protocol: plays the protocol through the
-    inverse model on a backend and measures desired vs reached angles.
+    residual whiteness and cross-correlations, and every catalog effect the model lacks tested:
+    fitted on the estimation data (--train, or the records the model was fitted on) and scored
+    on DATA, unit by unit, Holm-corrected; rolling-origin cross-validation on DATA when there is
+    no estimation data. Prints the command that refits with the most likely missing effect, and
+    names effects the residual points at that the scan could not confirm. With --protocol: plays
+    the protocol through the inverse model on a backend and measures desired vs reached angles.
     """
     from endocal.models import load_model
 
@@ -118,30 +162,34 @@ def validate(
 
         # before any work: a long validation must not end in an output that cannot be written
         raise OutputPathError(f"cannot write {json_out}: folder {json_out.parent} does not exist; create it or pick another path")
+    from endocal.models.base import OUT_OF_RANGE_CHOICES
+
+    if out_of_range not in OUT_OF_RANGE_CHOICES:
+        raise ModelError(f"--out-of-range must be one of {', '.join(OUT_OF_RANGE_CHOICES)}, got {out_of_range!r}")
     model = load_model(model_path)
     if protocol is not None:
         if data:
             raise ModelError("give either DATA (offline validation) or --protocol (playback on a backend), not both")
+        model.out_of_range = out_of_range
         _playback(model, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets, runs_out, json_out)
         return
     if not data:
         raise ModelError("nothing to validate on: give run folders or aligned tables, or --protocol P")
     from endocal.runs.aligned import load_aligned
+    from endocal.validation.estimation import plan_estimation
     from endocal.validation.offline import validate_offline
 
     tables = [load_aligned(p) for p in data]
+    plan = plan_estimation(model, tables, model_path=model_path, train_paths=train, cv=cv, planes_path=planes)
     effects = [e.label for e in model.effects_]
     old_path = compare if compare is not None else previous_model_path(model_path, effects)
     old = load_model(old_path) if old_path is not None else None
-    # The refit command fits on the model's own training data (from its provenance, where those
-    # files still exist) plus the data validated here: the effect shows in the latter, and the
-    # former keeps the command range the model was built for.
-    trained_on = [d["path"] for d in getattr(model, "provenance_", {}).get("data", []) if Path(d["path"]).exists()]
-    refit_paths = list(dict.fromkeys(trained_on + [str(p) for p in data]))
-    result = validate_offline(model, tables, folds=folds, seed=seed, compare=old, model_path=str(model_path),
-                              data_paths=refit_paths, load_columns=load_column or None)
+    result = validate_offline(model, tables, train=plan.train, train_paths=plan.train_paths, planes=plan.planes,
+                              refit_args=plan.refit_args, scheme_reason=plan.reason, folds=folds, seed=seed,
+                              compare=old, model_path=str(model_path), data_paths=[str(p) for p in data],
+                              load_columns=load_column or None)
     d = result.to_dict()
-    if old_path is not None:
+    if old_path is not None and d["compare"] is not None:
         d["compare"]["path"] = str(old_path)
     text = json.dumps(_finite(d), allow_nan=False)
     if json_out is not None:

@@ -21,7 +21,7 @@ import inspect
 import math
 import warnings
 from abc import ABC, abstractmethod
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import ClassVar
 
 import numpy as np
@@ -67,6 +67,9 @@ class FitReport:
         the data, their standard errors are infinite.
     method : str
         Optimiser used.
+    warnings : list of str
+        Effect parameters the data does not pin down: at a bound, or with a standard error
+        larger than the value (the term ran off or is not identified; the fit report prints them).
     """
 
     success: bool
@@ -81,6 +84,7 @@ class FitReport:
     n_free: int
     rank_deficient: bool
     method: str = "trf"
+    warnings: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -392,6 +396,7 @@ class HysteresisModel(ABC):
             nfev=int(res.nfev), njev=int(res.njev or 0), cost=float(res.cost),
             rmse_deg=float(math.sqrt(float(r @ r) / m)), n_samples=d.n_samples, n_runs=d.n_runs,
             n_free=n_free, rank_deficient=rank_def,
+            warnings=_loose_parameters(free, owners, values, stderr, lo, hi),
         )
         return self
 
@@ -547,7 +552,8 @@ class HysteresisModel(ABC):
         msg = (f"{what} {cmd[k]:.3f} deg at sample {k} lies outside the fitted command range "
                f"[{lo:.3f}, {hi:.3f}] deg ({int(bad.sum())} samples)")
         if self.out_of_range == "error":
-            raise ModelError(msg + "; refit on wider data, reduce the amplitude, or use out_of_range='clamp'")
+            raise ModelError(msg + "; refit on wider data, reduce the amplitude, or clamp to the fitted range "
+                             "(--out-of-range clamp; out_of_range='clamp' in Python)")
         warnings.warn(msg + "; clamped", OutOfRangeWarning, stacklevel=3)
         return np.clip(cmd, lo, hi)
 
@@ -732,6 +738,31 @@ class HysteresisModel(ABC):
         from endocal.models.io import save_model
 
         save_model(self, path)
+
+
+def _loose_parameters(free: list[str], owners: dict, values: dict, stderr: dict, lo: np.ndarray,
+                      hi: np.ndarray) -> list[str]:
+    """Warnings for effect parameters the data does not pin down (at a bound, or standard error > |value|).
+
+    The base's shape coefficients (B-spline increments, PI weights) sit at their zero bound
+    by design and are not reported.
+    """
+    out = []
+    for i, n in enumerate(free):
+        if owners[n][0] == "base":
+            continue
+        v, se = values[n], stderr[n]
+        span = hi[i] - lo[i] if math.isfinite(hi[i] - lo[i]) else max(abs(v), 1.0)
+        for bound, word in ((lo[i], "lower"), (hi[i], "upper")):
+            if math.isfinite(bound) and abs(v - bound) <= 1e-4 * span:
+                out.append(f"{n} = {v:.4g} sits at its {word} bound {bound:.4g}: the data does not constrain it "
+                           "(the term may be absent from this data, or compensate for something else)")
+                break
+        else:
+            if not math.isfinite(se) or se > abs(v):
+                out.append(f"{n} = {v:.4g} +- {se:.2g}: its standard error exceeds its value, the data does not "
+                           "identify it (record motion that exercises the term, or drop it)")
+    return out
 
 
 def _covariance(J: np.ndarray, s2: float) -> tuple[np.ndarray, bool]:

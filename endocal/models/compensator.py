@@ -117,7 +117,7 @@ class StreamingCompensator:
             msg = (f"command {v:.3f} deg for desired angle {desired_deg:.3f} deg lies outside the fitted range "
                    f"[{self._lo:.3f}, {self._hi:.3f}] deg")
             if not self._clamp:
-                raise ModelError(msg + "; use out_of_range='clamp' to clamp")
+                raise ModelError(msg + "; clamp to the fitted range with --out-of-range clamp (out_of_range='clamp' in Python)")
             warnings.warn(msg + "; clamped", OutOfRangeWarning, stacklevel=2)
             v = min(max(v, self._lo), self._hi)
         return v

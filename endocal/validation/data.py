@@ -16,6 +16,7 @@ at each); only the extra columns every table has are kept.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -36,8 +37,12 @@ def _as_list(aligned) -> list[AlignedData]:
     return out
 
 
-def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str) -> HysteresisData:
+def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str, planes=None) -> HysteresisData:
     """The command, measurement, time and extra columns of ``axis``, one run per table.
+
+    ``fit hysteresis``, ``validate`` and ``report`` all read data through this function, so a
+    model file's training-data hashes match the records they evaluate and a model is scored
+    on the same angles it was fitted on.
 
     Parameters
     ----------
@@ -45,6 +50,12 @@ def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str) -> Hyster
         Loaded run folders or aligned tables (:func:`~endocal.runs.aligned.load_aligned`).
     axis : str
         Bending axis (``ap``, ``ml``, ``ud``, ``lr`` or a table's own axis name).
+    planes : PlanesCalibration, optional
+        Bending planes (``endocal fit planes``): the measured standard-plane angles are mapped
+        into the twisted half-planes the knobs actually drive. The orthogonal compensator of
+        duodenoscope eqs. 3-4 maps an output in the standard planes to the input along the
+        twisted planes that produces it, so a hysteresis model sees one knob against its own
+        plane.
 
     Returns
     -------
@@ -55,13 +66,16 @@ def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str) -> Hyster
     Raises
     ------
     ModelError
-        A table lacks ``axis`` (the message names the table and the axes it has).
+        A table lacks ``axis`` (the message names the table and the axes it has), or
+        ``planes`` is given for a table without both bending axes.
     """
     tables = _as_list(aligned)
     for a in tables:
         if axis not in a.axes:
             raise ModelError(f"{a.source}: no axis '{axis}' in the data (it has {', '.join(a.axes)}); "
                              "validate a model of one of those axes, or give data of this axis")
+    if planes is not None:
+        tables = [_through_planes(a, axis, planes) for a in tables]
     common = set.intersection(*(set(a.extras) for a in tables))
     others = [[b for b in a.axes if b != axis] for a in tables]
     # The other axis is used only when every table has the same single one (coupling needs a
@@ -79,6 +93,17 @@ def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str) -> Hyster
             extras[f"{other}_meas_deg"] = extras[OTHER_MEAS]
         runs.append(HysteresisData(cmd_deg=a.cmd_deg(axis), meas_deg=a.meas_deg(axis), t_s=a.t_s, extras=extras))
     return runs[0] if len(runs) == 1 else HysteresisData.from_runs(runs)
+
+
+def _through_planes(data: AlignedData, axis: str, planes) -> AlignedData:
+    if len(data.axes) != 2:
+        raise ModelError(f"{data.source}: the model was fitted through bending planes, which need both bending "
+                         f"axes in the data (it has {', '.join(data.axes)})")
+    first, second = data.axes
+    comp = planes.compensate(data.meas_deg(first), data.meas_deg(second))
+    table = data.table.copy()
+    table[f"{axis}_meas_deg"] = np.asarray(comp[0] if axis == first else comp[1], float)
+    return replace(data, table=table)
 
 
 def is_constant(values: np.ndarray) -> bool:

@@ -30,7 +30,10 @@ from endocal.validation.suspects import (
     heldout_errors,
     one_blas_thread,
     scan_effects,
+    scan_split,
+    split_errors,
 )
+from endocal.validation.verdict import Pointer, residual_pointers
 
 
 @dataclass(frozen=True)
@@ -44,7 +47,9 @@ class Comparison:
     old_rmse_deg, new_rmse_deg : float
         RMSE of each fitted model on the data (deg).
     old_heldout_rmse_deg, new_heldout_rmse_deg : float
-        Held-out RMSE of each model structure, refitted on the same rolling-origin folds (deg).
+        Held-out RMSE of each model structure under the scan's scheme: refitted on the same
+        estimation data and scored on the validation data, or refitted on the same
+        rolling-origin folds (deg).
     """
 
     old_label: str
@@ -90,6 +95,12 @@ class ValidationResult:
         effects the data cannot reveal).
     compare : Comparison or None
         A previous model's error beside this one.
+    pointers : tuple of Pointer
+        Effects the residuals point at that the scan could not test or did not confirm
+        (:mod:`endocal.validation.verdict`).
+    estimation : list of dict
+        ``source``, ``sha256``, ``n_samples`` of each estimation table (empty under
+        rolling-origin cross-validation).
     """
 
     axis: str
@@ -101,10 +112,17 @@ class ValidationResult:
     scan: ScanResult
     notes: tuple[str, ...] = ()
     compare: Comparison | None = None
+    pointers: tuple[Pointer, ...] = ()
+    estimation: list = ()
 
     @property
     def suspects(self):
         return self.scan.suspects
+
+    @property
+    def clean(self) -> bool:
+        """True when nothing is missing: no suspect, no residual pointer, and the scan ran."""
+        return not self.suspects and not self.pointers and self.scan.scheme != "none"
 
     def to_dict(self) -> dict:
         """One JSON-able object: ``metrics``, ``regimes``, ``residuals``, ``suspects``, ``notes`` and more."""
@@ -118,6 +136,10 @@ class ValidationResult:
             "residuals": self.residuals.to_dict(),
             "suspects": [s.to_dict() for s in self.scan.suspects],
             "scan": self.scan.to_dict(),
+            "scheme": {"name": self.scan.scheme, "reason": self.scan.scheme_reason},
+            "estimation": list(self.estimation),
+            "pointers": [p.to_dict() for p in self.pointers],
+            "clean": self.clean,
             "notes": list(self.notes),
             "compare": None if self.compare is None else self.compare.to_dict(),
         }
@@ -169,31 +191,79 @@ def predict_clamped(model: HysteresisModel, data: HysteresisData) -> tuple[np.nd
         return m.predict(data), clamped
 
 
-def validate_offline(model: HysteresisModel, datas, *, axis: str | None = None, folds: int = 5, seed: int = 0,
-                     alpha: float = 0.05, min_gain_pct: float = 10.0, compare: HysteresisModel | None = None,
-                     model_path: str | None = None, data_paths: Sequence[str] | None = None,
+def _axis_of(datas, model: HysteresisModel, axis: str | None, planes, bending_axes):
+    """(HysteresisData, axis, per-table info, bending axes, paths) of loaded tables or one HysteresisData."""
+    if isinstance(datas, HysteresisData):
+        ax = axis or model.axis or "axis"
+        return datas, ax, [{"source": None, "sha256": None, "n_samples": datas.n_samples}], list(bending_axes or []), None
+    tables = [datas] if isinstance(datas, AlignedData) else list(datas)
+    if not tables:
+        raise ModelError("no data given: name at least one run folder or aligned table")
+    ax = _resolve_axis(model, tables)
+    data = axis_data(tables, ax, planes)
+    info = [{"source": str(a.source), "sha256": a.sha256, "n_samples": len(a.table)} for a in tables]
+    axes_all = list(bending_axes) if bending_axes is not None else sorted(set().union(*(a.axes for a in tables)))
+    return data, ax, info, axes_all, [str(a.source) for a in tables]
+
+
+def _no_scan(reason: str, alpha: float, min_gain_pct: float) -> ScanResult:
+    return ScanResult((), (), float("nan"), {}, (), 0, 1, 0, alpha, min_gain_pct, scheme="none",
+                      scheme_reason=reason)
+
+
+def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | None = None, folds: int = 5,
+                     seed: int = 0, alpha: float = 0.05, min_gain_pct: float = 10.0,
+                     compare: HysteresisModel | None = None, model_path: str | None = None,
+                     data_paths: Sequence[str] | None = None, train_paths: Sequence[str] | None = None,
+                     planes=None, refit_args: Sequence[str] = (), scheme_reason: str | None = None,
                      load_columns: Sequence[str] | None = None, bending_axes: Sequence[str] | None = None,
                      max_scan_samples: int = MAX_SCAN_SAMPLES, n_boot: int = 400) -> ValidationResult:
     """Validate a fitted model on measured data: metrics, regimes, residual tests, missing effects.
+
+    Two schemes test the candidate effects (:mod:`endocal.validation.suspects`):
+
+    estimation/validation (``train`` given)
+        the model's structure and each augmented structure are fitted on the estimation
+        data ``train`` and scored on the validation data ``datas``, unit by unit
+        (:func:`~endocal.validation.suspects.scan_split`): the split every
+        system-identification tool works with, and the one that suits short records (one
+        sweep to fit, one to validate);
+    rolling origin (no ``train``)
+        blocked cross-validation on ``datas`` alone
+        (:func:`~endocal.validation.suspects.scan_effects`); data too short for it gets the
+        metrics, regimes and residual tests, and a note instead of a scan.
 
     Parameters
     ----------
     model : HysteresisModel
         A fitted model (:func:`endocal.models.load_model`).
     datas : AlignedData, list of AlignedData, or HysteresisData
-        Run folders / aligned tables (loaded), or one axis's data directly.
+        Validation data: run folders / aligned tables (loaded), or one axis's data directly.
+    train : AlignedData, list of AlignedData, or HysteresisData, optional
+        Estimation data (what the model was, or is to be, fitted on).
     axis : str, optional
         Axis of ``HysteresisData`` input (default: the model's).
     folds : int
-        Held-out blocks of the effect scan.
+        Held-out blocks of the rolling-origin scan.
     seed : int
         Seed of the bootstrap intervals.
     alpha, min_gain_pct : float
         Significance level (Holm) and smallest held-out gain of a suspect.
     compare : HysteresisModel, optional
-        A previous model: its error is shown beside this one's.
-    model_path, data_paths : optional
-        Where model and data came from (recorded, and used in the refit commands).
+        A previous model: its error is shown beside this one's, under the same scheme.
+    model_path : str, optional
+        Where the model came from (refit commands name their output after it).
+    data_paths, train_paths : sequence of str, optional
+        Validation and estimation data paths. The refit commands fit on ``train_paths``
+        under the estimation/validation scheme (the validation data is not folded in),
+        on ``data_paths`` under rolling origin.
+    planes : PlanesCalibration, optional
+        The bending planes the model was fitted through: measured angles of both data sets
+        are mapped into the twisted planes first, as ``fit hysteresis --planes`` did.
+    refit_args : sequence of str
+        Further options of the refit commands (``--planes planes.json``).
+    scheme_reason : str, optional
+        Why this scheme runs (recorded and printed).
     load_columns : sequence of str, optional
         Columns to try ``load`` on (default: every varying extra column but the knob drives').
     bending_axes : sequence of str, optional
@@ -211,57 +281,68 @@ def validate_offline(model: HysteresisModel, datas, *, axis: str | None = None, 
     ------
     ModelError
         Unfitted model, a model for an axis the data lacks, ``load:`` on a missing or
-        constant column, data too short for cross-validation.
+        constant column, estimation data no model can be fitted on.
     """
     model._require_fitted()
-    if isinstance(datas, HysteresisData):
-        data = datas
-        ax = axis or model.axis or "axis"
-        info = [{"source": None, "sha256": None, "n_samples": data.n_samples}]
-        axes_all = list(bending_axes or [])
-        paths = list(data_paths or ["DATA"])
-    else:
-        tables = [datas] if isinstance(datas, AlignedData) else list(datas)
-        if not tables:
-            raise ModelError("no data given: name at least one run folder or aligned table")
-        ax = _resolve_axis(model, tables)
-        data = axis_data(tables, ax)
-        info = [{"source": str(a.source), "sha256": a.sha256, "n_samples": len(a.table)} for a in tables]
-        axes_all = list(bending_axes) if bending_axes is not None else sorted(set().union(*(a.axes for a in tables)))
-        paths = list(data_paths) if data_paths is not None else [str(a.source) for a in tables]
+    data, ax, info, axes_all, val_paths = _axis_of(datas, model, axis, planes, bending_axes)
     if data.meas_deg is None:
         raise ModelError("validation needs measured angles")
+    paths = list(data_paths) if data_paths is not None else (val_paths or ["DATA"])
+    est, est_info = None, []
+    if train is not None:
+        est, _, est_info, est_axes, est_paths = _axis_of(train, model, ax, planes, bending_axes)
+        axes_all = sorted(set(axes_all) | set(est_axes))
+        if train_paths is None:
+            train_paths = est_paths or ["TRAIN"]
     labels = effect_labels(model)
     check_columns(data, [lab.partition(":")[2] for lab in labels if lab.startswith("load:")])
     if load_columns:
         check_columns(data, load_columns)
-    check_cv_data(data, folds)
 
     pred, clamped = predict_clamped(model, data)
     metrics = error_metrics(data.meas_deg, pred, n_boot=n_boot, seed=seed)
     regimes = error_by_regime(data, pred, seed=seed)
     resid = residual_tests(data, data.meas_deg - pred, alpha=alpha)
-    scan = scan_effects(model, data, folds=folds, alpha=alpha, min_gain_pct=min_gain_pct,
-                        load_columns=load_columns, bending_axes=axes_all, max_samples=max_scan_samples,
-                        data_paths=paths, model_path=model_path)
     notes = []
+    if est is not None:
+        same = {d["sha256"] for d in est_info if d["sha256"]} & {d["sha256"] for d in info if d["sha256"]}
+        if same:
+            notes.append("the estimation data includes the validation data itself: the scores are in-sample and "
+                         "flatter the model; validate on a record the model was not fitted on")
+        scan = scan_split(model, est, data, alpha=alpha, min_gain_pct=min_gain_pct, load_columns=load_columns,
+                          bending_axes=axes_all, max_samples=max_scan_samples, data_paths=list(train_paths),
+                          model_path=model_path, refit_args=refit_args,
+                          scheme_reason=scheme_reason or "estimation data given")
+    else:
+        reason = scheme_reason or "no separate estimation data"
+        try:
+            check_cv_data(data.decimate(max(1, -(-data.n_samples // max_scan_samples))), folds)
+        except ModelError as exc:
+            scan = _no_scan(f"{reason}, and rolling-origin cross-validation cannot run on this record alone "
+                            f"({exc}); give the record the model was fitted on with --train to test effects on "
+                            "this one as a whole", alpha, min_gain_pct)
+        else:
+            scan = scan_effects(model, data, folds=folds, alpha=alpha, min_gain_pct=min_gain_pct,
+                                load_columns=load_columns, bending_axes=axes_all, max_samples=max_scan_samples,
+                                data_paths=paths, model_path=model_path, refit_args=refit_args,
+                                scheme_reason=reason)
     if clamped:
         lo, hi = model.cmd_range_deg_
         notes.append(f"{clamped} samples command beyond the model's fitted range [{lo:.3g}, {hi:.3g}] deg and were "
                      "clamped: refit on data that covers them")
-    if not scan.suspects:
-        notes.append("nothing significant is missing: no catalog effect improves the held-out error "
-                     f"by at least {min_gain_pct:g} % at family-wise level {alpha:g}")
+    pointers = residual_pointers(model, data, resid, regimes, scan)
     notes += list(scan.notes)
     comp = None
-    if compare is not None:
+    if compare is not None and scan.scheme != "none":
         compare._require_fitted()
         old_pred, _ = predict_clamped(compare, data)
         stride = scan.stride
-        d = data.decimate(stride) if stride > 1 else data
-        bounds = fold_bounds(d.n_samples, folds)
         with one_blas_thread():
-            old_err, _ = heldout_errors(compare, effect_labels(compare), d, bounds)
+            if scan.scheme == "estimation/validation":
+                old_err = split_errors(compare, effect_labels(compare), est, data, stride)
+            else:
+                d = data.decimate(stride) if stride > 1 else data
+                old_err, _ = heldout_errors(compare, effect_labels(compare), d, fold_bounds(d.n_samples, folds))
         comp = Comparison(
             old_label=model_label(compare), new_label=model_label(model),
             old_rmse_deg=float(np.sqrt(np.mean((old_pred - data.meas_deg) ** 2))), new_rmse_deg=metrics.rmse_deg,
@@ -270,4 +351,5 @@ def validate_offline(model: HysteresisModel, datas, *, axis: str | None = None, 
     model_info = {"path": model_path, "base": model.base_name, "effects": labels, "label": model_label(model),
                   "equation": model.equation()}
     return ValidationResult(axis=ax, model=model_info, data=info, metrics=metrics, regimes=regimes,
-                            residuals=resid, scan=scan, notes=tuple(notes), compare=comp)
+                            residuals=resid, scan=scan, notes=tuple(notes), compare=comp, pointers=tuple(pointers),
+                            estimation=est_info)

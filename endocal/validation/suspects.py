@@ -47,7 +47,9 @@ from endocal.models.base import HysteresisModel, OutOfRangeWarning
 from endocal.models.data import OTHER_CMD
 from endocal.validation.data import is_constant, load_candidates, prefix
 from endocal.validation.metrics import block_length
+from endocal.validation.parallel import map_jobs
 from endocal.validation.regimes import hold_mask, turning_points
+from endocal.validation.units import Units, make_units
 
 try:  # BLAS threads fight each other on the many small least-squares problems of a scan
     from threadpoolctl import threadpool_limits
@@ -98,6 +100,10 @@ class Suspect:
     screened : bool
         Not refitted beyond the first fold: its training fit gained too little (see
         :func:`scan_effects`).
+    evidence : str
+        ``significant``, ``not significant``, or ``not enough evidence (N units)`` when the
+        validation data holds too few independent units for any p-value to reach ``alpha``
+        (the candidate is then listed as a suggestion on its gain alone).
     """
 
     effect: str
@@ -114,6 +120,7 @@ class Suspect:
     protocol: str
     n_blocks: int
     screened: bool = False
+    evidence: str = ""
 
     def to_dict(self) -> dict:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
@@ -137,7 +144,19 @@ class ScanResult:
     notes : tuple of str
         Ambiguities and identifiability, in words.
     folds, stride, n_samples : int
-        Test blocks, decimation step and samples scanned.
+        Test blocks, decimation step and samples scanned (rolling origin); under the
+        estimation/validation scheme ``folds`` is 0 and ``stride``/``n_samples`` are those
+        of the estimation data the candidates were fitted on.
+    scheme : {"estimation/validation", "rolling-origin", "none"}
+        How held-out errors were made: candidates fitted on separate estimation data and
+        scored on the validation data, or rolling-origin cross-validation on the validation
+        data alone; ``none`` when the data could not support either (``scheme_reason`` says why).
+    scheme_reason : str
+        Why this scheme ran, in words.
+    units : dict or None
+        The validation data's units of the paired test (estimation/validation scheme).
+    min_units : int
+        Fewest units with which the best candidate could reach significance.
     """
 
     suspects: tuple[Suspect, ...]
@@ -150,17 +169,29 @@ class ScanResult:
     n_samples: int = 0
     alpha: float = 0.05
     min_gain_pct: float = 0.0
+    scheme: str = "rolling-origin"
+    scheme_reason: str = ""
+    units: dict | None = None
+    min_units: int = 0
+
+    @property
+    def thin_evidence(self) -> bool:
+        """True when the data holds too few units for any candidate to reach significance."""
+        return any(s.evidence.startswith("not enough") for s in self.tested)
 
     def to_dict(self) -> dict:
+        test = ("Wilcoxon signed-rank on per-unit mean loss differentials of the validation data, Holm-corrected"
+                if self.scheme == "estimation/validation" else
+                "Wilcoxon signed-rank on block-mean loss differentials, Holm-corrected")
         return {
             "suspects": [s.to_dict() for s in self.suspects],
             "tested": [s.to_dict() for s in self.tested],
             "baseline_rmse_heldout_deg": self.baseline_rmse_heldout_deg,
             "untestable": dict(self.untestable),
             "notes": list(self.notes),
-            "cv": {"scheme": "rolling-origin blocked", "folds": self.folds, "stride": self.stride,
+            "cv": {"scheme": self.scheme, "reason": self.scheme_reason, "folds": self.folds, "stride": self.stride,
                    "n_samples": self.n_samples, "alpha": self.alpha, "min_gain_pct": self.min_gain_pct,
-                   "test": "Wilcoxon signed-rank on block-mean loss differentials, Holm-corrected"},
+                   "units": self.units, "min_units": self.min_units, "test": test},
         }
 
 
@@ -387,10 +418,13 @@ def _creep_reason(data: HysteresisData) -> str | None:
             "run `staircase`)")
 
 
-def _coupling_reason(data: HysteresisData) -> str | None:
+def _coupling_reason(data: HysteresisData, where: str = "") -> str | None:
     if OTHER_CMD not in data.extras:
         return "one axis only: coupling cannot be identified (drive both knobs: run `lissajous` or `circle`)"
     if is_constant(data.extras[OTHER_CMD]):
+        if where:
+            return (f"the other knob never moves in {where}: coupling cannot be fitted there (record estimation "
+                    "data in which both knobs move, e.g. `lissajous` or `circle`, or each knob in turn: `sine-set`)")
         return "the other knob never moves: coupling cannot be identified (run `lissajous` or `circle`)"
     return None
 
@@ -410,6 +444,16 @@ IDENTIFIABILITY = {
     "drift": _time_reason("drift"),
 }
 
+#: Effect name -> check of whether its parameters can be fitted at all (the estimation/validation
+#: scheme tests every fittable candidate on the separate validation data).
+FITTABILITY = {
+    "coupling": _coupling_reason,
+    "delay": _time_reason("delay"),
+    "drift": _time_reason("drift"),
+    "creep": _time_reason("creep"),
+    "rate": _time_reason("rate"),
+}
+
 
 def takes_column(name: str) -> bool:
     """True for catalog effects that need a column, written ``NAME:COLUMN`` (``load``)."""
@@ -420,14 +464,16 @@ def takes_column(name: str) -> bool:
     return False
 
 
-def refit_command(data_paths: Sequence[str], axis: str | None, base: str, effects: Sequence[str], out: str) -> str:
-    """``endocal fit hysteresis DATA... --axis AXIS --model BASE --effects E1,E2 --out OUT``."""
+def refit_command(data_paths: Sequence[str], axis: str | None, base: str, effects: Sequence[str], out: str,
+                  extra_args: Sequence[str] = ()) -> str:
+    """``endocal fit hysteresis DATA... --axis AXIS --model BASE --effects E1,E2 [EXTRA...] --out OUT``."""
     parts = ["endocal fit hysteresis", *[str(p) for p in data_paths]]
     if axis:
         parts += ["--axis", axis]
     parts += ["--model", base]
     if effects:
         parts += ["--effects", ",".join(effects)]
+    parts += [str(a) for a in extra_args]
     parts += ["--out", out]
     return " ".join(parts)
 
@@ -450,11 +496,236 @@ def refit_path(model_path: str | None, effect: str) -> str:
 MAX_SCAN_SAMPLES = 5000
 
 
+def candidate_effects(model: HysteresisModel, data: HysteresisData, candidates: Sequence[str] | None,
+                      load_columns: Sequence[str] | None, bending_axes: Sequence[str], *,
+                      train: HysteresisData, rolling: bool) -> tuple[list[str], dict[str, str]]:
+    """The catalog effects to test, and why the others cannot be tested on this data.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        The model as it stands (its effects are not candidates).
+    data : HysteresisData
+        All the data the scan uses (load candidates must vary in it).
+    candidates, load_columns : sequence of str, optional
+        As :func:`scan_effects`.
+    bending_axes : sequence of str
+        Knob columns that are not load candidates.
+    train : HysteresisData
+        The data candidates are fitted on (the first training block, or the estimation data):
+        an effect whose parameters it cannot show (the other knob at rest, no time stamps)
+        is not fitted.
+    rolling : bool
+        Rolling-origin cross-validation: effects that need several speeds (``rate``,
+        ``delay``) or holds (``creep``) to be told from a wider loop are tested only on data
+        that has them. Under the estimation/validation scheme every fittable candidate is
+        tested: the separate validation data decides.
+
+    Returns
+    -------
+    tested : list of str
+    untestable : dict of str to str
+    """
+    have = effect_labels(model)
+    have_names = {lab.partition(":")[0] for lab in have}
+    untestable: dict[str, str] = {}
+    if candidates is None:
+        cands: list[str] = []
+        for name in EFFECTS:
+            if takes_column(name):
+                if load_columns is None:
+                    cols, _constant = load_candidates(data, bending_axes)
+                else:
+                    cols = list(load_columns)
+                cols = [c for c in cols if f"{name}:{c}" not in have]
+                if not cols:
+                    untestable[name] = (f"no varying extra column: {name} cannot be identified "
+                                        "(log a covariate such as sheath_wrap_deg)")
+                cands += [f"{name}:{c}" for c in cols]
+            elif name not in have_names:
+                cands.append(name)
+    else:
+        cands = [c for c in candidates if c not in have]
+    tested = []
+    for c in cands:
+        name = c.partition(":")[0]
+        check = (IDENTIFIABILITY if rolling else FITTABILITY).get(name)
+        reason = check(data) if check is not None else None
+        if reason is None and name == "coupling":
+            reason = _coupling_reason(train, where="the estimation data" if not rolling else
+                                      f"the first training block (the first {train.n_samples} of {data.n_samples} "
+                                      "samples)")
+        if reason is not None:
+            untestable[c] = reason
+        else:
+            tested.append(c)
+    return tested, untestable
+
+
+def min_units_for(n_candidates: int, alpha: float) -> int:
+    """Fewest paired units with which the best of ``n_candidates`` can reach Holm-corrected ``alpha``.
+
+    The smallest one-sided p-value of an exact Wilcoxon signed-rank test on ``n`` units is
+    ``2**-n`` (every unit in favour); Holm multiplies the smallest p-value by the number of
+    candidates.
+    """
+    return max(1, int(math.ceil(math.log2(max(n_candidates, 1) / alpha))))
+
+
+def unit_test(err_base: np.ndarray, err_cand: np.ndarray, units: Units) -> float:
+    """One-sided p-value that ``err_cand`` is smaller than ``err_base``, on per-unit mean loss differentials.
+
+    The loss differential ``e_base^2 - e_cand^2`` (Diebold & Mariano 1995) is averaged over
+    each unit (a half-cycle or decorrelation block of the validation data,
+    :func:`~endocal.validation.units.make_units`) and the unit means are tested with the
+    one-sided Wilcoxon signed-rank test.
+    """
+    d = err_base**2 - err_cand**2
+    means = np.array([d[a:b].mean() for a, b in units.bounds])
+    if means.size < 1 or not np.any(means):
+        return 1.0
+    return float(wilcoxon(means, alternative="greater").pvalue)
+
+
+def _predict_errors(model: HysteresisModel, data: HysteresisData) -> np.ndarray:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutOfRangeWarning)
+        return model.predict(data) - data.meas_deg
+
+
+def split_errors(model: HysteresisModel, effects: Sequence[str], train: HysteresisData, val: HysteresisData,
+                 stride: int = 1) -> np.ndarray:
+    """Validation errors ``pred - meas`` (deg) of ``base + effects`` fitted on ``train`` (every ``stride``-th sample)."""
+    dt = train.decimate(stride) if stride > 1 else train
+    return _predict_errors(_template(model, effects).fit(dt), val)
+
+
+def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisData, *, alpha: float = 0.05,
+               min_gain_pct: float = 10.0, candidates: Sequence[str] | None = None,
+               load_columns: Sequence[str] | None = None, bending_axes: Sequence[str] = (),
+               max_samples: int = MAX_SCAN_SAMPLES, data_paths: Sequence[str] = ("DATA",),
+               model_path: str | None = None, refit_args: Sequence[str] = (),
+               scheme_reason: str = "", jobs: int | None = None) -> ScanResult:
+    """Test every catalog effect the model lacks: fitted on estimation data, scored on validation data.
+
+    The estimation/validation split of system identification (Ljung, *System
+    Identification*, 2nd ed., sec. 16.4): the model as it stands and each augmented model
+    ``base + effects + candidate`` are fitted on ``train`` and run over every record of
+    ``val`` from its start. Their errors on ``val`` are compared unit by unit (half-cycles,
+    or decorrelation blocks when the command rarely reverses: :func:`unit_test`) and the
+    p-values Holm-corrected. A candidate is a suspect when its corrected p-value is below
+    ``alpha`` and it cuts the validation RMSE by at least ``min_gain_pct``. When ``val``
+    holds fewer units than any candidate would need to reach ``alpha``
+    (:func:`min_units_for`), the candidates that clear the gain bar are listed as
+    suggestions with ``evidence = "not enough evidence (N units)"``.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        The model under validation (its structure is refitted on ``train``).
+    train, val : HysteresisData
+        Estimation and validation data (commands, measured angles, time, extras).
+    max_samples : int
+        Longer estimation data is decimated to about this many samples for the fits
+        (see :func:`scan_effects`); validation data is always scored at full rate.
+    data_paths : sequence of str
+        The estimation data, for the refit commands (the validation data is not folded in).
+    refit_args : sequence of str
+        Further options of the refit command (``--planes planes.json``).
+    scheme_reason : str
+        Why this scheme runs, recorded in the result.
+    jobs : int, optional
+        Processes for the fits (:func:`endocal.validation.parallel.n_jobs`).
+
+    Returns
+    -------
+    ScanResult
+
+    Raises
+    ------
+    ModelError
+        The estimation data cannot be fitted (no reversal, too few samples), or the model
+        as it stands cannot be refitted on it.
+    """
+    if train.meas_deg is None or val.meas_deg is None:
+        raise ModelError("validation needs the measured angle meas_deg (deg) in estimation and validation data")
+    check_fit_data(train, "estimation data")
+    stride = max(1, int(math.ceil(train.n_samples / max_samples)))
+    dt = train.decimate(stride) if stride > 1 else train
+    have = effect_labels(model)
+    tested_cands, untestable = candidate_effects(model, dt, candidates, load_columns, bending_axes,
+                                                 train=dt, rolling=False)
+    with one_blas_thread():
+        errors = map_jobs(lambda effects: split_errors(model, effects, dt, val),
+                          [have] + [have + [c] for c in tested_cands], jobs)
+    if isinstance(errors[0], ModelError):
+        raise ModelError(f"the model as it stands cannot be refitted on the estimation data: {errors[0]}") from None
+    err_base = errors[0]
+    fitted = []
+    for c, err in zip(tested_cands, errors[1:]):
+        if isinstance(err, ModelError):
+            untestable[c] = f"could not be fitted on the estimation data ({err})"
+        else:
+            fitted.append((c, err))
+    rmse_base = float(np.sqrt(np.mean(err_base**2)))
+    units = make_units(val, [err_base] + [e for _, e in fitted])
+    need = min_units_for(len(fitted), alpha)
+    thin = units.n < need
+    raw = [unit_test(err_base, e, units) for _, e in fitted]
+    adj = holm(raw) if raw else np.array([])
+    tested, errs = [], {}
+    for (c, err), p, pa in zip(fitted, raw, adj):
+        name, _, col = c.partition(":")
+        cls = EFFECTS[name]
+        rmse = float(np.sqrt(np.mean(err**2)))
+        gain = 100.0 * (1.0 - rmse / rmse_base) if rmse_base > 0 else 0.0
+        significant = bool(pa < alpha and gain >= min_gain_pct)
+        evidence = (f"not enough evidence ({units.n} units, {need} needed)" if thin else
+                    "significant" if significant else "not significant")
+        cmd = refit_command(data_paths, model.axis, model.base_name, have + [c], refit_path(model_path, c),
+                            refit_args)
+        tested.append(Suspect(effect=c, column=col or None, gain_pct=gain, p_value=float(pa), p_raw=float(p),
+                              rmse_heldout_deg=rmse, base_rmse_heldout_deg=rmse_base, significant=significant,
+                              command=cmd, cause=cls.cause, signature=cls.signature, protocol=cls.protocol,
+                              n_blocks=units.n, evidence=evidence))
+        errs[c] = err
+    tested.sort(key=lambda s: -s.gain_pct)
+    if thin:
+        suspects = [s for s in tested if s.gain_pct >= min_gain_pct]
+    else:
+        suspects = [s for s in tested if s.significant]
+    notes = _ambiguities(suspects, errs, alpha) if not thin else []
+    notes += [f"{k}: {v}" for k, v in untestable.items()]
+    if thin and fitted:
+        notes.append(f"the validation data holds {units.n} {units.kind}s; with {len(fitted)} candidates at least "
+                     f"{need} are needed before any can be significant at {alpha:g}: candidates are ranked by their "
+                     "validation gain alone; validate on a longer record (or more records) to test them")
+    if stride > 1:
+        notes.append(f"candidates fitted on 1 estimation sample in {stride} ({dt.n_samples} of {train.n_samples})")
+    return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), 0, stride,
+                      dt.n_samples, alpha, min_gain_pct, scheme="estimation/validation", scheme_reason=scheme_reason,
+                      units=units.to_dict(), min_units=need)
+
+
+def check_fit_data(data: HysteresisData, what: str = "data") -> None:
+    """Refuse data no hysteresis model can be fitted on (no reversal), stating the minimum.
+
+    Raises
+    ------
+    ModelError
+    """
+    if turning_points(data).size < 1:
+        raise ModelError(f"the {what} never reverses the knob ({data.n_samples} samples): a hysteresis model needs "
+                         "at least one reversal (one back-and-forth sweep) to see both branches of the loop")
+
+
+
 def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5, alpha: float = 0.05,
                  min_gain_pct: float = 10.0, candidates: Sequence[str] | None = None,
                  load_columns: Sequence[str] | None = None, bending_axes: Sequence[str] = (),
                  max_samples: int = MAX_SCAN_SAMPLES, train_frac: float = 0.5, screen_pct: float = 0.5,
-                 data_paths: Sequence[str] = ("DATA",), model_path: str | None = None) -> ScanResult:
+                 data_paths: Sequence[str] = ("DATA",), model_path: str | None = None,
+                 refit_args: Sequence[str] = (), scheme_reason: str = "", jobs: int | None = None) -> ScanResult:
     """Test every catalog effect the model lacks on held-out data; rank the significant ones.
 
     Parameters
@@ -491,6 +762,12 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
         gain is the first fold's. The decision uses training data only.
     data_paths, model_path : optional
         Where the data and model came from, for the refit commands.
+    refit_args : sequence of str
+        Further options of the refit commands (``--planes planes.json``).
+    scheme_reason : str
+        Why this scheme runs, recorded in the result.
+    jobs : int, optional
+        Processes for the fits (:func:`endocal.validation.parallel.n_jobs`).
 
     Returns
     -------
@@ -509,61 +786,40 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
     check_cv_data(d, folds, train_frac)
     bounds = fold_bounds(d.n_samples, folds, train_frac)
     have = effect_labels(model)
-    have_names = {lab.partition(":")[0] for lab in have}
-    untestable: dict[str, str] = {}
-    if candidates is None:
-        cands: list[str] = []
-        for name in EFFECTS:
-            if takes_column(name):
-                if load_columns is None:
-                    cols, _constant = load_candidates(d, bending_axes)
-                else:
-                    cols = list(load_columns)
-                cols = [c for c in cols if f"{name}:{c}" not in have]
-                if not cols:
-                    untestable[name] = (f"no varying extra column: {name} cannot be identified "
-                                        "(log a covariate such as sheath_wrap_deg)")
-                cands += [f"{name}:{c}" for c in cols]
-            elif name not in have_names:
-                cands.append(name)
-    else:
-        cands = [c for c in candidates if c not in have]
-    tested_cands = []
-    for c in cands:
-        name = c.partition(":")[0]
-        check = IDENTIFIABILITY.get(name)
-        reason = check(d) if check is not None else None
-        if reason is not None:
-            untestable[c] = reason
-        else:
-            tested_cands.append(c)
+    # what the first training block cannot show, no fold can be fitted for
+    first_train = fold_split(d, bounds[0])[0]
+    tested_cands, untestable = candidate_effects(model, d, candidates, load_columns, bending_axes,
+                                                 train=first_train, rolling=True)
 
     with one_blas_thread():
-        base_folds = [fold_errors(model, have, d, bd) for bd in bounds]
+        base_folds = map_jobs(lambda bd: fold_errors(model, have, d, bd), bounds, jobs)
+        for f in base_folds:
+            if isinstance(f, ModelError):
+                raise f
         err_base = np.concatenate([e for e, _ in base_folds])
         base_train_rmse = base_folds[0][1].fit_report_.rmse_deg
         rmse_base = float(np.sqrt(np.mean(err_base**2)))
-        results = []
-        for c in tested_cands:
-            try:
-                first = fold_errors(model, have + [c], d, bounds[0])
-                train_gain = 100.0 * (1.0 - first[1].fit_report_.rmse_deg / base_train_rmse) if base_train_rmse > 0 else 0.0
-                if train_gain < screen_pct * min_gain_pct:
-                    # screened on its training fit alone: no held-out data was looked at to decide
-                    e0 = first[0]
-                    n0 = e0.size
-                    rmse0 = float(np.sqrt(np.mean(e0**2)))
-                    base0 = float(np.sqrt(np.mean(err_base[:n0] ** 2)))
-                    results.append((c, None, rmse0 * rmse_base / base0 if base0 > 0 else rmse0, 1.0, 0))
-                    continue
-                rest = [fold_errors(model, have + [c], d, bd) for bd in bounds[1:]]
-            except ModelError as exc:
-                untestable[c] = f"could not be fitted on this data ({exc})"
-                continue
+
+        def candidate(c: str):
+            first = fold_errors(model, have + [c], d, bounds[0])
+            train_gain = 100.0 * (1.0 - first[1].fit_report_.rmse_deg / base_train_rmse) if base_train_rmse > 0 else 0.0
+            if train_gain < screen_pct * min_gain_pct:
+                # screened on its training fit alone: no held-out data was looked at to decide
+                e0 = first[0]
+                rmse0 = float(np.sqrt(np.mean(e0**2)))
+                base0 = float(np.sqrt(np.mean(err_base[:e0.size] ** 2)))
+                return (c, None, rmse0 * rmse_base / base0 if base0 > 0 else rmse0, 1.0, 0)
+            rest = [fold_errors(model, have + [c], d, bd) for bd in bounds[1:]]
             err = np.concatenate([first[0]] + [e for e, _ in rest])
             p, nb = paired_test(err_base, err)
-            rmse = float(np.sqrt(np.mean(err**2)))
-            results.append((c, err, rmse, p, nb))
+            return (c, err, float(np.sqrt(np.mean(err**2))), p, nb)
+
+        results = []
+        for c, r in zip(tested_cands, map_jobs(candidate, tested_cands, jobs)):
+            if isinstance(r, ModelError):
+                untestable[c] = f"could not be fitted on this data ({r})"
+            else:
+                results.append(r)
 
     adj = holm([r[3] for r in results]) if results else np.array([])
     tested = []
@@ -572,12 +828,14 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
         name, _, col = c.partition(":")
         cls = EFFECTS[name]
         gain = 100.0 * (1.0 - rmse / rmse_base) if rmse_base > 0 else 0.0
-        cmd = refit_command(data_paths, model.axis, model.base_name, have + [c], refit_path(model_path, c))
+        cmd = refit_command(data_paths, model.axis, model.base_name, have + [c], refit_path(model_path, c),
+                            refit_args)
+        significant = bool(pa < alpha and gain >= min_gain_pct)
         tested.append(Suspect(effect=c, column=col or None, gain_pct=gain, p_value=float(pa), p_raw=p,
                               rmse_heldout_deg=rmse, base_rmse_heldout_deg=rmse_base,
-                              significant=bool(pa < alpha and gain >= min_gain_pct), command=cmd,
+                              significant=significant, command=cmd,
                               cause=cls.cause, signature=cls.signature, protocol=cls.protocol, n_blocks=nb,
-                              screened=err is None))
+                              screened=err is None, evidence="significant" if significant else "not significant"))
         if err is not None:
             errs[c] = err
     tested.sort(key=lambda s: -s.gain_pct)
@@ -587,7 +845,7 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
     if stride > 1:
         notes.append(f"scanned 1 sample in {stride} ({d.n_samples} of {data.n_samples})")
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), folds, stride,
-                      d.n_samples, alpha, min_gain_pct)
+                      d.n_samples, alpha, min_gain_pct, scheme="rolling-origin", scheme_reason=scheme_reason)
 
 
 def _ambiguities(suspects: list[Suspect], errs: dict, alpha: float, close_pct: float = 5.0) -> list[str]:

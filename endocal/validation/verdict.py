@@ -1,0 +1,142 @@
+"""No verdict that its own residuals contradict: effects the residuals point at but the scan did not confirm.
+
+The effect scan (:mod:`endocal.validation.suspects`) can only confirm what it can test: an
+effect whose signature the estimation data (or the first training block) lacks is not
+fitted, and an effect can be tested and still not pay on the held-out data. The residual
+tests and the regimes look at the model's error directly. When they point at an effect the
+model lacks and the scan did not confirm, ``validate`` names it as a *pointer*: an untested
+or unconfirmed suspect, with the evidence, why the scan could not settle it, and the
+experiment that would. ``validate`` says nothing is missing only when there is no suspect
+and no pointer.
+
+What points at what (the catalog's signatures, :mod:`endocal.models.effects`):
+
+========================================  ===================
+residual correlates with ...              effect
+========================================  ===================
+the other knob's command                  ``coupling``
+time                                      ``drift``
+the signed knob speed                     ``delay``, ``rate``
+the unsigned knob speed                   ``rate``
+========================================  ===================
+
+and the error of a regime well above the whole record's: the other knob's low or high
+band (``coupling``), holds (``creep``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+from endocal.models import EFFECTS
+from endocal.models.base import HysteresisModel
+from endocal.models.data import HysteresisData
+
+#: Smallest |cross-correlation| that counts as pointing at an effect. With thousands of
+#: samples a correlation of 0.05 is "significant" yet explains 0.25 % of the residual's
+#: variance; 0.3 explains about a tenth of it, what the scan's 10 % gain bar asks of a term.
+MIN_CORR = 0.3
+#: Smallest regime error relative to the whole record's that counts as pointing at an effect.
+MIN_RATIO = 1.5
+
+_BY_SIGNAL = {
+    "other command": (("coupling",), "the other knob's command"),
+    "time": (("drift",), "time"),
+    "speed": (("delay", "rate"), "the signed knob speed"),
+    "abs speed": (("rate",), "how fast the knob moves"),
+}
+_BY_REGIME = {"other axis": "coupling", "hold": "creep"}
+
+
+@dataclass(frozen=True)
+class Pointer:
+    """An effect the residuals point at that the scan did not confirm.
+
+    Attributes
+    ----------
+    effect : str
+        Catalog effect name.
+    evidence : str
+        What in the residual points at it, in words (correlations, regimes).
+    status : {"untested", "unconfirmed"}
+        ``untested``: the scan could not fit or test it on this data; ``unconfirmed``: it
+        was tested and did not lower the held-out error enough.
+    why : str
+        Why the scan could not settle it.
+    experiment : str
+        The experiment or data that would test it.
+    """
+
+    effect: str
+    evidence: str
+    status: str
+    why: str
+    experiment: str
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def _evidence(resid, regimes) -> dict[str, list[str]]:
+    out: dict[str, list[str]] = {}
+    for x in resid.significant():
+        if x.signal not in _BY_SIGNAL or x.max_abs_corr < MIN_CORR:
+            continue
+        effects, words = _BY_SIGNAL[x.signal]
+        for e in effects:
+            out.setdefault(e, []).append(f"the residual follows {words} (|r| = {x.max_abs_corr:.2f} at lag "
+                                         f"{x.lag_s:+.3g} s)")
+    for r in regimes.regimes:
+        key = r.group if r.group in _BY_REGIME else ("hold" if r.name.startswith("hold") else None)
+        if key is None or r.ratio < MIN_RATIO:
+            continue
+        out.setdefault(_BY_REGIME[key], []).append(
+            f"the error in '{r.name}' is {r.ratio:.2f}x the whole record's ({r.metrics.rmse_deg:.3g} deg)")
+    return out
+
+
+def residual_pointers(model: HysteresisModel, data: HysteresisData, resid, regimes, scan) -> list[Pointer]:
+    """Effects the residual tests and regimes point at that the model lacks and the scan did not confirm.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        The model under validation (effects it has are not pointed at).
+    data : HysteresisData
+        The validation data.
+    resid : ResidualTests
+        :func:`~endocal.validation.residuals.residual_tests` of the model's residual.
+    regimes : RegimeBreakdown
+        :func:`~endocal.validation.regimes.error_by_regime` of the model's error.
+    scan : ScanResult
+        What the effect scan tested and confirmed.
+
+    Returns
+    -------
+    list of Pointer
+        In the order of the table in the module docstring.
+    """
+    have = {lab.partition(":")[0] for lab in (e.label for e in model.effects_)}
+    confirmed = {s.effect.partition(":")[0] for s in scan.suspects}
+    tested = {s.effect.partition(":")[0]: s for s in scan.tested}
+    untestable = {k.partition(":")[0]: v for k, v in scan.untestable.items()}
+    out = []
+    for effect, ev in _evidence(resid, regimes).items():
+        if effect in have or effect in confirmed or effect not in EFFECTS:
+            continue
+        experiment = f"record {EFFECTS[effect].protocol}"
+        if effect in untestable:
+            status, why = "untested", untestable[effect]
+        elif scan.scheme == "none":
+            status, why = "untested", scan.scheme_reason
+        elif effect in tested:
+            s = tested[effect]
+            status = "unconfirmed"
+            why = (f"fitted and tested, it changed the held-out RMSE by {-s.gain_pct:+.0f} % "
+                   f"({s.base_rmse_heldout_deg:.3g} -> {s.rmse_heldout_deg:.3g} deg, p = {s.p_value:.2g}): the "
+                   "catalog term does not capture what the residual shows here, or the held-out data does not "
+                   "exercise it")
+        else:
+            continue
+        out.append(Pointer(effect, "; ".join(dict.fromkeys(ev)), status, why, experiment))
+    return out
