@@ -15,23 +15,23 @@ step "fit the deviation angles and the orthogonal compensator" \
 step "sweep again through the compensator (knob commands only) and measure what is left: the paper's figure 8" \
   $E excite planes --planes "$OUT/planes.json" --out "$OUT/planes-after" --seed 6 --force --quiet
 $E fit planes "$OUT/planes" --after "$OUT/planes-after" --out "$OUT/planes.json" --force
-step "identification run: the duodenoscope paper's damped sine" \
+step "estimation runs: the duodenoscope paper's damped sine, and a chirp (several speeds tell a delay from speed-dependent friction)" \
   $E excite damped-sine --amplitude 85 --out "$OUT/train" --seed 2 --force --quiet
-step "held-out runs: band-limited random input, and a chirp (several speeds tell a delay from speed-dependent friction)" \
-  $E excite random --amplitude 60 --out "$OUT/test" --seed 3 --force --quiet
 $E excite chirp --amplitude 50 --out "$OUT/chirp" --seed 4 --force --quiet
-step "check run for the report, used by no fit: the paper's triangle" \
-  $E excite triangle --amplitude 50 --out "$OUT/check" --seed 5 --force --quiet
-step "fit the paper's modified Prandtl-Ishlinskii model" \
-  $E fit hysteresis "$OUT/train" --axis ap --model pi --effects envelope --out "$OUT/pi-envelope.json" --force
-# The loop: validate names the most likely missing effect and prints the command that adds it;
-# run that command, validate again (it shows the error falling), until nothing significant is
-# missing or three effects have been added.
+step "validation runs, used by no fit: band-limited random input and the paper's triangle" \
+  $E excite random --amplitude 60 --out "$OUT/test" --seed 3 --force --quiet
+$E excite triangle --amplitude 50 --out "$OUT/check" --seed 5 --force --quiet
+step "fit the paper's modified Prandtl-Ishlinskii model on the estimation runs" \
+  $E fit hysteresis "$OUT/train" "$OUT/chirp" --axis ap --model pi --effects envelope --out "$OUT/pi-envelope.json" --force
+# The loop: validate holds the model against the validation runs, refits every candidate effect
+# on the estimation runs the model file names, names the most likely missing effect and prints
+# the command that adds it; run that command, validate again (it shows the error falling),
+# until nothing significant is missing or three effects have been added.
 model="$OUT/pi-envelope.json"
 models=("$model")
 for round in 1 2 3 4; do
-  step "round $round: hold $(basename "$model") against the held-out runs: how far off, where, which effect is missing" \
-    $E validate "$model" "$OUT/test" "$OUT/chirp" --json-out "$OUT/validate-$(basename "$model")"
+  step "round $round: hold $(basename "$model") against the validation runs: how far off, where, which effect is missing" \
+    $E validate "$model" "$OUT/test" "$OUT/check" --json-out "$OUT/validate-$(basename "$model")"
   refit=$(python -c "import json,sys; s=json.load(open(sys.argv[1]))['suspects']; print(s[0]['command'] if s else '')" "$OUT/validate-$(basename "$model")")
   if [ -z "$refit" ]; then
     echo "validate finds nothing significant missing: the loop ends"

@@ -1,0 +1,185 @@
+"""`endocal validate` on recordings as labs make them: one acquisition to fit, another to validate.
+
+The estimation/validation scheme (endocal/validation/estimation.py, suspects.scan_split): the
+model file names its training data, validate refits each candidate effect on it and scores it
+on the validation record, unit by unit. Checked as a user runs it, through the real commands:
+fit on one acquisition, validate on another, refit with the first suggestion, validate again.
+
+- short records on the simulator (one back-and-forth sine each, the default probe with its
+  tendon slack and tracker noise) and on real piezo data (one 1 Hz cycle each);
+- the thesis's calibration workflow (planes, then `sine-set` per axis with --planes): fit and
+  validate give the same RMSE on the same data, the planes recorded in the model are applied,
+  and the diagnosis on an unseen run lowers its error;
+- a residual that points at an effect the scan cannot test is named, never "nothing missing";
+- bad input: moved or changed training data, another axis, --train equal to the data.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from tests.test_cli_validate import _app, runner
+
+PIEZO = Path(__file__).resolve().parents[1] / "data_samples" / "piezo" / "piezo_aligned.csv"
+
+
+def _run(*args, ok=True):
+    res = runner.invoke(_app(), [str(a) for a in args])
+    if ok:
+        assert res.exit_code == 0, res.output
+    return res
+
+
+def _one_line_exit_2(res, match):
+    assert res.exit_code == 2, res.output
+    lines = [ln for ln in res.output.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1 and match in lines[0] and "Traceback" not in res.output, res.output
+
+
+def _validate_json(tmp, model, *data):
+    out = tmp / (Path(model).stem + ".v.json")
+    _run("validate", model, *data, "--json-out", out)
+    return json.loads(out.read_text())
+
+
+def _loop(tmp, model, val):
+    """validate MODEL VAL; run the first suggestion's refit command; validate the new model on VAL."""
+    first = _validate_json(tmp, model, val)
+    assert first["scheme"]["name"] == "estimation/validation", first["scheme"]
+    assert first["suspects"], [(s["effect"], s["gain_pct"]) for s in first["scan"]["tested"]]
+    cmd = first["suspects"][0]["command"].split()
+    assert cmd[:3] == ["endocal", "fit", "hysteresis"] and str(val) not in cmd  # validation data not folded in
+    _run(*cmd[1:], "--force")
+    second = _validate_json(tmp, cmd[cmd.index("--out") + 1], val)
+    return first, second
+
+
+@pytest.fixture(scope="module")
+def sine_sweeps(tmp_path_factory):
+    """Two acquisitions of one back-and-forth knob sweep each on the default simulated probe."""
+    tmp = tmp_path_factory.mktemp("sweeps")
+    _run("excite", "sine", "--set", "cycles=1", "--set", "frequency_hz=0.05", "--amplitude", "60",
+         "--out", tmp / "est", "--seed", "1", "--quiet")
+    _run("excite", "sine", "--set", "cycles=1", "--set", "frequency_hz=0.07", "--amplitude", "50",
+         "--out", tmp / "val", "--seed", "2", "--quiet")
+    _run("fit", "hysteresis", tmp / "est", "--axis", "ap", "--model", "pi", "--effects", "envelope",
+         "--out", tmp / "pe.json")
+    return tmp
+
+
+def test_one_sweep_to_fit_one_to_validate_runs_the_whole_diagnosis(sine_sweeps):
+    tmp = sine_sweeps
+    first, second = _loop(tmp, tmp / "pe.json", tmp / "val")
+    # the probe's tendon slack is what the paper's modified PI lacks: named first, and the refit
+    # on the first sweep cuts the error on the second by far more than the 30 % bar
+    assert first["suspects"][0]["effect"] == "deadzone"
+    assert first["estimation"][0]["source"].endswith("est")
+    before, after = first["metrics"]["rmse_deg"], second["metrics"]["rmse_deg"]
+    assert after <= 0.7 * before, (before, after)
+    # "watch the error fall" under the same scheme: the refit's validation RMSE is the scan's
+    assert second["compare"]["old_heldout_rmse_deg"] == pytest.approx(first["heldout_rmse_deg"], rel=1e-9)
+    assert second["compare"]["new_heldout_rmse_deg"] < second["compare"]["old_heldout_rmse_deg"]
+
+
+def test_bad_estimation_data_is_one_line_and_exit_2(sine_sweeps, tmp_path):
+    tmp = sine_sweeps
+    # training data recorded in the model moved: named, with the way forward
+    moved = tmp_path / "m.json"
+    d = json.loads((tmp / "pe.json").read_text())
+    d["provenance"]["data"][0]["path"] = str(tmp_path / "gone")
+    moved.write_text(json.dumps(d))
+    _one_line_exit_2(_run("validate", moved, tmp / "val", ok=False), "not found: give the estimation data with --train")
+    # changed since the fit (hash differs)
+    d["provenance"]["data"][0]["path"] = str(tmp / "val")
+    d["provenance"]["data"][0]["sha256"] = "0" * 64
+    moved.write_text(json.dumps(d))
+    _one_line_exit_2(_run("validate", moved, tmp / "est", ok=False), "has changed since the model was fitted")
+    # estimation data of another axis than the model
+    _one_line_exit_2(_run("validate", tmp / "pe.json", tmp / "val", "--train", PIEZO, ok=False), "is for axis 'ap'")
+    # --train with --cv rolling, an unknown --cv, an unknown --out-of-range
+    _one_line_exit_2(_run("validate", tmp / "pe.json", tmp / "val", "--train", tmp / "est", "--cv", "rolling", ok=False),
+                     "exclude each other")
+    _one_line_exit_2(_run("validate", tmp / "pe.json", tmp / "val", "--cv", "kfold", ok=False), "--cv must be one of")
+    _one_line_exit_2(_run("validate", tmp / "pe.json", "--protocol", "triangle", "--out-of-range", "wrap", ok=False),
+                     "--out-of-range must be one of")
+
+
+def test_train_equal_to_the_validation_data_warns_the_scores_are_in_sample(sine_sweeps):
+    tmp = sine_sweeps
+    d = _validate_json(tmp, tmp / "pe.json", tmp / "est")  # fitted on est, validated on est: rolling origin
+    assert d["scheme"]["name"] in ("rolling-origin", "none") and "fitted on the data validated here" in d["scheme"]["reason"]
+    res = _run("validate", tmp / "pe.json", tmp / "est", "--train", tmp / "est")
+    assert "in-sample" in res.stdout
+
+
+def test_real_piezo_one_cycle_to_fit_one_to_validate(tmp_path):
+    """Real hysteresis nobody here generated: fit on one 1 Hz cycle, validate on another."""
+    table = pd.read_csv(PIEZO)
+    for name, k in (("est", 2), ("val", 5)):  # 200 samples = one cycle each
+        part = table.iloc[200 * k: 200 * (k + 1)].copy()
+        part["t_s"] -= part["t_s"].iloc[0]
+        part.to_csv(tmp_path / f"{name}.csv", index=False)
+    _run("fit", "hysteresis", tmp_path / "est.csv", "--axis", "piezo", "--model", "linear", "--out", tmp_path / "lin.json")
+    first, second = _loop(tmp_path, tmp_path / "lin.json", tmp_path / "val.csv")
+    before, after = first["metrics"]["rmse_deg"], second["metrics"]["rmse_deg"]
+    # a piezo stack creeps (its displacement lags the drive's history, relaxing after each move):
+    # the first suggestion pays on the unseen cycle by more than the 30 % bar, and never makes it worse
+    assert after <= 0.7 * before, (first["suspects"][0]["effect"], before, after)
+
+
+@pytest.fixture(scope="module")
+def thesis(tmp_path_factory):
+    """The thesis's calibration: planes sweeps, then a shortened sine-set to fit and another to validate."""
+    tmp = tmp_path_factory.mktemp("thesis")
+    short = ["--set", "periods_s=[20.0,10.0,5.0]", "--set", "cycles=2"]
+    _run("excite", "planes", "--out", tmp / "planes", "--seed", "1", "--quiet")
+    _run("fit", "planes", tmp / "planes", "--out", tmp / "planes.json")
+    _run("excite", "sine-set", *short, "--out", tmp / "est", "--seed", "2", "--quiet")
+    _run("excite", "sine-set", *short, "--out", tmp / "val", "--seed", "3", "--quiet")
+    return tmp
+
+
+@pytest.mark.parametrize("axis", ["ap", "ml"])
+def test_thesis_workflow_fit_and_validate_agree_and_the_diagnosis_pays(thesis, axis):
+    tmp = thesis
+    model = tmp / f"{axis}.json"
+    res = _run("fit", "hysteresis", tmp / "est", "--axis", axis, "--model", "pi", "--effects", "envelope",
+               "--planes", tmp / "planes.json", "--out", model, "--json")
+    fit_rmse = json.loads(res.stdout)["fit"]["rmse_deg"]
+    # the same model on the same data: validate applies the planes the model records
+    same = _validate_json(tmp, model, tmp / "est")
+    assert same["metrics"]["rmse_deg"] == pytest.approx(fit_rmse, rel=0.02)
+    first, second = _loop(tmp, model, tmp / "val")
+    assert "--planes" in first["suspects"][0]["command"]
+    assert second["metrics"]["rmse_deg"] < first["metrics"]["rmse_deg"]
+
+
+def test_a_residual_pointing_at_an_effect_the_scan_cannot_test_is_named(thesis):
+    """sine-set drives each knob in turn: under rolling origin no training block sees the other knob move."""
+    tmp = thesis
+    model = tmp / "ap-noplanes.json"
+    _run("fit", "hysteresis", tmp / "est", "--axis", "ap", "--model", "pi", "--effects", "envelope", "--out", model)
+    out = tmp / "rolling.json"
+    _run("validate", model, tmp / "val", "--cv", "rolling", "--json-out", out)
+    d = json.loads(out.read_text())
+    other = [x for x in d["residuals"]["cross_correlation"] if x["signal"] == "other command"]
+    assert other and other[0]["significant"] and other[0]["max_abs_corr"] >= 0.3, other
+    pointers = {p["effect"]: p for p in d["pointers"]}
+    assert "coupling" in pointers and d["clean"] is False, d["pointers"]
+    assert "first training block" in pointers["coupling"]["why"]
+
+
+def test_moved_run_folder_is_found_beside_the_model(sine_sweeps, tmp_path):
+    """Recorded relative paths are also looked up relative to the model file's folder."""
+    tmp = sine_sweeps
+    shutil.copytree(tmp / "est", tmp_path / "est")
+    d = json.loads((tmp / "pe.json").read_text())
+    d["provenance"]["data"][0]["path"] = "est"
+    (tmp_path / "pe.json").write_text(json.dumps(d))
+    v = _validate_json(tmp_path, tmp_path / "pe.json", tmp / "val")
+    assert v["scheme"]["name"] == "estimation/validation"
