@@ -38,7 +38,7 @@ from endocal.protocols import signals
 DEFAULT_SAMPLE_RATE_HZ = 100.0
 
 # Top-level keys of a protocol file.
-_FILE_KEYS = ("description", "signal", "params")
+_FILE_KEYS = ("description", "signal", "params", "sim")
 
 
 # --------------------------------------------------------------------------- parameters
@@ -778,6 +778,10 @@ class Protocol:
         SHA-256 of the file's bytes (overrides are recorded in ``params``/``overrides``).
     overrides : dict
         The parameters the user changed at load time.
+    sim : dict
+        The file's optional ``[sim]`` table: simulator settings this protocol needs (e.g.
+        ``[sim.contact]``, an obstacle), in the layout of a sim config TOML. The simulator
+        backend applies them over ``--sim-config``; other backends only record them.
     """
 
     name: str
@@ -787,6 +791,7 @@ class Protocol:
     source_path: Path | None = None
     sha256: str | None = None
     overrides: dict = field(default_factory=dict)
+    sim: dict = field(default_factory=dict)
 
     @property
     def spec(self) -> SignalSpec:
@@ -799,7 +804,7 @@ class Protocol:
         where = f"override for protocol '{self.name}'"
         params = _resolve_params(self.spec, dict(overrides), where, base=self.params)
         return Protocol(self.name, self.description, self.signal, params, self.source_path, self.sha256,
-                        {**self.overrides, **dict(overrides)})
+                        {**self.overrides, **dict(overrides)}, self.sim)
 
     def resolved_axes(self, probe: ProbeConfig) -> list[str]:
         """The protocol's ``axes`` as the probe's DoF names.
@@ -872,6 +877,7 @@ class Protocol:
             "overrides": dict(self.overrides),
             "source": str(self.source_path) if self.source_path else None,
             "sha256": self.sha256,
+            **({"sim": self.sim} if self.sim else {}),
         }
 
     @classmethod
@@ -892,7 +898,7 @@ class Protocol:
             raise ProtocolError(f"{where}: 'params' must be a table")
         src = d.get("source")
         return cls(name, str(d.get("description", "")), signal, _resolve_params(spec, params, where),
-                   Path(src) if src else None, d.get("sha256"), dict(d.get("overrides") or {}))
+                   Path(src) if src else None, d.get("sha256"), dict(d.get("overrides") or {}), dict(d.get("sim") or {}))
 
 
 def _spec(signal: Any, where: str) -> SignalSpec:
@@ -975,6 +981,9 @@ def read_protocol_file(path: str | Path) -> Protocol:
     params = data.get("params", {})
     if not isinstance(params, dict):
         raise ProtocolError(f"{where}: 'params' must be a table (a section headed params)")
+    sim = data.get("sim", {})
+    if not isinstance(sim, dict):
+        raise ProtocolError(f"{where}: 'sim' must be a table of sim config sections (e.g. a section headed sim.contact)")
     return Protocol(
         name=path.stem,
         description=" ".join(data["description"].split()),
@@ -982,6 +991,7 @@ def read_protocol_file(path: str | Path) -> Protocol:
         params=_resolve_params(spec, params, where),
         source_path=path.resolve(),
         sha256=hashlib.sha256(raw).hexdigest(),
+        sim=sim,
     )
 
 
