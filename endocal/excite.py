@@ -11,14 +11,14 @@ flushed, and ``run.json`` records how the run ended.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
 from endocal.backends.base import Backend
-from endocal.errors import OutputPathError
+from endocal.errors import ConfigError, OutputPathError
 from endocal.probe import ProbeConfig
 from endocal.runs.format import (
     MOTOR,
@@ -53,6 +53,7 @@ class ExciteResult:
     aligned_rows: int
     wall_s: float
     alignment_error: str | None = None
+    events: list = field(default_factory=list)
 
     @property
     def speed_x_realtime(self) -> float:
@@ -72,6 +73,7 @@ def run_excitation(
     command: str | None = None,
     progress: Callable[[float, float], None] | None = None,
     flush_interval_s: float = 1.0,
+    guard=None,
 ) -> ExciteResult:
     """Play ``trajectory`` on ``backend`` and log the run to ``out``.
 
@@ -95,11 +97,15 @@ def run_excitation(
         Replace an existing ``out``.
     progress : callable, optional
         Called as ``progress(done_s, total_s)`` after each chunk.
+    guard : ForceGuard, optional
+        Contact-force guard (:class:`endocal.force.guard.ForceGuard`) the backend steps at
+        every tick; its stops and releases are the run's ``events`` in ``run.json``.
 
     Returns
     -------
     ExciteResult
-        ``status`` is ``interrupted`` when Ctrl-C stopped the run (the run is still valid).
+        ``status`` is ``interrupted`` when Ctrl-C stopped the run (the run is still valid);
+        ``events`` lists the guard's stops and releases.
 
     Raises
     ------
@@ -108,6 +114,13 @@ def run_excitation(
     """
     out = Path(out)
     trajectory.check_limits(probe)  # refuse before anything moves
+    if guard is not None:
+        if not hasattr(backend, "attach_guard"):
+            raise ConfigError(f"backend '{backend.name}' has no per-tick hook for a force guard")
+        if guard.axis not in trajectory.moving_dofs:
+            raise ConfigError(f"the force model is for axis '{guard.axis}', but this protocol moves "
+                              f"{', '.join(trajectory.moving_dofs) or 'nothing'}: use a model of a driven axis")
+        backend.attach_guard(guard)
     prepare_output(out, force)
     meta = run_meta(protocol=protocol_info, probe=probe, backend={"name": backend.name}, seed=seed,
                     realtime=realtime or backend.realtime, command=command,
@@ -158,6 +171,9 @@ def run_excitation(
         try:
             backend.close()
         finally:
+            if guard is not None:
+                meta["force_guard"] = guard.describe()
+                meta["events"] = list(guard.events)
             logger.flush()
             finish_run(out, meta, logger, status, error, time.monotonic() - wall0, probe)
     return ExciteResult(
@@ -170,4 +186,53 @@ def run_excitation(
         aligned_rows=meta.get("counts", {}).get("aligned_rows", 0),
         wall_s=meta.get("wall_s", 0.0),
         alignment_error=meta.get("alignment_error"),
+        events=list(meta.get("events", [])),
     )
+
+
+def prepare_backend(backend: Backend, protocol, probe: ProbeConfig, *, tip_load_n: float | None = None):
+    """Set a backend up for a protocol: its ``[sim]`` table and a known tip load.
+
+    Parameters
+    ----------
+    backend : Backend
+        As built from the command line.
+    protocol : Protocol
+        Its ``sim`` table (sim-config sections, e.g. an obstacle) is applied on the simulator.
+    probe : ProbeConfig
+    tip_load_n : float, optional
+        A known force hung at the tip (N, >= 0), opposing bending of the protocol's first axis
+        towards its positive half-plane (duodenoscope paper, sec. 2.4, calibration weights).
+        On the simulator it is hung there ([contact] mode ``weight``); on any backend it is
+        recorded for ``endocal fit force``.
+
+    Returns
+    -------
+    backend : Backend
+        The simulator with the settings applied, or ``backend`` unchanged.
+    record : dict
+        What ``run.json`` records under ``protocol`` (``tip_load``), possibly empty.
+
+    Raises
+    ------
+    ConfigError
+        A negative or non-finite load, a load together with a protocol obstacle, or a bad ``[sim]`` table.
+    """
+    sections = {k: dict(v) for k, v in (getattr(protocol, "sim", None) or {}).items()}
+    record: dict = {}
+    if tip_load_n is not None:
+        if not np.isfinite(tip_load_n) or tip_load_n < 0:
+            raise ConfigError(f"--tip-load-n must be a force of 0 N or more, got {tip_load_n!r}")
+        if "contact" in sections:
+            raise ConfigError(f"protocol '{protocol.name}' sets up its own contact on the simulator; "
+                              "--tip-load-n belongs to force-calibration runs")
+        axis = protocol.resolved_axes(probe)[0]
+        record["tip_load"] = {"force_n": float(tip_load_n), "axis": axis, "opposes": "+"}
+        if tip_load_n > 0:
+            sections["contact"] = {"enabled": True, "mode": "weight", "axis": axis, "weight_n": float(tip_load_n)}
+    if sections and hasattr(backend, "with_settings"):
+        try:
+            backend = backend.with_settings(sections)
+        except ConfigError as exc:
+            raise ConfigError(f"protocol '{protocol.name}' [sim] table: {exc}") from None
+    return backend, record

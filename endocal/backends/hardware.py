@@ -514,6 +514,9 @@ class HardwareBackend:
         self.stage = UdpStage(stage) if stage.mode == "udp" else None
         self.slip_s = 0.0
         self.ticks_played = 0
+        #: Per-tick hook (:class:`endocal.force.guard.ForceGuard`) or None; see :meth:`attach_guard`.
+        self.force_guard = None
+        self._guard_reading: tuple | None = None
         self._open = False
         self._t0: float | None = None
         self._previous: tuple[float, dict[str, float]] | None = None
@@ -610,6 +613,16 @@ class HardwareBackend:
             self.servos.write_goals_deg({a: float(goals[a][i]) for a in start})
         self._present.update(end)
 
+    def attach_guard(self, guard) -> None:
+        """Step ``guard`` (a :class:`endocal.force.guard.ForceGuard`) at every tick; None detaches.
+
+        Before each goal is written the guard sees the guarded knob's last reading (time,
+        angle, speed, current) and may hold that knob's goal back; the motor stream logs the
+        goal written.
+        """
+        self.force_guard = guard
+        self._guard_reading = None
+
     def execute(self, t_s: np.ndarray, goal: dict[str, np.ndarray]) -> StreamChunk:
         """Play one chunk tick by tick, paced to the run clock, and return what was logged.
 
@@ -656,17 +669,24 @@ class HardwareBackend:
             else:
                 _wait_until(deadline)
             self.tracker.check()
-            self.servos.write_goals_deg({a: float(goals[a][i]) for a in knobs})
+            knob_goals = {a: float(goals[a][i]) for a in knobs}
+            guard = self.force_guard
+            if guard is not None and self._guard_reading is not None:  # the last reading decides this goal
+                knob_goals[guard.axis] = guard.step(*self._guard_reading, knob_goals[guard.axis])
+            self.servos.write_goals_deg(knob_goals)
             if self.stage is not None:
                 stage_reply = self.stage.command(float(goals[TRANSLATION][i]), float(goals[ROTATION][i]))
             t_before = self.clock()
             state = self.servos.read_state()
             cols["t_s"][i] = 0.5 * (t_before + self.clock())
             for a in knobs:
-                cols[f"{a}_goal_deg"][i] = goals[a][i]
+                cols[f"{a}_goal_deg"][i] = knob_goals[a]
                 cols[f"{a}_pos_deg"][i] = state.pos_deg[a]
                 cols[f"{a}_vel_degps"][i] = state.vel_dps[a]
                 cols[f"{a}_current_ma"][i] = state.current_ma[a]
+            if guard is not None:
+                ga = guard.axis
+                self._guard_reading = (cols["t_s"][i], state.pos_deg[ga], state.vel_dps[ga], state.current_ma[ga])
             for dof in STAGE_DOFS:
                 cols[f"{dof}_goal_{self.units[dof]}"][i] = goals[dof][i]
             if self.stage is not None:

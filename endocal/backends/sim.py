@@ -32,7 +32,25 @@ class SimBackend:
         self.probe = probe
         self.seed = seed
         self._sim: Simulator | None = None
+        #: Per-tick hook (:class:`endocal.force.guard.ForceGuard`) or None; see :meth:`attach_guard`.
+        self.force_guard = None
         Simulator(self.config, probe, seed)  # validate now (contact axis, seed) rather than at open()
+
+    def attach_guard(self, guard) -> None:
+        """Step ``guard`` at every simulated tick (it may hold back its knob's goal); None detaches."""
+        self.force_guard = guard
+
+    def with_settings(self, sections: dict) -> SimBackend:
+        """A fresh backend with some sim-config sections changed (a protocol's ``[sim]`` table).
+
+        Raises
+        ------
+        ConfigError
+            An unknown section or key, or a bad value (validated like a sim config file).
+        """
+        backend = SimBackend(self.config.replace(**sections) if sections else self.config, self.probe, self.seed)
+        backend.force_guard = self.force_guard
+        return backend
 
     def open(self) -> None:
         """Start a fresh simulation (neutral probe, clock and random streams at their start)."""
@@ -42,7 +60,7 @@ class SimBackend:
         """Simulate one chunk; see :meth:`endocal.sim.Simulator.execute`. Opens on first use."""
         if self._sim is None:
             self.open()
-        return self._sim.execute(t_s, goal)
+        return self._sim.execute(t_s, goal, guard=self.force_guard)
 
     def close(self) -> None:
         """Release the simulation; safe to call more than once."""

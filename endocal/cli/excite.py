@@ -30,6 +30,9 @@ def excite(
     axes: Optional[str] = typer.Option(None, "--axes", help="Comma-separated axes to drive, e.g. `ml` or `ap,ml`."),
     planes_file: Optional[Path] = typer.Option(None, "--planes", help="planes.json from `endocal fit planes`: pass the knob goals through the orthogonal compensator."),
     model_files: list[Path] = typer.Option([], "--model", help="Hysteresis model (endocal fit hysteresis) of one axis, repeatable: the protocol's goals become desired bending angles played through the inverse models (task-space control)."),
+    force_model: Optional[Path] = typer.Option(None, "--force-model", help="force.json (endocal fit force): guard the run, checking the predicted tip force every tick."),
+    max_force_n: Optional[float] = typer.Option(None, "--max-force-n", help="With --force-model: stop bending further into the load when the predicted tip force reaches this (N)."),
+    tip_load_n: Optional[float] = typer.Option(None, "--tip-load-n", help="Known load hung at the tip (N), opposing positive bending of the protocol's first axis: recorded for `fit force`; the simulator hangs it."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
 ) -> None:
     """Run an excitation protocol and log motor and tracker streams to a run folder.
@@ -40,7 +43,7 @@ def excite(
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
     from endocal.backends.registry import make_backend
-    from endocal.excite import run_excitation
+    from endocal.excite import prepare_backend, run_excitation
     from endocal.probe import load_probe
     from endocal.protocols import load_protocol, parse_overrides
 
@@ -80,7 +83,20 @@ def excite(
 
         trajectory = compensate_trajectory(trajectory, probe_cfg, planes)
     trajectory.check_limits(probe_cfg)  # before any backend is built or anything moves
+    guard = None
+    if force_model is not None or max_force_n is not None:
+        from endocal.errors import ModelError
+        from endocal.force import ForceGuard, check_guard_fits, load_force_model
+
+        if force_model is None:
+            raise ModelError("--max-force-n needs --force-model force.json (endocal fit force): the guard predicts the force from it")
+        fmodel = load_force_model(force_model)
+        check_guard_fits(fmodel, probe_cfg, max_force_n)
+        guard = ForceGuard(fmodel, max_force_n)
+        protocol_info["force_model"] = str(force_model)
     be = make_backend(backend, probe_cfg, seed=seed, sim_config=sim_config, hardware_config=hardware_config)
+    be, record = prepare_backend(be, proto, probe_cfg, tip_load_n=tip_load_n)
+    protocol_info.update(record)
     command = "endocal " + " ".join(sys.argv[1:])
 
     show = not quiet and err.is_terminal
@@ -105,12 +121,20 @@ def excite(
             force=force,
             command=command,
             progress=lambda done, total: bar.update(task, completed=done),
+            guard=guard,
         )
     speed = f", {result.speed_x_realtime:,.0f}x real time" if result.wall_s > 0 else ""
     out.print(
         f"run {result.status}: {result.run_dir} ({result.logged_s:.1f} of {result.planned_s:.1f} s logged, "
         f"{result.motor_rows} motor ticks, {result.tracker_rows} tracker frames, {result.aligned_rows} aligned rows{speed})"
     )
+    if guard is not None:
+        stops = [e for e in result.events if e["kind"] == "stop"]
+        out.print(f"force guard ({guard.axis}, {guard.max_force_n:g} N): {len(stops)} stop(s)")
+        for e in result.events:
+            pred = "predicted -" if e["force_pred_n"] is None else f"predicted {e['force_pred_n']:.3f} N"
+            out.print(f"  t = {e['t_s']:.2f} s  {e['kind']:<7}  {pred}  "
+                      f"{e['axis']} = {e['knob_deg'][e['axis']]:.2f} deg", markup=False)
     if result.alignment_error:
         err.print(f"warning: no aligned table: {result.alignment_error}")
     if result.status == "interrupted":

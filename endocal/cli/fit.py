@@ -11,7 +11,7 @@ import typer
 from endocal.cli._common import cli_errors, err, out
 from endocal.errors import OutputExistsError
 
-app = typer.Typer(help="Fit bending planes (`fit planes`) and hysteresis models (`fit hysteresis`).", no_args_is_help=True)
+app = typer.Typer(help="Fit bending planes (`fit planes`), hysteresis models (`fit hysteresis`) and contact-force models (`fit force`).", no_args_is_help=True)
 
 
 @app.command("planes")
@@ -110,3 +110,8 @@ def hysteresis(
     for w in rep.warnings:
         out.print(f"warning: {w}", markup=False)
     err.print(f"wrote {out_path}")
+
+
+from endocal.cli.force import fit_force_cmd  # noqa: E402  (registered here so `fit --help` lists it)
+
+app.command("force")(fit_force_cmd)

@@ -173,12 +173,20 @@ class LoadConfig:
 
 @dataclass(frozen=True)
 class ContactConfig:
-    """A wall the tip meets past a given bend on one half-plane of one axis."""
+    """A load at the tip of one bending axis: a wall past a given bend, or a hung weight.
+
+    Either way the tip force ``F`` acts perpendicular to the tip in the axis' plane, so its
+    moment about the base of the bending section is ``F * L(beta)`` with the constant-curvature
+    lever arm ``L(beta) = l sin(beta) / beta`` (the tip's axial distance from the base).
+    """
 
     enabled: bool = _p(False, "switch the obstacle on")
+    mode: str = _p("wall", "'wall' (an elastic wall past wall_deg) or 'weight' (a constant force weight_n at the tip)",
+                   choices=("wall", "weight"))
     axis: str = _p("axis1", "bending axis the wall blocks: 'axis1', 'axis2' or the probe's axis name")
     wall_deg: float = _p(25.0, "eq.-1 angle where the tip meets the wall (deg, sign = half-plane)", -89.0, 89.0)
     stiffness_n_per_mm: float = _p(0.05, "wall stiffness at the tip (N/mm)", 0.0, lo_open=True)
+    weight_n: float = _p(0.5, "mode 'weight': force hung at the tip (N), opposing bending towards the positive half-plane", 0.0, 20.0)
 
 
 _SECTIONS: dict[str, type] = {

@@ -113,11 +113,12 @@ class Simulator:
         self._coupling = np.array([cp.first_from_second, cp.second_from_first]) if cp.enabled else np.zeros(2)
         self._inv_bs2 = 1.0 / math.radians(c.envelope.stiffening_bend_deg) ** 2 if c.envelope.enabled else 0.0
         # [contact]: a wall at eq.-1 angle theta_w, i.e. at bend 2*theta_w (in-plane CC arc: eq. 1 gives
-        # exactly half the bend). Tip force F = k * l * penetration with lever l = bending length, so the
-        # wall's moment about the section base is k * l^2 * penetration (N*mm/rad).
+        # exactly half the bend), with moment k * l^2 * penetration (N*mm/rad) about the section base; or
+        # a weight F whose moment is F * l sin(beta)/beta. Either tip force acts perpendicular to the tip,
+        # so F = moment / L(beta) with the constant-curvature lever arm L = l sin(beta)/beta.
         self._wall_axis = -1
         self._lever_mm = self.probe.bending_length_mm
-        self._wall_rad, self._wall_sign, self._k_wall = 0.0, 1.0, 0.0
+        self._wall_rad, self._wall_sign, self._k_wall, self._w_force = 0.0, 1.0, 0.0, 0.0
         if c.contact.enabled:
             try:
                 axis = self.probe.resolve_axis(c.contact.axis)
@@ -125,12 +126,15 @@ class Simulator:
                 raise ConfigError(f"contact.axis: {exc}") from None
             if axis not in self._axes:
                 raise ConfigError(f"contact.axis must be a bending axis ({', '.join(self._axes)}), got '{axis}'")
-            if c.contact.wall_deg == 0.0:
+            if c.contact.mode == "wall" and c.contact.wall_deg == 0.0:
                 raise ConfigError("contact.wall_deg must be non-zero: its sign says which half-plane the wall is on")
             self._wall_axis = self._axes.index(axis)
-            self._wall_rad = 2.0 * math.radians(c.contact.wall_deg)
-            self._wall_sign = 1.0 if c.contact.wall_deg > 0 else -1.0
-            self._k_wall = c.contact.stiffness_n_per_mm * self._lever_mm**2
+            if c.contact.mode == "weight":
+                self._w_force = c.contact.weight_n * self._lever_mm
+            else:
+                self._wall_rad = 2.0 * math.radians(c.contact.wall_deg)
+                self._wall_sign = 1.0 if c.contact.wall_deg > 0 else -1.0
+                self._k_wall = c.contact.stiffness_n_per_mm * self._lever_mm**2
         dev = c.deviation_deg
         self._psi = np.radians([[NOMINAL_DIRECTION_DEG["y+"] + dev["y+"], NOMINAL_DIRECTION_DEG["y-"] + dev["y-"]],
                                 [NOMINAL_DIRECTION_DEG["x+"] + dev["x+"], NOMINAL_DIRECTION_DEG["x-"] + dev["x-"]]])
@@ -171,7 +175,7 @@ class Simulator:
         return bx, by
 
     # -- the contract ---------------------------------------------------------------------
-    def execute(self, t_s: np.ndarray, goal: dict[str, np.ndarray]) -> StreamChunk:
+    def execute(self, t_s: np.ndarray, goal: dict[str, np.ndarray], guard=None) -> StreamChunk:
         """Simulate one chunk of motor ticks.
 
         Parameters
@@ -181,12 +185,16 @@ class Simulator:
         goal : dict
             ``dof -> (n,)`` goals for every DoF of the probe (knobs and rotation in deg,
             translation in mm), within the probe's limits.
+        guard : ForceGuard, optional
+            Per-tick hook (:class:`endocal.force.guard.ForceGuard`): after each tick's physics it
+            sees the guarded knob's angle, speed and current and may replace the goal written at
+            that tick; the chunk is then stepped tick by tick instead of in one compiled call.
 
         Returns
         -------
         StreamChunk
             ``motor``: :func:`~endocal.backends.base.motor_columns` plus ``contact_force_n`` and
-            ``sheath_wrap_deg``; ``tracker``: frames stamped in ``(previous chunk end, t_s[-1]]``;
+            ``sheath_wrap_deg`` (and ``force_pred_n``, the guard's prediction, with a guard); ``tracker``: frames stamped in ``(previous chunk end, t_s[-1]]``;
             ``truth``: ``t_s``, ``<axis>_true_deg`` (noise- and latency-free eq.-1 angles),
             ``bend_x_rad``, ``bend_y_rad``, ``contact_force_n``.
 
@@ -209,23 +217,26 @@ class Simulator:
         out_t0 = np.empty((n, 2, 2))
         out_beta = np.empty((n, 2))
         out_mwall = np.empty(n)
-        ten = self.config.tendon
-        tendon.simulate_ticks(
-            dt, goal_int, np.radians(wrap_deg), self._w, self._tau, self._vmax,
-            ten.pulley_radius_mm, ten.offset_mm, self._e0, ten.mu, self._rate_gain, self._coupling,
-            self.config.bending.stiffness_nmm_per_rad, self._inv_bs2, self.config.bending.friction_nmm,
-            self._wall_axis, self._wall_rad, self._wall_sign, self._k_wall,
-            self._held_goal, self._pos, self._vel, self._prof, self._d_mm, self._beta_qs,
-            out_pos, out_vel, out_t0, out_beta, out_mwall,
-        )
+        outs = (out_pos, out_vel, out_t0, out_beta, out_mwall)
+        noise_ma = self._rng_current.standard_normal((n, 4)) * self.config.motor.current_noise_ma
+        wrap_rad = np.radians(wrap_deg)
+        force_pred_n = None
+        if guard is None:
+            self._ticks(dt, goal_int, wrap_rad, outs)
+        else:
+            force_pred_n = self._guarded_ticks(t, dt, g, goal_int, wrap_rad, outs, noise_ma, guard)
         cr = self.config.creep
         beta = tendon.creep_filter(out_beta, dt, cr.fraction, cr.time_constant_s, self._creep_slow) if cr.enabled else out_beta
-        contact_force_n = out_mwall / self._lever_mm
+        contact_force_n = np.zeros(n)
+        if self._wall_axis >= 0:
+            contact_force_n = out_mwall / self.lever_arm_mm(out_beta[:, self._wall_axis])
         bx, by = self.bending_vector_rad(beta)
         tip_in_base, _ = tip_pose_in_base(bx, by, self.probe.bending_length_mm)
         true1, true2 = bending_angles_deg(tip_in_base)
 
-        motor = self._motor_stream(t, g, out_pos, out_vel, out_t0, contact_force_n, wrap_deg)
+        motor = self._motor_stream(t, g, out_pos, out_vel, out_t0, contact_force_n, wrap_deg, noise_ma)
+        if force_pred_n is not None:
+            motor["force_pred_n"] = force_pred_n
         state = np.column_stack([bx, by, out_pos[:, 2], out_pos[:, 3]])
         tracker = self._tracker_stream(t, state)
         a1, a2 = self._axes
@@ -241,6 +252,59 @@ class Simulator:
         return StreamChunk(motor=motor, tracker=tracker, truth=truth)
 
     # -- helpers --------------------------------------------------------------------------
+    def lever_arm_mm(self, bend_rad: np.ndarray) -> np.ndarray:
+        """Lever arm (mm) of a tip force perpendicular to the tip about the section base.
+
+        Constant curvature: the tip's axial distance from the base, ``l sin(beta)/beta``
+        (:func:`endocal.kinematics.tip_pose_in_base`, ``z`` component).
+        """
+        b = np.abs(np.asarray(bend_rad, float))
+        return tip_pose_in_base(b, np.zeros_like(b), self.probe.bending_length_mm)[0][:, 2]
+
+    def _ticks(self, dt, goal_int, wrap_rad, outs) -> None:
+        """Run ticks ``dt`` through the compiled kernel, updating the carried state."""
+        ten = self.config.tendon
+        tendon.simulate_ticks(
+            dt, goal_int, wrap_rad, self._w, self._tau, self._vmax,
+            ten.pulley_radius_mm, ten.offset_mm, self._e0, ten.mu, self._rate_gain, self._coupling,
+            self.config.bending.stiffness_nmm_per_rad, self._inv_bs2, self.config.bending.friction_nmm,
+            self._wall_axis, self._wall_rad, self._wall_sign, self._k_wall, self._w_force,
+            self._held_goal, self._pos, self._vel, self._prof, self._d_mm, self._beta_qs,
+            *outs,
+        )
+
+    def _guarded_ticks(self, t, dt, g, goal_int, wrap_rad, outs, noise_ma, guard) -> np.ndarray:
+        """Step the chunk tick by tick with ``guard.step`` between ticks; returns its predictions (N).
+
+        A goal written at tick ``i`` acts from ``t_i`` on, so the reading of tick ``i`` does
+        not depend on it: the guard sees that reading and may replace the goal before the
+        next tick (``g`` and the held goal are updated in place, so the motor stream logs
+        what was written).
+        """
+        try:
+            ax = self._axes.index(guard.axis)
+        except ValueError:
+            raise ConfigError(f"force guard is for axis '{guard.axis}', but probe '{self.probe.name}' "
+                              f"has {', '.join(self._axes)}") from None
+        m, r_p = self.config.motor, self.config.tendon.pulley_radius_mm
+        out_pos, out_vel, out_t0 = outs[0], outs[1], outs[2]
+        pred = np.empty(t.size)
+        for i in range(t.size):
+            sl = slice(i, i + 1)
+            self._ticks(dt[sl], goal_int[sl], wrap_rad[sl], tuple(o[sl] for o in outs))
+            vel_dps = math.degrees(out_vel[i, ax])
+            # The current the motor reports (as in _motor_stream, same noise draw).
+            torque_nmm = r_p * (out_t0[i, ax, 0] - out_t0[i, ax, 1]) + m.knob_friction_nmm * math.tanh(
+                vel_dps / _KNOB_FRICTION_SMOOTHING_DPS)
+            current_ma = torque_nmm / m.torque_constant_nm_per_a + noise_ma[i, ax]
+            wanted = g[i, ax]
+            allowed = guard.step(float(t[i]), math.degrees(out_pos[i, ax]), vel_dps, current_ma, wanted)
+            pred[i] = guard.force_n
+            if allowed != wanted:
+                g[i, ax] = allowed
+                self._held_goal[ax] = math.radians(allowed)
+        return pred
+
     def _check_input(self, t_s, goal) -> tuple[np.ndarray, np.ndarray]:
         t = np.asarray(t_s, dtype=float)
         if t.ndim != 1 or t.size == 0:
@@ -276,10 +340,9 @@ class Simulator:
             g[:, i] = v
         return t, g
 
-    def _motor_stream(self, t, g, pos, vel, t0, contact_force_n, wrap_deg) -> dict[str, np.ndarray]:
+    def _motor_stream(self, t, g, pos, vel, t0, contact_force_n, wrap_deg, noise) -> dict[str, np.ndarray]:
         m = self.config.motor
         r_p = self.config.tendon.pulley_radius_mm
-        noise = self._rng_current.standard_normal((t.size, 4)) * m.current_noise_ma
         vel_units = np.column_stack([np.degrees(vel[:, 0]), np.degrees(vel[:, 1]), vel[:, 2], np.degrees(vel[:, 3])])
         pos_units = np.column_stack([np.degrees(pos[:, 0]), np.degrees(pos[:, 1]), pos[:, 2], np.degrees(pos[:, 3])])
         current = np.empty((t.size, 4))

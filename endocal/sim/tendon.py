@@ -139,8 +139,22 @@ def _apply_clamp(old, lo_f, hi_f, t_end, out):
 
 
 @njit(cache=True)
+def _weight_moment(beta, w_force):
+    """Moment (N*mm) of a tip weight about the section base and its derivative in ``beta``.
+
+    ``w_force * sin(beta) / beta``: force times the constant-curvature lever arm (the tip's
+    axial distance from the base, ``l sin(beta)/beta``), ``w_force = F * l`` (N*mm).
+    """
+    if w_force == 0.0:
+        return 0.0, 0.0
+    if abs(beta) < 1e-4:
+        return w_force * (1.0 - beta * beta / 6.0), -w_force * beta / 3.0
+    return w_force * math.sin(beta) / beta, w_force * (beta * math.cos(beta) - math.sin(beta)) / (beta * beta)
+
+
+@njit(cache=True)
 def _moment_residual(beta, mid, w, lo_d, hi_d, swlo_d, swhi_d, base_ag, base_an, r_t, c_other, k_bend, inv_bs2,
-                     wall, wall_sign, k_wall, guess_ag, guess_ant):
+                     wall, wall_sign, k_wall, w_force, guess_ag, guess_ant):
     """Moment balance ``R(beta)`` (N*mm), ``dR/dbeta`` and the two distal tensions (N).
 
     ``base_ag``, ``base_an`` are the tendons' stretches before the distal anchor displacement
@@ -157,7 +171,9 @@ def _moment_residual(beta, mid, w, lo_d, hi_d, swlo_d, swhi_d, base_ag, base_an,
     if k_wall > 0.0 and pen > 0.0:
         m_wall = wall_sign * k_wall * pen
         dm += k_wall
-    r = r_t * (t_ag - t_an) - m_bend - m_wall
+    m_w, dm_w = _weight_moment(beta, w_force)
+    dm += dm_w
+    r = r_t * (t_ag - t_an) - m_bend - m_wall - m_w
     dr = -dm
     if g_ag > 0.0:
         dr -= r_t * r_t / g_ag
@@ -168,7 +184,7 @@ def _moment_residual(beta, mid, w, lo_d, hi_d, swlo_d, swhi_d, base_ag, base_an,
 
 @njit(cache=True)
 def axis_step(prof, mid, w, lo_p, hi_p, lo_d, hi_d, q_rad, d_old, beta_prev, beta_other,
-              r_p, r_t, e0, c_couple, k_bend, inv_bs2, m_fric, wall, wall_sign, k_wall):
+              r_p, r_t, e0, c_couple, k_bend, inv_bs2, m_fric, wall, wall_sign, k_wall, w_force):
     """Advance one bending axis by one motor tick (both sub-steps); updates ``prof`` in place.
 
     Parameters
@@ -199,6 +215,8 @@ def axis_step(prof, mid, w, lo_p, hi_p, lo_d, hi_d, q_rad, d_old, beta_prev, bet
         imbalance equals ``+-m_fric``.
     wall, wall_sign, k_wall : float
         Wall bend (rad), its half-plane (+-1) and rotational stiffness (N*mm/rad, 0 = no wall).
+    w_force : float
+        Tip weight times the bending length (N*mm, 0 = none): moment ``w_force sin(beta)/beta``.
 
     Returns
     -------
@@ -207,7 +225,7 @@ def axis_step(prof, mid, w, lo_p, hi_p, lo_d, hi_d, q_rad, d_old, beta_prev, bet
     d_new : float
         Distal anchor displacement now (mm).
     m_wall : float
-        Wall moment (N*mm, >= 0 magnitude along the wall's half-plane).
+        Contact moment magnitude (N*mm, >= 0): the wall's or the weight's.
     """
     n = prof.shape[1]
     swlo_p = 0.0
@@ -231,7 +249,7 @@ def axis_step(prof, mid, w, lo_p, hi_p, lo_d, hi_d, q_rad, d_old, beta_prev, bet
     c_other = c_couple * beta_other
     b = beta_prev
     r, dr, t_ag, t_an = _moment_residual(b, mid, w, lo_d, hi_d, swlo_d, swhi_d, base_ag, base_an, r_t, c_other, k_bend,
-                                         inv_bs2, wall, wall_sign, k_wall, mid[0, n - 1], mid[1, n - 1])
+                                         inv_bs2, wall, wall_sign, k_wall, w_force, mid[0, n - 1], mid[1, n - 1])
     # Joint friction: stick inside the friction cone, else slide to its edge on the side of the imbalance.
     slide = 0.0
     if r > m_fric:
@@ -263,7 +281,7 @@ def axis_step(prof, mid, w, lo_p, hi_p, lo_d, hi_d, q_rad, d_old, beta_prev, bet
             break
         b = bn
         r, dr, t_ag, t_an = _moment_residual(b, mid, w, lo_d, hi_d, swlo_d, swhi_d, base_ag, base_an, r_t, c_other, k_bend,
-                                             inv_bs2, wall, wall_sign, k_wall, t_ag, t_an)
+                                             inv_bs2, wall, wall_sign, k_wall, w_force, t_ag, t_an)
         r -= slide
         if abs(r) <= 1e-11 * (1.0 + k_bend):
             break
@@ -274,7 +292,8 @@ def axis_step(prof, mid, w, lo_p, hi_p, lo_d, hi_d, q_rad, d_old, beta_prev, bet
     _apply_clamp(mid[1], lo_d, hi_d, t_an, prof[1])
     pen = wall_sign * (b - wall)
     m_wall = k_wall * pen if (k_wall > 0.0 and pen > 0.0) else 0.0
-    return b, d_new, m_wall
+    m_w, _ = _weight_moment(b, w_force)
+    return b, d_new, m_wall + abs(m_w)
 
 
 @njit(cache=True)
@@ -316,7 +335,7 @@ def _motor(pos, vel, goal, tau, vmax, dt):
 
 @njit(cache=True)
 def simulate_ticks(dt_s, goal, wrap_rad, w, tau_s, vmax, r_p, r_t, e0, mu, rate_gain_s_per_rad, coupling,
-                   k_bend, inv_bs2, m_fric, wall_axis, wall_rad, wall_sign, k_wall,
+                   k_bend, inv_bs2, m_fric, wall_axis, wall_rad, wall_sign, k_wall, w_force,
                    held, pos, vel, prof, d_mm, beta_qs, out_pos, out_vel, out_t0, out_beta, out_mwall):
     """Run a chunk of motor ticks; every state array is updated in place.
 
@@ -346,6 +365,8 @@ def simulate_ticks(dt_s, goal, wrap_rad, w, tau_s, vmax, r_p, r_t, e0, mu, rate_
         Axis the wall blocks (0, 1) or -1 for none.
     wall_rad, wall_sign, k_wall : float
         Wall bend (rad), half-plane sign, rotational stiffness (N*mm/rad).
+    w_force : float
+        Tip weight on ``wall_axis`` times the bending length (N*mm; 0 = none).
     held : (4,) array
         Goal of the previous tick, held by the servos over the current tick (a goal written at
         tick ``i`` acts from ``t_i`` on; the position read at ``t_i`` has not seen it yet).
@@ -361,7 +382,7 @@ def simulate_ticks(dt_s, goal, wrap_rad, w, tau_s, vmax, r_p, r_t, e0, mu, rate_
     out_beta : (n, 2) array
         Quasi-static bend per axis (rad).
     out_mwall : (n,) array
-        Wall moment magnitude (N*mm).
+        Contact moment magnitude (N*mm) of the wall or weight.
     """
     n_nodes = prof.shape[2]
     n_seg = n_nodes - 1
@@ -391,7 +412,8 @@ def simulate_ticks(dt_s, goal, wrap_rad, w, tau_s, vmax, r_p, r_t, e0, mu, rate_
             has_wall = wall_axis == ax
             b, d_new, m_wall = axis_step(prof[ax], mid, w, lo_p, hi_p, lo_d, hi_d, pos[ax], d_mm[ax], beta_qs[ax],
                                          other, r_p, r_t, e0, coupling[ax], k_bend, inv_bs2, m_fric,
-                                         wall_rad if has_wall else 0.0, wall_sign, k_wall if has_wall else 0.0)
+                                         wall_rad if has_wall else 0.0, wall_sign, k_wall if has_wall else 0.0,
+                                         w_force if has_wall else 0.0)
             beta_qs[ax] = b
             d_mm[ax] = d_new
             if has_wall:
