@@ -144,6 +144,8 @@ def validate(
     planes: Optional[Path] = typer.Option(None, "--planes", help="planes.json (endocal fit planes): for --protocol; offline, overrides the planes the model was fitted through."),
     sets: list[str] = typer.Option([], "--set", help="Override a parameter of --protocol, e.g. --set amplitude_deg=40 (repeatable)."),
     runs_out: Optional[Path] = typer.Option(None, "--runs-out", help="With --protocol: keep the played runs here (compensated/, uncompensated/)."),
+    force_model: Optional[Path] = typer.Option(None, "--force-model", help="With --protocol: force.json (endocal fit force); guard both playbacks every tick."),
+    max_force_n: Optional[float] = typer.Option(None, "--max-force-n", help="With --force-model: stop bending into the load at this predicted tip force (N)."),
 ) -> None:
     """Compare a model with measurements: how far off, where it fails, which physical effect is missing.
 
@@ -171,8 +173,11 @@ def validate(
         if data:
             raise ModelError("give either DATA (offline validation) or --protocol (playback on a backend), not both")
         model.out_of_range = out_of_range
-        _playback(model, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets, runs_out, json_out)
+        _playback(model, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets, runs_out, json_out,
+                  force_model, max_force_n)
         return
+    if force_model is not None or max_force_n is not None:
+        raise ModelError("--force-model and --max-force-n guard a playback: use them with --protocol")
     if not data:
         raise ModelError("nothing to validate on: give run folders or aligned tables, or --protocol P")
     from endocal.runs.aligned import load_aligned
@@ -223,7 +228,8 @@ def _finite(obj):
     return obj
 
 
-def _playback(model, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets, runs_out, json_out) -> None:
+def _playback(model, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets, runs_out, json_out,
+              force_model=None, max_force_n=None) -> None:
     from endocal.backends.registry import make_backend
     from endocal.planes import load_planes
     from endocal.probe import load_probe
@@ -234,6 +240,16 @@ def _playback(model, protocol, backend, probe, sim_config, hardware_config, plan
     proto = load_protocol(protocol, overrides=parse_overrides(sets) or None)
     make_backend(backend, probe_cfg, seed=seed, sim_config=sim_config, hardware_config=hardware_config)  # check configs first
     cal = load_planes(planes) if planes is not None else None
+    guard_factory = None
+    if force_model is not None or max_force_n is not None:
+        from endocal.force import ForceGuard, check_guard_fits, load_force_model
+
+        if force_model is None:
+            raise ModelError("--max-force-n needs --force-model force.json (endocal fit force)")
+        fmodel = load_force_model(force_model)
+        check_guard_fits(fmodel, probe_cfg, max_force_n)
+        ForceGuard(fmodel, max_force_n)  # refuse a bad threshold before anything moves
+        guard_factory = lambda: ForceGuard(fmodel, max_force_n)  # noqa: E731
     result = validate_on_backend(
         model,
         proto,
@@ -242,6 +258,7 @@ def _playback(model, protocol, backend, probe, sim_config, hardware_config, plan
         planes=cal,
         seed=seed,
         out_dir=runs_out,
+        guard_factory=guard_factory,
     )
     text = json.dumps(_finite(result.to_dict()), allow_nan=False)
     if json_out is not None:
@@ -251,3 +268,9 @@ def _playback(model, protocol, backend, probe, sim_config, hardware_config, plan
         return
     out.print(_metrics_table(f"compensated: {protocol} on {backend}", result.metrics))
     out.print(_metrics_table("uncompensated", result.uncompensated))
+    if guard_factory is not None:
+        for name, run in result.runs.items():
+            events = json.loads((Path(run) / "run.json").read_text()).get("events", [])
+            stops = [e for e in events if e["kind"] == "stop"]
+            out.print(f"force guard, {name}: {len(stops)} stop(s)" + "".join(
+                f"; t = {e['t_s']:.2f} s at {e['force_pred_n']:.3f} N" for e in stops), markup=False)

@@ -155,6 +155,7 @@ def validate_on_backend(
     seed: int = 0,
     out_dir: Path | None = None,
     progress=None,
+    guard_factory=None,
 ) -> PlaybackResult:
     """Play ``protocol`` as desired angles of the model's axis, compensated and uncompensated.
 
@@ -175,6 +176,8 @@ def validate_on_backend(
     out_dir : Path, optional
         Where the two runs are kept (``compensated/``, ``uncompensated/``); a temporary
         folder when omitted.
+    guard_factory : callable, optional
+        ``guard_factory() -> ForceGuard``: a fresh contact-force guard for each playback.
 
     Raises
     ------
@@ -210,6 +213,7 @@ def validate_on_backend(
             seed=seed,
             force=True,
             progress=progress,
+            guard=guard_factory() if guard_factory is not None else None,
         )
         data = load_aligned(runs[name])
         keep = data.t_s >= PREROLL_S - 1e-9  # metrics over the protocol only, on its own clock
