@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 import pyarrow.parquet as pq
 
 from endocal.errors import RunFormatError
@@ -48,6 +49,27 @@ class Alignment:
         }
 
 
+def read_parquet(source: Path | list[Path], where: str | None = None) -> pd.DataFrame:
+    """Read a Parquet file (or the parts of one dataset) as a DataFrame.
+
+    Raises
+    ------
+    RunFormatError
+        The file is missing, not Parquet (a text file renamed ``.parquet``) or corrupt:
+        the message names the file and pyarrow's reason.
+    """
+    where = where or str(source)
+    try:
+        return pq.read_table(source).to_pandas()
+    except FileNotFoundError:
+        raise RunFormatError(f"{where} does not exist") from None
+    except (pa.ArrowException, OSError) as exc:
+        reason = " ".join(str(exc).split())
+        raise RunFormatError(
+            f"{where} cannot be read as Parquet ({reason}); was it written completely, and is it a Parquet file?"
+        ) from None
+
+
 def read_stream(run_dir: Path, name: str) -> pd.DataFrame:
     """Read one stream folder of a run (all its parts) as a DataFrame sorted by ``t_s``.
 
@@ -60,7 +82,7 @@ def read_stream(run_dir: Path, name: str) -> pd.DataFrame:
     parts = sorted(folder.glob("part-*.parquet")) if folder.is_dir() else []
     if not parts:
         raise RunFormatError(f"{run_dir}: no {name} samples were logged ({folder} is missing or empty)")
-    df = pq.read_table(parts).to_pandas() if len(parts) > 1 else pq.read_table(parts[0]).to_pandas()
+    df = read_parquet(parts if len(parts) > 1 else parts[0], where=str(folder))
     return df.sort_values("t_s", kind="stable").reset_index(drop=True)
 
 
@@ -176,7 +198,7 @@ def _read_table(path: Path) -> pd.DataFrame:
     suffix = path.suffix.lower()
     try:
         if suffix == ".parquet":
-            return pq.read_table(path).to_pandas()
+            return read_parquet(path)
         if suffix in (".csv", ".txt"):
             return pd.read_csv(path)
     except FileNotFoundError:
@@ -242,7 +264,7 @@ def load_aligned(path: str | Path, max_gap_s: float = 0.2) -> AlignedData:
     if path.is_dir():
         meta = read_run_json(path)
         if (path / ALIGNED).is_file():
-            df = pq.read_table(path / ALIGNED).to_pandas()
+            df = read_parquet(path / ALIGNED)
             digest = sha256_of(path / ALIGNED)
         else:
             probe = ProbeConfig.from_dict(meta["probe"], where=str(path / RUN_JSON))

@@ -1,0 +1,100 @@
+"""Unreadable input files get one line and exit code 2 on every command that reads them.
+
+A text file renamed ``.parquet``, a truncated Parquet part, a CSV that is no table, JSON
+that is not JSON or not an endocal file: each must stop the command with one line that
+names the file, never a traceback, and nothing half-written.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from endocal.cli import app
+from endocal.cli import commands  # noqa: F401  (registers the subcommands)
+
+REPO = Path(__file__).resolve().parents[1]
+SAMPLE = REPO / "data_samples" / "sim-triangle"
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def bad(tmp_path_factory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("bad")
+    files = {
+        "text.parquet": b"hello world\n",
+        "random.parquet": bytes(range(256)) * 12,
+        "binary.csv": b"\x00\x01\x02binary\xff\xfe\n",
+        "broken.json": b"not json {",
+        "other.json": b'{"a": 1}',
+        "list.json": b"[1, 2, 3]",
+    }
+    out = {}
+    for name, content in files.items():
+        (d / name).write_bytes(content)
+        out[name] = d / name
+    # a run folder whose aligned table is junk, and one whose motor parts are truncated
+    junk_aligned = d / "run-junk-aligned"
+    shutil.copytree(SAMPLE, junk_aligned)
+    (junk_aligned / "aligned.parquet").write_text("garbage")
+    out["run-junk-aligned"] = junk_aligned
+    truncated = d / "run-truncated-stream"
+    shutil.copytree(SAMPLE, truncated)
+    (truncated / "aligned.parquet").unlink()
+    for part in (truncated / "motor").glob("part-*.parquet"):
+        part.write_bytes(part.read_bytes()[:5])
+    out["run-truncated-stream"] = truncated
+    broken_meta = d / "run-broken-json"
+    shutil.copytree(SAMPLE, broken_meta)
+    (broken_meta / "run.json").write_text("{")
+    out["run-broken-json"] = broken_meta
+    return out
+
+
+def _one_line_exit_2(result, name: str) -> None:
+    assert result.exit_code == 2, (result.exit_code, result.output)
+    assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
+    lines = [ln for ln in result.output.splitlines() if ln.strip()]
+    assert len(lines) == 1, result.output
+    assert lines[0].startswith("error:") and name in lines[0], lines[0]
+    assert "Traceback" not in result.output
+
+
+@pytest.mark.parametrize("data", ["text.parquet", "random.parquet", "binary.csv", "run-junk-aligned",
+                                  "run-truncated-stream", "run-broken-json"])
+def test_unreadable_data_is_one_line_on_fit_validate_and_report(bad, data, tmp_path):
+    src = bad[data]
+    model = tmp_path / "m.json"
+    result = runner.invoke(app, ["fit", "hysteresis", str(src), "--model", "linear", "--axis", "ap",
+                                 "--out", str(model)])
+    _one_line_exit_2(result, src.name)
+    assert not model.exists()
+    good = tmp_path / "good.json"
+    assert runner.invoke(app, ["fit", "hysteresis", str(SAMPLE), "--model", "linear", "--axis", "ap",
+                               "--out", str(good)]).exit_code == 0
+    _one_line_exit_2(runner.invoke(app, ["validate", str(good), str(src)]), src.name)
+    html = tmp_path / "r.html"
+    _one_line_exit_2(runner.invoke(app, ["report", str(good), "--data", str(src), "--out", str(html)]), src.name)
+    assert not html.exists()
+
+
+@pytest.mark.parametrize("model", ["broken.json", "other.json", "list.json", "text.parquet"])
+def test_a_file_that_is_not_an_endocal_model_is_one_line(bad, model, tmp_path):
+    src = bad[model]
+    _one_line_exit_2(runner.invoke(app, ["validate", str(src), str(SAMPLE)]), src.name)
+    run = tmp_path / "run"
+    _one_line_exit_2(runner.invoke(app, ["excite", "triangle", "--model", str(src), "--out", str(run)]), src.name)
+    assert not run.exists()
+
+
+@pytest.mark.parametrize("planes", ["broken.json", "other.json", "list.json"])
+def test_a_bad_planes_file_is_one_line(bad, planes, tmp_path):
+    src = bad[planes]
+    model = tmp_path / "m.json"
+    result = runner.invoke(app, ["fit", "hysteresis", str(SAMPLE), "--model", "linear", "--axis", "ap",
+                                 "--planes", str(src), "--out", str(model)])
+    _one_line_exit_2(result, src.name)
+    assert not model.exists()
