@@ -168,3 +168,27 @@ def test_ctrl_c_stops_cleanly_and_leaves_a_valid_run(tmp_path):
     assert meta["status"] == "interrupted"
     data = load_aligned(run)  # the aligned table was written for what was logged
     assert (run / "aligned.parquet").exists() and data.t_s[-1] == pytest.approx(meta["logged_s"], abs=0.05)
+
+
+def test_out_of_range_on_excite_model_errors_by_default_and_clamps_on_request(tmp_path):
+    # The sample triangle run spans +-45 deg of knob: a linear model fitted on it cannot reach
+    # the protocol's larger desired angles without leaving that range.
+    model = tmp_path / "lin.json"
+    fit = endocal("fit", "hysteresis", ROOT / "data_samples" / "sim-triangle", "--model", "linear", "--axis", "ap",
+                  "--out", model)
+    assert fit.returncode == 0, fit.stderr
+    refused = endocal("excite", "triangle", "--model", model, "--axes", "ap", "--out", tmp_path / "r1")
+    one_line_error(refused, "outside the fitted command range", "--out-of-range clamp")
+    assert not (tmp_path / "r1").exists()
+    clamped = endocal("excite", "triangle", "--model", model, "--axes", "ap", "--out-of-range", "clamp",
+                      "--out", tmp_path / "r2", "-q")
+    assert clamped.returncode == 0, clamped.stderr
+    warnings = [ln for ln in clamped.stderr.splitlines() if ln.strip()]
+    assert len(warnings) == 1 and warnings[0].startswith("warning:") and "clamped" in warnings[0], clamped.stderr
+    meta = json.loads((tmp_path / "r2" / "run.json").read_text())
+    assert meta["protocol"]["out_of_range"] == {"ap": "clamp"}
+    cmd = load_aligned(tmp_path / "r2").table["ap_cmd_deg"].to_numpy()
+    assert np.abs(cmd).max() <= 45.0 + 0.5  # clamped to the fitted range (0.5 deg: servo resolution and lag)
+    one_line_error(endocal("excite", "triangle", "--out-of-range", "clamp", "--out", tmp_path / "r3"), "--model")
+    one_line_error(endocal("excite", "triangle", "--model", model, "--out-of-range", "wrap", "--out", tmp_path / "r4"),
+                   "--out-of-range must be one of")

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import sys
+import warnings
 from typing import Callable, TypeVar
 
 import typer
@@ -47,3 +49,39 @@ def cli_errors(func: F) -> F:
 
 def stdout_is_terminal() -> bool:
     return sys.stdout.isatty()
+
+
+#: Help text of ``--out-of-range`` on every command that plays a model.
+OUT_OF_RANGE_HELP = ("A desired angle the model cannot reach within its fitted range is an `error` (nothing moves), "
+                     "or is `clamp`ed to the range. Default: the model file's own setting.")
+
+
+def apply_out_of_range(model, value: str | None) -> None:
+    """Set a loaded model's ``out_of_range`` from ``--out-of-range`` (``None`` keeps the file's)."""
+    from endocal.errors import ModelError
+    from endocal.models.base import OUT_OF_RANGE_CHOICES
+
+    if value is None:
+        return
+    if value not in OUT_OF_RANGE_CHOICES:
+        raise ModelError(f"--out-of-range must be one of {', '.join(OUT_OF_RANGE_CHOICES)}, got {value!r}")
+    model.out_of_range = value
+
+
+@contextlib.contextmanager
+def warnings_as_lines():
+    """Print the library's warnings raised inside the block as ``warning: ...`` lines on stderr.
+
+    Each distinct message once, after the block, instead of Python's file:line form.
+    """
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            yield
+        finally:
+            seen = set()
+            for w in caught:
+                text = str(w.message)
+                if text not in seen:
+                    seen.add(text)
+                    err.print(f"warning: {text}", markup=False)

@@ -8,7 +8,7 @@ from typing import Optional
 
 import typer
 
-from endocal.cli._common import cli_errors, err, fail, out
+from endocal.cli._common import OUT_OF_RANGE_HELP, apply_out_of_range, cli_errors, err, fail, out, warnings_as_lines
 
 
 @cli_errors
@@ -30,6 +30,7 @@ def excite(
     axes: Optional[str] = typer.Option(None, "--axes", help="Comma-separated axes to drive, e.g. `ml` or `ap,ml`."),
     planes_file: Optional[Path] = typer.Option(None, "--planes", help="planes.json from `endocal fit planes`: pass the knob goals through the orthogonal compensator."),
     model_files: list[Path] = typer.Option([], "--model", help="Hysteresis model (endocal fit hysteresis) of one axis, repeatable: the protocol's goals become desired bending angles played through the inverse models (task-space control)."),
+    out_of_range: Optional[str] = typer.Option(None, "--out-of-range", help="With --model: " + OUT_OF_RANGE_HELP),
     force_model: Optional[Path] = typer.Option(None, "--force-model", help="force.json (endocal fit force): guard the run, checking the predicted tip force every tick."),
     max_force_n: Optional[float] = typer.Option(None, "--max-force-n", help="With --force-model: stop bending further into the load when the predicted tip force reaches this (N)."),
     tip_load_n: Optional[float] = typer.Option(None, "--tip-load-n", help="Known load hung at the tip (N), opposing positive bending of the protocol's first axis: recorded for `fit force`; the simulator hangs it."),
@@ -72,12 +73,17 @@ def excite(
         models = {}
         for path in model_files:
             model = load_model(path)
+            apply_out_of_range(model, out_of_range)
             if model.axis in models:
                 raise ModelError(f"two --model files for axis '{model.axis}' ({path}): give one per axis")
             models[model.axis] = model
-        trajectory = task_space_trajectory(trajectory, probe_cfg, models, planes)
+        with warnings_as_lines():
+            trajectory = task_space_trajectory(trajectory, probe_cfg, models, planes)
         protocol_info["hysteresis_compensation"] = {axis: str(p) for axis, p in zip(models, model_files)}
+        protocol_info["out_of_range"] = {axis: m.out_of_range for axis, m in models.items()}
         protocol_info["preroll_s"] = PREROLL_S  # the protocol starts this much after t_s = 0
+    elif out_of_range is not None:
+        fail("--out-of-range applies to the inverse hysteresis models: use it with --model")
     elif planes is not None:
         from endocal.planes.from_runs import compensate_trajectory
 

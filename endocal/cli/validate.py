@@ -11,7 +11,7 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from endocal.cli._common import cli_errors, err, out
+from endocal.cli._common import OUT_OF_RANGE_HELP, apply_out_of_range, cli_errors, err, out, warnings_as_lines
 from endocal.errors import ModelError
 from endocal.validation.metrics import METRIC_KEYS
 
@@ -134,7 +134,7 @@ def validate(
     compare: Optional[Path] = typer.Option(None, "--compare", help="A previous model: show its error beside this one's."),
     train: list[Path] = typer.Option([], "--train", help="Estimation data (repeatable): candidate effects are fitted on it and scored on DATA. Default: the records the model file names, when found and unchanged."),
     cv: str = typer.Option("auto", "--cv", help="How effects are tested: `auto` (estimation/validation split when there is estimation data, else rolling origin), `rolling` (rolling-origin cross-validation on DATA alone), `split` (require estimation data)."),
-    out_of_range: str = typer.Option("error", "--out-of-range", help="With --protocol: a desired angle the model cannot reach within its fitted range is an `error`, or is `clamp`ed to the range."),
+    out_of_range: Optional[str] = typer.Option(None, "--out-of-range", help="With --protocol: " + OUT_OF_RANGE_HELP),
     load_column: list[str] = typer.Option([], "--load-column", help="Try load:COLUMN on this column (repeatable; default: every varying extra column)."),
     protocol: Optional[str] = typer.Option(None, "--protocol", help="Play this desired-angle protocol through the inverse model on a backend instead."),
     backend: str = typer.Option("sim", "--backend", "-b", help="Backend for --protocol: `sim` or `hardware`."),
@@ -164,20 +164,18 @@ def validate(
 
         # before any work: a long validation must not end in an output that cannot be written
         raise OutputPathError(f"cannot write {json_out}: folder {json_out.parent} does not exist; create it or pick another path")
-    from endocal.models.base import OUT_OF_RANGE_CHOICES
-
-    if out_of_range not in OUT_OF_RANGE_CHOICES:
-        raise ModelError(f"--out-of-range must be one of {', '.join(OUT_OF_RANGE_CHOICES)}, got {out_of_range!r}")
     model = load_model(model_path)
     if protocol is not None:
         if data:
             raise ModelError("give either DATA (offline validation) or --protocol (playback on a backend), not both")
-        model.out_of_range = out_of_range
+        apply_out_of_range(model, out_of_range)
         _playback(model, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets, runs_out, json_out,
                   force_model, max_force_n)
         return
     if force_model is not None or max_force_n is not None:
         raise ModelError("--force-model and --max-force-n guard a playback: use them with --protocol")
+    if out_of_range is not None:
+        raise ModelError("--out-of-range applies to a playback (--protocol): offline validation predicts the recorded commands as they are")
     if not data:
         raise ModelError("nothing to validate on: give run folders or aligned tables, or --protocol P")
     from endocal.runs.aligned import load_aligned
@@ -250,16 +248,17 @@ def _playback(model, protocol, backend, probe, sim_config, hardware_config, plan
         check_guard_fits(fmodel, probe_cfg, max_force_n)
         ForceGuard(fmodel, max_force_n)  # refuse a bad threshold before anything moves
         guard_factory = lambda: ForceGuard(fmodel, max_force_n)  # noqa: E731
-    result = validate_on_backend(
-        model,
-        proto,
-        lambda: make_backend(backend, probe_cfg, seed=seed, sim_config=sim_config, hardware_config=hardware_config),
-        probe_cfg,
-        planes=cal,
-        seed=seed,
-        out_dir=runs_out,
-        guard_factory=guard_factory,
-    )
+    with warnings_as_lines():
+        result = validate_on_backend(
+            model,
+            proto,
+            lambda: make_backend(backend, probe_cfg, seed=seed, sim_config=sim_config, hardware_config=hardware_config),
+            probe_cfg,
+            planes=cal,
+            seed=seed,
+            out_dir=runs_out,
+            guard_factory=guard_factory,
+        )
     text = json.dumps(_finite(result.to_dict()), allow_nan=False)
     if json_out is not None:
         _write_json(json_out, text)
