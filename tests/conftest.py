@@ -11,7 +11,7 @@ import os
 import numpy as np
 import pytest
 
-from endocal.backends.base import StreamChunk, motor_columns
+from endocal.streams import StreamChunk, motor_columns
 from endocal.kinematics import tip_pose_in_base
 from endocal.probe import PRESETS
 

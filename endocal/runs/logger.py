@@ -17,7 +17,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from endocal.backends.base import StreamChunk
+from endocal.streams import StreamChunk
 from endocal.errors import RunFormatError
 from endocal.runs.aligned import align, read_stream
 from endocal.runs.format import ALIGNED, MOTOR, RUN_JSON, STREAMS, TRACKER, atomic_write_bytes, utc_now, write_json

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from endocal.backends.base import StreamChunk
+from endocal.streams import StreamChunk
 from endocal.errors import RunFormatError
 from endocal.probe import TRANSLATION, ProbeConfig
 from endocal.runs.format import (

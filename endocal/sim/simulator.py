@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from endocal.backends.base import StreamChunk, motor_columns
+from endocal.streams import StreamChunk, motor_columns
 from endocal.errors import ConfigError, LimitError, ProtocolError
 from endocal.kinematics import bending_angles_deg, tip_pose_in_base
 from endocal.probe import ProbeConfig
@@ -193,7 +193,7 @@ class Simulator:
         Returns
         -------
         StreamChunk
-            ``motor``: :func:`~endocal.backends.base.motor_columns` plus ``contact_force_n`` and
+            ``motor``: :func:`~endocal.streams.motor_columns` plus ``contact_force_n`` and
             ``sheath_wrap_deg`` (and ``force_pred_n``, the guard's prediction, with a guard); ``tracker``: frames stamped in ``(previous chunk end, t_s[-1]]``;
             ``truth``: ``t_s``, ``<axis>_true_deg`` (noise- and latency-free eq.-1 angles),
             ``bend_x_rad``, ``bend_y_rad``, ``contact_force_n``.
