@@ -814,7 +814,7 @@ class RotatedBaseTracker(FakeTracker):
 
 def test_hardware_run_folder_through_run_excitation(tmp_path):
     from endocal.excite import run_excitation
-    from endocal.protocols.protocol import Trajectory
+    from endocal.protocols.trajectory import Trajectory
     from endocal.runs.aligned import read_stream
 
     config = HardwareConfig.from_toml(rig_toml(tmp_path))

@@ -2,8 +2,12 @@
 
 - :mod:`endocal.protocols.signals`: pure signal generators (sines, the duodenoscope paper's
   damped sine, chirps, band-limited random, staircases, circles, ...).
+- :mod:`endocal.protocols.params`: typed, bounded protocol parameters.
+- :mod:`endocal.protocols.catalogue`: the signal catalogue (:data:`SIGNALS`) a protocol names.
+- :mod:`endocal.protocols.trajectory`: the :class:`Trajectory` a protocol builds for a probe,
+  and its limit checks.
 - :mod:`endocal.protocols.protocol`: protocol TOML files (``protocols/`` and the shipped
-  set), parameters and overrides, and the :class:`Trajectory` they build for a probe.
+  set), overrides, and :class:`Protocol`.
 - :mod:`endocal.protocols.plot`: goal-versus-time figures (PNG).
 
 >>> from endocal.probe import PRESETS
@@ -14,13 +18,10 @@
 140.0
 """
 
+from endocal.protocols.catalogue import SIGNALS, SignalSpec
+from endocal.protocols.params import Param
 from endocal.protocols.protocol import (
-    SIGNALS,
-    Param,
     Protocol,
-    Segment,
-    SignalSpec,
-    Trajectory,
     list_protocols,
     load_protocol,
     parse_overrides,
@@ -28,6 +29,7 @@ from endocal.protocols.protocol import (
     read_protocol_file,
     shipped_protocols_dir,
 )
+from endocal.protocols.trajectory import Segment, Trajectory
 
 __all__ = [
     "SIGNALS",

@@ -13,7 +13,7 @@ from matplotlib.figure import Figure
 
 from endocal.errors import OutputPathError
 from endocal.probe import ProbeConfig
-from endocal.protocols.protocol import Trajectory
+from endocal.protocols.trajectory import Trajectory
 
 
 def trajectory_figure(traj: Trajectory, probe: ProbeConfig | None = None, title: str | None = None) -> Figure:
