@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import math
 import sys
 import warnings
+from pathlib import Path
 from typing import Callable, TypeVar
 
 import typer
@@ -85,3 +87,57 @@ def warnings_as_lines():
                 if text not in seen:
                     seen.add(text)
                     err.print(f"warning: {text}", markup=False)
+
+
+def guard_factory(force_model, max_force_n, probe):
+    """From ``--force-model``/``--max-force-n``: a function making a fresh contact-force guard, or None.
+
+    Everything is checked here, before anything moves: the force model's file, its probe and
+    axis, and the threshold.
+    """
+    if force_model is None and max_force_n is None:
+        return None
+    from endocal.errors import ModelError
+    from endocal.force import ForceGuard, check_guard_fits, load_force_model
+
+    if force_model is None:
+        raise ModelError("--max-force-n needs --force-model force.json (endocal fit force): the guard predicts the force from it")
+    fmodel = load_force_model(force_model)
+    check_guard_fits(fmodel, probe, max_force_n)
+    ForceGuard(fmodel, max_force_n)  # a bad threshold is refused here
+    return lambda: ForceGuard(fmodel, max_force_n)
+
+
+def finite(obj):
+    """JSON has no NaN or infinity: write them as null."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [finite(v) for v in obj]
+    return obj
+
+
+def write_json_file(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically (a reader never sees half a file)."""
+    from endocal.errors import OutputPathError
+    from endocal.runs.format import atomic_write_bytes
+
+    try:
+        atomic_write_bytes(path, (text + "\n").encode())
+    except OSError as exc:
+        raise OutputPathError(f"cannot write {path}: {exc.strerror}") from None
+
+
+def emit_json(d: dict, as_json: bool, json_out: Path | None) -> bool:
+    """Write ``d`` to ``json_out`` (when given) and print it (``--json``); True when printed, so
+    the caller skips its terminal view."""
+    import json
+
+    text = json.dumps(finite(d), allow_nan=False)
+    if json_out is not None:
+        write_json_file(json_out, text)
+    if as_json:
+        out.print_json(text)
+    return as_json

@@ -8,7 +8,16 @@ from typing import Optional
 
 import typer
 
-from endocal.cli._common import OUT_OF_RANGE_HELP, apply_out_of_range, cli_errors, err, fail, out, warnings_as_lines
+from endocal.cli._common import (
+    OUT_OF_RANGE_HELP,
+    apply_out_of_range,
+    cli_errors,
+    err,
+    fail,
+    guard_factory,
+    out,
+    warnings_as_lines,
+)
 
 
 @cli_errors
@@ -89,16 +98,9 @@ def excite(
 
         trajectory = compensate_trajectory(trajectory, probe_cfg, planes)
     trajectory.check_limits(probe_cfg)  # before any backend is built or anything moves
-    guard = None
-    if force_model is not None or max_force_n is not None:
-        from endocal.errors import ModelError
-        from endocal.force import ForceGuard, check_guard_fits, load_force_model
-
-        if force_model is None:
-            raise ModelError("--max-force-n needs --force-model force.json (endocal fit force): the guard predicts the force from it")
-        fmodel = load_force_model(force_model)
-        check_guard_fits(fmodel, probe_cfg, max_force_n)
-        guard = ForceGuard(fmodel, max_force_n)
+    make_guard = guard_factory(force_model, max_force_n, probe_cfg)
+    guard = make_guard() if make_guard is not None else None
+    if guard is not None:
         protocol_info["force_model"] = str(force_model)
     be = make_backend(backend, probe_cfg, seed=seed, sim_config=sim_config, hardware_config=hardware_config)
     be, record = prepare_backend(be, proto, probe_cfg, tip_load_n=tip_load_n)

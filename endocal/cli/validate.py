@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import Optional
 
@@ -11,7 +10,16 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from endocal.cli._common import OUT_OF_RANGE_HELP, apply_out_of_range, cli_errors, err, out, warnings_as_lines
+from endocal.cli._common import (
+    OUT_OF_RANGE_HELP,
+    apply_out_of_range,
+    cli_errors,
+    emit_json,
+    err,
+    guard_factory,
+    out,
+    warnings_as_lines,
+)
 from endocal.errors import ModelError
 from endocal.validation.metrics import METRIC_KEYS
 
@@ -131,12 +139,13 @@ def validate(
     json_out: Optional[Path] = typer.Option(None, "--json-out", help="Also write that JSON object to this file (the terminal view still prints)."),
     folds: int = typer.Option(5, "--folds", help="Held-out blocks of the blocked cross-validation."),
     seed: int = typer.Option(0, "--seed", help="Seed of the bootstrap intervals (and of the backend with --protocol)."),
-    compare: Optional[Path] = typer.Option(None, "--compare", help="A previous model: show its error beside this one's."),
+    compare: list[Path] = typer.Option([], "--compare", help="A previous model: show its error beside this one's. With --trajectory: other models to walk the path with, one per axis per set (repeatable), compared with paired tests."),
     train: list[Path] = typer.Option([], "--train", help="Estimation data (repeatable): candidate effects are fitted on it and scored on DATA. Default: the records the model file names, when found and unchanged."),
     cv: str = typer.Option("auto", "--cv", help="How effects are tested: `auto` (estimation/validation split when there is estimation data, else rolling origin), `rolling` (rolling-origin cross-validation on DATA alone), `split` (require estimation data)."),
     out_of_range: Optional[str] = typer.Option(None, "--out-of-range", help="With --protocol: " + OUT_OF_RANGE_HELP),
     load_column: list[str] = typer.Option([], "--load-column", help="Try load:COLUMN on this column (repeatable; default: every varying extra column)."),
     protocol: Optional[str] = typer.Option(None, "--protocol", help="Play this desired-angle protocol through the inverse model on a backend instead."),
+    trajectory: Optional[str] = typer.Option(None, "--trajectory", help="Walk this tip path (circle-1, circle-2, line, raster, a path .toml or an x_mm,y_mm,z_mm .csv) with task-space control: MODEL and DATA are then the model files, one per axis."),
     backend: str = typer.Option("sim", "--backend", "-b", help="Backend for --protocol: `sim` or `hardware`."),
     probe: str = typer.Option("tee", "--probe", help="Probe preset or .toml for --protocol."),
     sim_config: Optional[Path] = typer.Option(None, "--sim-config", help="Simulator TOML for --backend sim."),
@@ -164,6 +173,19 @@ def validate(
 
         # before any work: a long validation must not end in an output that cannot be written
         raise OutputPathError(f"cannot write {json_out}: folder {json_out.parent} does not exist; create it or pick another path")
+    if trajectory is not None:
+        if protocol is not None:
+            raise ModelError("give either --trajectory (a tip path) or --protocol (desired angles of one axis), not both")
+        from endocal.cli.tip_path import run_trajectory
+
+        run_trajectory([model_path, *(data or [])], compare, trajectory, backend=backend, probe=probe, sim_config=sim_config,
+                       hardware_config=hardware_config, planes=planes, seed=seed, sets=sets, out_of_range=out_of_range,
+                       runs_out=runs_out, as_json=as_json, json_out=json_out,
+                       force_model=force_model, max_force_n=max_force_n)
+        return
+    if len(compare) > 1:
+        raise ModelError("--compare takes one previous model offline (several only with --trajectory)")
+    compare_path = compare[0] if compare else None
     model = load_model(model_path)
     if protocol is not None:
         if data:
@@ -185,7 +207,7 @@ def validate(
     tables = [load_aligned(p) for p in data]
     plan = plan_estimation(model, tables, model_path=model_path, train_paths=train, cv=cv, planes_path=planes)
     effects = [e.label for e in model.effects_]
-    old_path = compare if compare is not None else previous_model_path(model_path, effects)
+    old_path = compare_path if compare_path is not None else previous_model_path(model_path, effects)
     old = load_model(old_path) if old_path is not None else None
     result = validate_offline(model, tables, train=plan.train, train_paths=plan.train_paths, planes=plan.planes,
                               refit_args=plan.refit_args, scheme_reason=plan.reason, folds=folds, seed=seed,
@@ -194,36 +216,11 @@ def validate(
     d = result.to_dict()
     if old_path is not None and d["compare"] is not None:
         d["compare"]["path"] = str(old_path)
-    text = json.dumps(_finite(d), allow_nan=False)
-    if json_out is not None:
-        _write_json(json_out, text)
-    if as_json:
-        out.print_json(text)
+    if emit_json(d, as_json, json_out):
         return
     render(result)
-    if old_path is not None and compare is None:
+    if old_path is not None and compare_path is None:
         err.print(f"compared with {old_path} (the model this one was refitted from)")
-
-
-def _write_json(path: Path, text: str) -> None:
-    from endocal.errors import OutputPathError
-    from endocal.runs.format import atomic_write_bytes
-
-    try:
-        atomic_write_bytes(path, (text + "\n").encode())
-    except OSError as exc:
-        raise OutputPathError(f"cannot write {path}: {exc.strerror}") from None
-
-
-def _finite(obj):
-    """JSON has no NaN or infinity: write them as null."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    return obj
 
 
 def _playback(model, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets, runs_out, json_out,
@@ -238,16 +235,7 @@ def _playback(model, protocol, backend, probe, sim_config, hardware_config, plan
     proto = load_protocol(protocol, overrides=parse_overrides(sets) or None)
     make_backend(backend, probe_cfg, seed=seed, sim_config=sim_config, hardware_config=hardware_config)  # check configs first
     cal = load_planes(planes) if planes is not None else None
-    guard_factory = None
-    if force_model is not None or max_force_n is not None:
-        from endocal.force import ForceGuard, check_guard_fits, load_force_model
-
-        if force_model is None:
-            raise ModelError("--max-force-n needs --force-model force.json (endocal fit force)")
-        fmodel = load_force_model(force_model)
-        check_guard_fits(fmodel, probe_cfg, max_force_n)
-        ForceGuard(fmodel, max_force_n)  # refuse a bad threshold before anything moves
-        guard_factory = lambda: ForceGuard(fmodel, max_force_n)  # noqa: E731
+    make_guard = guard_factory(force_model, max_force_n, probe_cfg)
     with warnings_as_lines():
         result = validate_on_backend(
             model,
@@ -257,17 +245,13 @@ def _playback(model, protocol, backend, probe, sim_config, hardware_config, plan
             planes=cal,
             seed=seed,
             out_dir=runs_out,
-            guard_factory=guard_factory,
+            guard_factory=make_guard,
         )
-    text = json.dumps(_finite(result.to_dict()), allow_nan=False)
-    if json_out is not None:
-        _write_json(json_out, text)
-    if as_json:
-        out.print_json(text)
+    if emit_json(result.to_dict(), as_json, json_out):
         return
     out.print(_metrics_table(f"compensated: {protocol} on {backend}", result.metrics))
     out.print(_metrics_table("uncompensated", result.uncompensated))
-    if guard_factory is not None:
+    if make_guard is not None:
         for name, run in result.runs.items():
             events = json.loads((Path(run) / "run.json").read_text()).get("events", [])
             stops = [e for e in events if e["kind"] == "stop"]

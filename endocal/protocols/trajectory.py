@@ -44,6 +44,9 @@ class Trajectory:
         Bending angles the user asked for (deg), for axes whose ``goal`` is no longer the
         protocol's own but a compensated knob command (orthogonal compensation, inverse
         hysteresis models); empty otherwise. Logged as ``<axis>_desired_deg``.
+    tip_desired_mm : (n, 3) array or None
+        Desired tip position in the base_home frame (see :mod:`endocal.protocols.paths`), mm,
+        for trajectories that walk a tip path; logged as ``tip_desired_{x,y,z}_mm``.
     """
 
     t_s: np.ndarray
@@ -52,6 +55,7 @@ class Trajectory:
     protocol: str = ""
     segments: tuple[Segment, ...] = ()
     desired: dict[str, np.ndarray] = field(default_factory=dict)
+    tip_desired_mm: np.ndarray | None = None
 
     @property
     def duration_s(self) -> float:

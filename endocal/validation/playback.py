@@ -94,9 +94,12 @@ def _with_goals(traj: Trajectory, new_goals: dict, preroll_s: float = PREROLL_S)
     # what was asked for: the protocol's angles, held at their first value during the pre-roll
     asked = traj.desired or {d: traj.goal[d] for d in new_goals}
     desired = {d: np.concatenate([np.full(n_pre, float(g[0])), g]) for d, g in asked.items()}
+    tip = traj.tip_desired_mm
+    if tip is not None:
+        tip = np.vstack([np.repeat(tip[:1], n_pre, axis=0), tip])
     t = np.concatenate([np.arange(n_pre) / fs, traj.t_s + n_pre / fs])
     segments = tuple(replace(s, start_s=s.start_s + n_pre / fs, stop_s=s.stop_s + n_pre / fs) for s in traj.segments)
-    return replace(traj, t_s=t, goal=goals, desired=desired, segments=segments)
+    return replace(traj, t_s=t, goal=goals, desired=desired, segments=segments, tip_desired_mm=tip)
 
 
 def slew_limit(cmd_deg: np.ndarray, t_s: np.ndarray, max_speed_dps: float) -> np.ndarray:
