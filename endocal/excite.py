@@ -158,7 +158,7 @@ def run_excitation(
             chunk = backend.execute(t[sl], {dof: g[sl] for dof, g in trajectory.goal.items()})
             for axis, angle in trajectory.desired.items():  # what the compensated goals were meant to reach
                 chunk.motor[f"{axis}_desired_deg"] = np.asarray(angle[sl], float)
-            if trajectory.tip_desired_mm is not None:  # a tip path: where the tip should be (base_home, mm)
+            if getattr(trajectory, "tip_desired_mm", None) is not None:  # a tip path: where the tip should be (base_home, mm)
                 for k, c in enumerate("xyz"):
                     chunk.motor[f"tip_desired_{c}_mm"] = np.asarray(trajectory.tip_desired_mm[sl, k], float)
             logger.append(chunk)

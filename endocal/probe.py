@@ -45,6 +45,11 @@ class ProbeConfig:
         Range of the insertion translation (mm) and of the probe rotation (deg).
     max_knob_speed_dps : float
         Fastest knob speed a protocol may ask for, in deg/s.
+    max_knob_accel_dps2 : float
+        Largest change of knob speed per second, deg/s^2. The default, 10 000 deg/s^2, lets a
+        knob reach 100 deg/s in 10 ms (one tick at 100 Hz), within what an XM430 on a knob
+        delivers, and refuses what no servo follows: a step to full speed in one tick
+        (36 000 deg/s^2), e.g. an inverse backlash model's jump across its dead band.
     """
 
     name: str
@@ -54,6 +59,7 @@ class ProbeConfig:
     translation_limits_mm: tuple[float, float] = (-150.0, 150.0)
     rotation_limits_deg: tuple[float, float] = (-180.0, 180.0)
     max_knob_speed_dps: float = 360.0
+    max_knob_accel_dps2: float = 10000.0
 
     def __post_init__(self) -> None:
         if len(self.bending_axes) != 2 or len(set(self.bending_axes)) != 2:
@@ -69,6 +75,8 @@ class ProbeConfig:
                 raise ConfigError(f"probe '{self.name}': knob limits for '{axis}' must bracket 0, got ({lo}, {hi})")
         if not self.bending_length_mm > 0:
             raise ConfigError(f"probe '{self.name}': bending_length_mm must be positive")
+        if not (self.max_knob_speed_dps > 0 and self.max_knob_accel_dps2 > 0):
+            raise ConfigError(f"probe '{self.name}': max_knob_speed_dps and max_knob_accel_dps2 must be positive")
 
     @property
     def dofs(self) -> tuple[str, ...]:
@@ -113,7 +121,7 @@ class ProbeConfig:
     @classmethod
     def from_dict(cls, d: dict, where: str = "probe") -> ProbeConfig:
         known = {"name", "bending_axes", "knob_limits_deg", "bending_length_mm",
-                 "translation_limits_mm", "rotation_limits_deg", "max_knob_speed_dps"}
+                 "translation_limits_mm", "rotation_limits_deg", "max_knob_speed_dps", "max_knob_accel_dps2"}
         unknown = set(d) - known
         if unknown:
             raise ConfigError(f"{where}: unknown key(s) {sorted(unknown)}; known keys are {sorted(known)}")
@@ -126,6 +134,7 @@ class ProbeConfig:
                 translation_limits_mm=tuple(float(x) for x in d.get("translation_limits_mm", (-150.0, 150.0))),
                 rotation_limits_deg=tuple(float(x) for x in d.get("rotation_limits_deg", (-180.0, 180.0))),
                 max_knob_speed_dps=float(d.get("max_knob_speed_dps", 360.0)),
+                max_knob_accel_dps2=float(d.get("max_knob_accel_dps2", 10000.0)),
             )
         except KeyError as exc:
             raise ConfigError(f"{where}: missing key {exc.args[0]!r}") from None

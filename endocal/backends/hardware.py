@@ -45,6 +45,7 @@ import numpy as np
 from endocal.backends.aurora import AuroraConfig, AuroraTracker, tracker_package_version
 from endocal.backends.base import StreamChunk, motor_columns
 from endocal.backends.dynamixel import DynamixelConfig, KnobServos, sdk_version
+from endocal.backends.limits import check_goals, probe_accel_limits
 from endocal.errors import ConfigError, HardwareError, LimitError, ProtocolError
 from endocal.probe import ROTATION, TRANSLATION, ProbeConfig
 
@@ -244,79 +245,6 @@ class HardwareConfig:
 
 
 # --- safety check -------------------------------------------------------------------------
-def check_goals(
-    t_s: np.ndarray,
-    goal: dict[str, np.ndarray],
-    limits: dict[str, tuple[float, float]],
-    max_speed: dict[str, float],
-    units: dict[str, str],
-    previous: tuple[float, dict[str, float]] | None = None,
-) -> None:
-    """Refuse a chunk of goals that leaves a limit or moves too fast, before anything moves.
-
-    Parameters
-    ----------
-    t_s : ndarray, shape (n,)
-        Tick times in s, strictly increasing.
-    goal : dict
-        DoF -> goals, shape (n,), in the DoF's unit.
-    limits : dict
-        DoF -> ``(min, max)``.
-    max_speed : dict
-        DoF -> fastest allowed ``|d goal / dt|`` in unit/s.
-    units : dict
-        DoF -> unit name for messages (``deg``, ``mm``).
-    previous : tuple, optional
-        ``(t_s, {dof: goal})`` of the last goal already sent, so the step into this chunk
-        is checked too.
-
-    Raises
-    ------
-    LimitError
-        Naming the DoF, the time, the value and the limit of the first violation.
-    ProtocolError
-        Non-finite or non-increasing times, non-finite goals.
-    """
-    t = np.asarray(t_s, dtype=float)
-    if t.ndim != 1 or not np.isfinite(t).all():
-        raise ProtocolError("chunk times t_s must be a finite 1-D array")
-    if t.size > 1 and not (np.diff(t) > 0).all():
-        k = int(np.argmin(np.diff(t) > 0)) + 1
-        raise ProtocolError(f"chunk times must increase strictly; t_s[{k}] = {t[k]:.6f} s follows {t[k - 1]:.6f} s")
-    if previous is not None and t.size and not t[0] > previous[0]:
-        raise ProtocolError(f"chunk starts at t = {t[0]:.6f} s, not after the previous chunk's last tick {previous[0]:.6f} s")
-    for dof, g in goal.items():
-        u = units[dof]
-        g = np.asarray(g, dtype=float)
-        bad = ~np.isfinite(g)
-        if bad.any():
-            k = int(np.argmax(bad))
-            raise ProtocolError(f"goal for '{dof}' at t = {t[k]:.3f} s is {g[k]} (not a number); the chunk was refused")
-        lo, hi = limits[dof]
-        out = (g < lo) | (g > hi)
-        if out.any():
-            k = int(np.argmax(out))
-            lim = lo if g[k] < lo else hi
-            raise LimitError(
-                f"goal for '{dof}' at t = {t[k]:.3f} s is {g[k]:.3f} {u}, beyond its limit {lim:.3f} {u} "
-                f"(allowed {lo:g}..{hi:g} {u}); the chunk was refused before any of it moved"
-            )
-        tt, gg = t, g
-        if previous is not None:
-            tt = np.concatenate(([previous[0]], t))
-            gg = np.concatenate(([previous[1][dof]], g))
-        if tt.size > 1:
-            speed = np.abs(np.diff(gg)) / np.diff(tt)
-            fast = speed > max_speed[dof] * (1.0 + 1e-9)
-            if fast.any():
-                k = int(np.argmax(fast))
-                raise LimitError(
-                    f"goal for '{dof}' at t = {tt[k + 1]:.3f} s moves at {speed[k]:.1f} {u}/s "
-                    f"(from {gg[k]:.3f} to {gg[k + 1]:.3f} {u}), faster than the limit {max_speed[dof]:g} {u}/s; "
-                    "the chunk was refused before any of it moved"
-                )
-
-
 # --- translation / rotation over UDP ------------------------------------------------------
 class UdpStage:
     """Client for the translation/rotation motors' controller (a LabVIEW PC in the thesis).
@@ -509,6 +437,7 @@ class HardwareBackend:
         self.limits[ROTATION] = _intersect(probe.limits(ROTATION), stage.rotation_limits_deg, f"{where}: rotation")
         self.max_speed[TRANSLATION] = stage.max_translation_speed_mmps
         self.max_speed[ROTATION] = stage.max_rotation_speed_dps
+        self.max_accel = probe_accel_limits(probe)
         self.servos = KnobServos(config.dynamixel, port_handler=port_handler, packet_handler=packet_handler)
         self.tracker = AuroraTracker(config.tracker, tracker_factory=tracker_factory)
         self.stage = UdpStage(stage) if stage.mode == "udp" else None
@@ -519,7 +448,7 @@ class HardwareBackend:
         self._guard_reading: tuple | None = None
         self._open = False
         self._t0: float | None = None
-        self._previous: tuple[float, dict[str, float]] | None = None
+        self._previous: tuple | None = None  # (t_s, goals, speeds) of the last tick played
         self._present: dict[str, float] = {}
         self._prev_handlers: dict[int, Any] = {}
         self._atexit_registered = False
@@ -654,7 +583,7 @@ class HardwareBackend:
         previous = self._previous
         if previous is None:
             self._check_start(t, goals)
-        check_goals(t, goals, self.limits, self.max_speed, self.units, previous)
+        check_goals(t, goals, self.limits, self.max_speed, self.units, previous, self.max_accel)
 
         n = t.size
         cols = {c: np.zeros(n) for c in motor_columns(self.probe)}
@@ -693,7 +622,11 @@ class HardwareBackend:
                 tr, rot, i_tr, i_rot = stage_reply
                 cols["translation_pos_mm"][i], cols["rotation_pos_deg"][i] = tr, rot
                 cols["translation_current_ma"][i], cols["rotation_current_ma"][i] = i_tr, i_rot
-            self._previous = (float(t[i]), {d: float(goals[d][i]) for d in self.probe.dofs})
+            last = self._previous
+            now_goals = {d: float(goals[d][i]) for d in self.probe.dofs}
+            speeds = ({d: (now_goals[d] - last[1][d]) / (float(t[i]) - last[0]) for d in now_goals} if last is not None
+                      else dict.fromkeys(now_goals, 0.0))
+            self._previous = (float(t[i]), now_goals, speeds)
             self.ticks_played += 1
         if self.stage is not None and n:
             self._stage_velocity(cols)
@@ -835,6 +768,7 @@ class HardwareBackend:
             "probe": self.probe.name,
             "limits": {d: list(v) for d, v in self.limits.items()},
             "max_speed": dict(self.max_speed),
+            "max_accel": dict(self.max_accel),
             "dynamixel": self.servos.describe(),
             "tracker": self.tracker.describe(),
             "stage": {"mode": self.config.stage.mode,

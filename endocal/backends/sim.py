@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from endocal.backends.base import StreamChunk
+from endocal.backends.limits import GoalChecker
 from endocal.probe import ProbeConfig
 from endocal.sim import SimConfig, Simulator
 
@@ -55,11 +56,13 @@ class SimBackend:
     def open(self) -> None:
         """Start a fresh simulation (neutral probe, clock and random streams at their start)."""
         self._sim = Simulator(self.config, self.probe, self.seed)
+        self._checker = GoalChecker(self.probe)
 
     def execute(self, t_s: np.ndarray, goal: dict[str, np.ndarray]) -> StreamChunk:
         """Simulate one chunk; see :meth:`endocal.sim.Simulator.execute`. Opens on first use."""
         if self._sim is None:
             self.open()
+        self._checker.check(t_s, goal)  # the probe's limits, as the hardware backend checks them
         return self._sim.execute(t_s, goal, guard=self.force_guard)
 
     def close(self) -> None:

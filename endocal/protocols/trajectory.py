@@ -87,7 +87,8 @@ class Trajectory:
         ----------
         probe : ProbeConfig
             Its ``limits(dof)`` bound every goal; ``max_knob_speed_dps`` bounds the speed of
-            each bending knob between consecutive samples.
+            each bending knob between consecutive samples, ``max_knob_accel_dps2`` the change
+            of that speed.
 
         Raises
         ------
@@ -130,4 +131,15 @@ class Trajectory:
                     f"max_knob_speed_dps {probe.max_knob_speed_dps:g} deg/s of probe '{probe.name}' "
                     f"(peak {v.max():.1f} deg/s): lower the amplitude or the frequency/rate"
                 )
+            signed = self.speed_per_s(dof)
+            if signed.size > 1:
+                acc = np.abs(np.diff(signed)) / np.diff(self.t_s[1:])
+                hard = np.flatnonzero(acc > probe.max_knob_accel_dps2 * (1 + 1e-9))
+                if hard.size:
+                    i = int(hard[0])
+                    raise LimitError(
+                        f"{name}: {dof} knob speed changes from {signed[i]:.1f} to {signed[i + 1]:.1f} deg/s at "
+                        f"t = {self.t_s[i + 1]:.3f} s: {acc[i]:.0f} deg/s^2 exceeds the max_knob_accel_dps2 "
+                        f"{probe.max_knob_accel_dps2:g} deg/s^2 of probe '{probe.name}': smooth the start or the reversals"
+                    )
 

@@ -52,6 +52,20 @@ def _tip_path(d: DataEntry) -> np.ndarray:
     return tip_in_base_mm
 
 
+def _walked_path(d: DataEntry):
+    """The tip-path evaluation of a record that walked one (``validate --trajectory``), else None."""
+    from endocal.validation.tip_path import evaluate_tip_run
+
+    src = Path(d.aligned.source)
+    if not src.is_dir() or "tip_desired_x_mm" not in d.aligned.table.columns:
+        return None
+    return evaluate_tip_run(src, label=d.label)
+
+
+def _walk_start(d: DataEntry) -> float:
+    return float((d.meta.get("protocol", {}).get("walk_s") or [0.0])[0])
+
+
 def _planes_job(view: PlanesView) -> tuple[ReportFigure, callable]:
     """The bending-plane figure, titled and captioned for what was measured and what is only fitted."""
     cal = view.calibration
@@ -245,6 +259,26 @@ def build_report(
             paths[d.label] = _tip_path(d)
         except EndocalError as exc:
             notes.append(f"no task-space tip trajectory for {d.label}: {exc}")
+    for d in data_entries:
+        walk = _walked_path(d)
+        if walk is None:
+            continue
+        m = walk.metrics
+        stops = [e for e in walk.events if e.get("kind") == "stop"]
+        stop_s = [float(np.interp(e["t_s"] - _walk_start(d), walk.t_s, walk.s_mm)) for e in stops]
+        jobs.append((ReportFigure(f"walk-{_slug(d.label)}", "task-space", f"{d.label}: tip path '{walk.path}'",
+                                  f"Desired (dashed) and reached tip (colour: error) in the base sensor's frame at home, "
+                                  f"and the error |P_r - P_d| along the path: median {m.median_mm:.2f} mm, RMSE "
+                                  f"{m.rmse_mm:.2f} mm, max {m.max_mm:.2f} mm, median {m.path_pct:.2f} % of the "
+                                  f"{m.length_mm:.1f} mm path ({m.n} tracker frames).", b""),
+                     lambda w=walk, stop_s=stop_s, lbl=d.label: F.tip_path_errors(
+                         w.desired_mm, w.reached_mm, w.s_mm, w.error_mm, f"{lbl}: tip path '{w.path}'", stop_s)))
+    for d in data_entries:
+        for e in d.meta.get("events", []) or []:
+            if e.get("kind") == "stop":
+                knobs = ", ".join(f"{a} knob at {v:.1f} deg" for a, v in (e.get("knob_deg") or {}).items())
+                notes.append(f"force guard stop in {d.label}: t = {e['t_s']:.2f} s, predicted tip force "
+                             f"{e['force_pred_n']:.3f} N (threshold {e['threshold_n']:g} N), {knobs}")
     if paths:
         jobs.append((ReportFigure("tip-paths", "task-space", "Task-space tip trajectories",
                                   "Measured tip position in the base sensor's frame (EM tracker), per record.", b""),

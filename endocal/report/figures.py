@@ -433,3 +433,32 @@ def tip_paths(paths_mm: Mapping[str, np.ndarray], title: str) -> bytes:
     axes[0].legend(fontsize=7, markerscale=5)
     fig.suptitle(title, x=0.01, ha="left", fontsize=11)
     return _png(fig)
+
+
+def tip_path_errors(desired_mm: np.ndarray, reached_mm: np.ndarray, s_mm: np.ndarray, error_mm: np.ndarray,
+                    title: str, stops_s_mm: Sequence[float] = ()) -> bytes:
+    """A walked tip path: desired (dashed) and reached tip seen from above, and the error along the path.
+
+    ``stops_s_mm``: where along the path the contact-force guard stopped the bending (marked).
+    """
+    fig = _new(10.5, 3.8)
+    top, along = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1, 1.6]})
+    top.plot(desired_mm[:, 0], desired_mm[:, 1], "--", color="0.35", lw=1.2, label="desired")
+    sc = top.scatter(reached_mm[:, 0], reached_mm[:, 1], c=error_mm, s=3, cmap="viridis", linewidths=0, label="reached")
+    fig.colorbar(sc, ax=top, label="error (mm)", fraction=0.046, pad=0.04)
+    top.set_xlabel("x (mm)")
+    top.set_ylabel("y (mm)")
+    top.set_aspect("equal", adjustable="datalim")
+    top.grid(alpha=0.3)
+    top.legend(fontsize=7, markerscale=3, loc="upper right")
+    along.plot(s_mm, error_mm, color=_PALETTE[0], lw=0.9)
+    med = float(np.median(error_mm))
+    along.axhline(med, color="0.3", ls=":", lw=1, label=f"median {med:.2f} mm")
+    for k, s in enumerate(stops_s_mm):
+        along.axvline(s, color="#d62728", lw=0.8, alpha=0.7, label="force guard stop" if k == 0 else None)
+    along.set_xlabel("distance along the path (mm)")
+    along.set_ylabel("|P_r - P_d| (mm)")
+    along.grid(alpha=0.3)
+    along.legend(fontsize=7)
+    fig.suptitle(title, x=0.01, ha="left", fontsize=11)
+    return _png(fig)

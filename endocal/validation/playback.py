@@ -102,20 +102,36 @@ def _with_goals(traj: Trajectory, new_goals: dict, preroll_s: float = PREROLL_S)
     return replace(traj, t_s=t, goal=goals, desired=desired, segments=segments, tip_desired_mm=tip)
 
 
-def slew_limit(cmd_deg: np.ndarray, t_s: np.ndarray, max_speed_dps: float) -> np.ndarray:
-    """Follow ``cmd_deg`` as closely as a knob limited to ``max_speed_dps`` can.
+def slew_limit(cmd_deg: np.ndarray, t_s: np.ndarray, max_speed_dps: float, max_accel_dps2: float | None = None) -> np.ndarray:
+    """Follow ``cmd_deg`` as closely as a knob limited to ``max_speed_dps`` (and ``max_accel_dps2``) can.
 
     Inverting backlash asks for a jump of the knob across the dead band at every reversal
     (the inverse of a flat branch is a step); no motor can jump, so the command is taken
-    across at the probe's top speed, which is what the servo would do anyway, and the
-    played command stays inside the limits that are checked before motion.
+    across as fast as the knob may go: accelerating at ``max_accel_dps2`` up to
+    ``max_speed_dps`` and braking so as to arrive without overshoot (in discrete time: the
+    speed from which ``m`` ticks of braking cover a gap ``e``, ``a h^2 m (m + 1) / 2 = |e|``).
+    A slow command the knob can follow is returned unchanged (braking assumes the command
+    stops, so one moving faster than about ``a h`` is followed with a little lag); the played
+    command stays inside the limits that are checked before motion.
     """
-    out = np.asarray(cmd_deg, float).copy()
-    max_step = max_speed_dps * np.diff(t_s)
+    cmd = np.asarray(cmd_deg, float)
+    out = cmd.copy()
+    dt = np.diff(t_s)
+    v = 0.0
     for i in range(1, out.size):
-        step = out[i] - out[i - 1]
-        if abs(step) > max_step[i - 1]:
-            out[i] = out[i - 1] + np.sign(step) * max_step[i - 1]
+        h = dt[i - 1]
+        e = cmd[i] - out[i - 1]
+        reach = min(abs(e) / h, max_speed_dps)
+        if max_accel_dps2 is not None:  # fastest speed from which braking at a, tick by tick, stops within |e|
+            ah = max_accel_dps2 * h
+            m = np.floor((np.sqrt(1.0 + 8.0 * abs(e) / (ah * h)) - 1.0) / 2.0)  # whole braking ticks that fit
+            rest = abs(e) - ah * h * m * (m + 1) / 2.0
+            reach = min(reach, ah * m + rest / ((m + 1) * h))
+        want = np.sign(e) * reach
+        if max_accel_dps2 is not None:
+            want = min(max(want, v - max_accel_dps2 * h), v + max_accel_dps2 * h)
+        out[i] = cmd[i] if want == e / h else out[i - 1] + want * h  # exact where it follows
+        v = want
     return out
 
 
@@ -143,8 +159,8 @@ def task_space_trajectory(traj: Trajectory, probe: ProbeConfig, models: dict, pl
     for axis, model in models.items():
         other = second if axis == first else first
         cmd = np.asarray(model.inverse(traj.goal[axis], t_s=traj.t_s, extras={"other_cmd_deg": traj.goal[other]}), float)
-        # 0.99: stay strictly inside the speed limit that check_limits enforces.
-        goals[axis] = slew_limit(cmd, traj.t_s, 0.99 * probe.max_knob_speed_dps)
+        # 0.99: stay strictly inside the speed and acceleration limits that check_limits enforces.
+        goals[axis] = slew_limit(cmd, traj.t_s, 0.99 * probe.max_knob_speed_dps, 0.99 * probe.max_knob_accel_dps2)
     return _with_goals(traj, goals)
 
 

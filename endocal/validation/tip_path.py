@@ -114,11 +114,13 @@ class TipPathResult:
                 "events": list(self.events)}
 
 
-def tip_in_base_home_mm(tracker) -> tuple[np.ndarray, np.ndarray]:
+def tip_in_base_home_mm(tracker, home_until_s: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
     """Tip positions in the base_home frame at each frame where both sensors are valid.
 
-    base_home is the base sensor's pose in its first valid frame (the probe at home at the
-    start of every run): ``tip_in_base_home = base_home2tracker^-1 (tip - base_home)``.
+    base_home is the base sensor's pose while the probe is at home: the mean of its valid
+    frames before ``home_until_s`` (when translation or rotation first move; all frames when
+    they never do), so the base sensor's own noise averages out of the frame instead of
+    entering every point. ``tip_in_base_home = base_home2tracker^-1 (tip - base_home)``.
 
     Returns
     -------
@@ -131,16 +133,18 @@ def tip_in_base_home_mm(tracker) -> tuple[np.ndarray, np.ndarray]:
     if tip.empty or base.empty:
         missing = "tip" if tip.empty else "base"
         raise RunFormatError(f"the tracker logged no valid {missing} sensor frame: the tip path needs both sensors")
-    b0 = base.sort_values("t_s").iloc[0]
-    home2tracker = Rotation.from_quat([b0["qw"], b0["qx"], b0["qy"], b0["qz"]], scalar_first=True)
     xyz = ["x_mm", "y_mm", "z_mm"]
+    home = base[base["t_s"] < home_until_s]
+    home = home if not home.empty else base.iloc[:1]
+    home2tracker = Rotation.from_quat(home[["qw", "qx", "qy", "qz"]].to_numpy(float), scalar_first=True).mean()
+    origin = home[xyz].to_numpy(float).mean(axis=0)
     pairs = tip.merge(base[["t_s"]], on="t_s").sort_values("t_s")  # frames where the base was seen too
-    p = home2tracker.inv().apply(pairs[xyz].to_numpy(float) - b0[xyz].to_numpy(float))
+    p = home2tracker.inv().apply(pairs[xyz].to_numpy(float) - origin)
     return pairs["t_s"].to_numpy(float), p
 
 
-def evaluate_tip_run(run: Path, path: TipPath, probe: ProbeConfig, label: str = "", models: dict | None = None) -> TipPathResult:
-    """Per-point tip errors of a logged walk of ``path`` (a run holding ``tip_desired_*_mm``).
+def evaluate_tip_run(run: Path, label: str = "", models: dict | None = None) -> TipPathResult:
+    """Per-point tip errors of a logged walk of a tip path (a run holding ``tip_desired_*_mm``).
 
     Only frames of the walk itself count (not the approach from rest or the return), and
     only frames inside the motor clock's span.
@@ -160,7 +164,11 @@ def evaluate_tip_run(run: Path, path: TipPath, probe: ProbeConfig, label: str = 
     walk = meta.get("protocol", {}).get("walk_s")
     t_m = motor["t_s"].to_numpy(float)
     desired_m = motor[cols].to_numpy(float)
-    t_f, reached = tip_in_base_home_mm(read_stream(run, TRACKER))
+    moves = np.zeros(t_m.size, bool)
+    for col in ("translation_goal_mm", "rotation_goal_deg"):
+        if col in motor.columns:
+            moves |= np.abs(motor[col].to_numpy(float)) > 1e-9
+    t_f, reached = tip_in_base_home_mm(read_stream(run, TRACKER), float(t_m[moves][0]) if moves.any() else np.inf)
     lo, hi = walk if walk else (t_m[0], t_m[-1])
     keep = (t_f >= lo) & (t_f <= hi) & (t_f >= t_m[0]) & (t_f <= t_m[-1])
     t = t_f[keep]
@@ -173,7 +181,8 @@ def evaluate_tip_run(run: Path, path: TipPath, probe: ProbeConfig, label: str = 
     s0 = float(s_m[inside][0]) if inside.any() else 0.0
     s = np.interp(t, t_m, s_m) - s0
     length = float(s_m[inside][-1] - s0) if inside.any() else float(s_m[-1])
-    return TipPathResult(path.name, label, dict(models or {}), tip_metrics(err, length), t - lo, desired, reached, err, s,
+    name = meta.get("protocol", {}).get("name", Path(run).name)
+    return TipPathResult(name, label, dict(models or {}), tip_metrics(err, length), t - lo, desired, reached, err, s,
                          Path(run), list(meta.get("events", [])))
 
 
@@ -232,7 +241,7 @@ def walk_tip_path(
             "orthogonal_compensation": planes is not None}
     run_excitation(traj, backend_factory(), probe, run, protocol_info=info, seed=seed, force=True, progress=progress,
                    guard=guard)
-    return evaluate_tip_run(run, path, probe, label=label, models=model_files or {a: type(m).__name__ for a, m in models.items()})
+    return evaluate_tip_run(run, label=label, models=model_files or {a: type(m).__name__ for a, m in models.items()})
 
 
 def tip_error_units(results: list[TipPathResult]) -> tuple[Units, list[np.ndarray]]:
