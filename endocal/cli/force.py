@@ -54,6 +54,8 @@ def fit_force_cmd(
         out.print(f"  {h.source}: load {h.load_n:.3f} N -> predicted {h.pred_mean_n:.3f} N "
                   f"(error {h.error_n:+.3f} N, {h.error_pct:+.1f} %; per tick rms {h.rms_error_n:.3f} N)", markup=False)
     if model.heldout_:
-        worst = max(model.heldout_, key=lambda h: abs(h.error_pct))
-        out.print(f"worst held-out error {abs(worst.error_n):.3f} N ({abs(worst.error_pct):.1f} %)", markup=False)
+        worst_n = max(model.heldout_, key=lambda h: abs(h.error_n))
+        worst_pct = max(model.heldout_, key=lambda h: abs(h.error_pct))
+        out.print(f"worst held-out error {abs(worst_n.error_n):.3f} N ({worst_n.source}), "
+                  f"{abs(worst_pct.error_pct):.1f} % ({worst_pct.source})", markup=False)
     err.print(f"wrote {out_path}")
