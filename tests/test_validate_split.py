@@ -183,3 +183,18 @@ def test_moved_run_folder_is_found_beside_the_model(sine_sweeps, tmp_path):
     (tmp_path / "pe.json").write_text(json.dumps(d))
     v = _validate_json(tmp_path, tmp_path / "pe.json", tmp / "val")
     assert v["scheme"]["name"] == "estimation/validation"
+
+
+def test_report_ladder_follows_validates_scheme(sine_sweeps):
+    """The report's ladder scores a model fitted on another acquisition by the same
+    estimation/validation split as validate: its held-out RMSE is validate's validation RMSE."""
+    from endocal.report import build_report
+
+    tmp = sine_sweeps
+    v = _validate_json(tmp, tmp / "pe.json", tmp / "val")
+    rep = build_report([tmp / "pe.json"], [tmp / "val", tmp / "est"], regime_boot=0)
+    on_val = next(s for s in rep.ladder if s["data"] == "val")
+    assert on_val["scheme"] == "estimation/validation", on_val
+    assert on_val["heldout_rmse_deg"] == pytest.approx(v["heldout_rmse_deg"], rel=1e-9)
+    on_est = next(s for s in rep.ladder if s["data"] == "est")  # fitted on it: rolling origin, as validate would
+    assert on_est["scheme"] in ("rolling-origin", None), on_est

@@ -23,7 +23,7 @@ from endocal.models.data import OTHER_CMD
 from endocal.planes import PlanesCalibration, load_planes
 from endocal.planes.halfplanes import NOMINAL_AZIMUTH_DEG
 from endocal.report import figures as F
-from endocal.report.evaluate import DataEntry, Group, Progress, evaluate, load_inputs
+from endocal.report.evaluate import DataEntry, Group, Progress, axis_planes, evaluate, load_inputs
 from endocal.report.ladder import ladder_size, model_ladder
 from endocal.report.planes import PlanesView, planes_view
 from endocal.report.result import Report, ReportFigure, check_output
@@ -178,13 +178,17 @@ def build_report(
     n_eval = sum(1 for d in data_entries for m in model_entries if m.axis in d.aligned.axes)
     n_groups = sum(1 for d in data_entries for a in d.aligned.axes if any(m.axis == a for m in model_entries))
     n_fig_est = 5 * n_groups + len(model_entries) + 2 + (planes is not None)
+    # each model is scored through the planes it was fitted through (its file records them);
+    # --planes only draws the calibration
+    read_planes, off_planes, model_entries = axis_planes(model_entries)
     groups, skipped = evaluate(model_entries, data_entries, n_boot=n_boot, regime_boot=regime_boot, seed=seed,
-                               progress=stage(0, 2 * n_eval + n_fig_est))
+                               progress=stage(0, 2 * n_eval + n_fig_est), planes=read_planes)
+    skipped = off_planes + skipped
     if not groups:
         reasons = "; ".join(f"{s.model} on {s.data}: {s.reason}" for s in skipped)
         raise RunFormatError(f"no model could be evaluated on any record ({reasons})")
     n_rungs = ladder_size(model_entries, groups)
-    ladder = model_ladder(model_entries, groups, folds=folds, n_boot=n_boot, seed=seed,
+    ladder = model_ladder(model_entries, groups, folds=folds, n_boot=n_boot, seed=seed, datas=data_entries,
                           progress=stage(n_eval, n_eval + n_rungs + n_fig_est))
     n_done = n_eval + n_rungs
 
@@ -236,9 +240,10 @@ def build_report(
         steps = [dict(s, model=s["step"]) for s in ladder if s["axis"] == axis]
         if len({s["model"] for s in steps}) >= 2:
             jobs.append((ReportFigure(f"ladder-{_slug(axis)}", "ladder", f"Model ladder, axis {axis}",
-                                      f"Each model structure (base, base+effect, ...) refitted on the first half of "
-                                      f"each record and on every rolling origin after it ({folds} folds, as `endocal "
-                                      "validate` does): solid, held-out RMSE of the blocks it was not fitted on, with "
+                                      f"Each model structure (base, base+effect, ...) scored as `endocal validate` "
+                                      f"does: refitted on the model's own training records and run over a record it "
+                                      f"never saw, or on a record it was fitted on by rolling origin ({folds} folds): "
+                                      "solid, held-out RMSE of data it was not fitted on, with "
                                       "95 % block-bootstrap intervals; dashed, hollow: in-sample RMSE of the same fits "
                                       "on their training data. Stars: the step's held-out gain over the previous "
                                       "step is significant (one-sided paired test, Holm).", b""),
@@ -297,7 +302,8 @@ def build_report(
         "created_utc": utc_now(),
         "command": command,
         "bootstrap": {"n_boot": n_boot, "regime_boot": regime_boot, "seed": seed, "confidence": 0.95},
-        "ladder_cv": {"scheme": "rolling-origin blocked (endocal validate's)", "folds": folds},
+        "ladder_cv": {"scheme": "endocal validate's: estimation/validation on records the model was not fitted on, "
+                                "else rolling-origin blocked", "folds": folds},
         "models": [{"label": m.label, "path": None if m.path is None else str(m.path), "sha256": m.sha256,
                     "axis": m.axis, "model": m.name,
                     "training_data": list(getattr(m.model, "training_data_", []) or [])} for m in model_entries],

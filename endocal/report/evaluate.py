@@ -344,6 +344,45 @@ def _finding(data: DataEntry, axis: str, evs: list[Evaluation], comp: Comparison
                    margin, pct, sig, p, comp.test, eff, text)
 
 
+def axis_planes(models: list[ModelEntry], given=None) -> tuple[dict, list[NotEvaluated], list[ModelEntry]]:
+    """The bending planes each axis's records are read through, and the models that fit them.
+
+    ``given`` (a planes file or calibration) applies to every model, as ``validate --planes``
+    does; otherwise each model brings the planes it was fitted through (recorded in its file,
+    found and unchanged: :func:`endocal.validation.estimation.recorded_planes`). Models of one
+    axis fitted through other planes than the first of that axis would be scored on other
+    angles: they are not evaluated, with the reason.
+
+    Returns
+    -------
+    planes : dict
+        Axis -> ``(PlanesCalibration or None, path or None)``.
+    skipped : list of NotEvaluated
+    kept : list of ModelEntry
+    """
+    from endocal.validation.estimation import recorded_planes
+
+    out: dict = {}
+    skipped, kept = [], []
+    for m in models:
+        if given is not None and not isinstance(given, (str, Path)):  # a PlanesCalibration object
+            cal, path = given, "the given planes"
+        else:
+            cal, path = recorded_planes(m.model, m.path, given)
+        key = None if path is None else str(Path(path).resolve())
+        if m.axis not in out:
+            out[m.axis] = (cal, path, key)
+        if out[m.axis][2] != key:
+            first = out[m.axis][1] or "no planes"
+            skipped.append(NotEvaluated(m.label, "every record", m.axis,
+                                        f"fitted through {path or 'no planes'}, while the first model of axis "
+                                        f"{m.axis} was fitted through {first}: they would be scored on different "
+                                        "angles; report them separately or give --planes"))
+            continue
+        kept.append(m)
+    return {a: (c, p) for a, (c, p, _) in out.items()}, skipped, kept
+
+
 def evaluate(
     models: list[ModelEntry],
     datas: list[DataEntry],
@@ -352,12 +391,17 @@ def evaluate(
     regime_boot: int = 200,
     seed: int = 0,
     progress: Progress | None = None,
+    planes: dict | None = None,
 ) -> tuple[list[Group], list[NotEvaluated]]:
     """Score every model on every record of its axis and compare the models per record.
 
     Parameters
     ----------
     models, datas : from :func:`load_inputs`
+    planes : dict, optional
+        Axis -> ``(PlanesCalibration or None, label)``: the bending planes the records of that
+        axis are read through (:func:`axis_planes`), so each model is scored on the angles it
+        was fitted on, as ``endocal validate`` does.
     n_boot : int
         Bootstrap replicates of the metric intervals (``error_metrics``' default: 400).
     regime_boot : int
@@ -384,7 +428,13 @@ def evaluate(
     done = 0
     for d in datas:
         for axis in [a for a in d.aligned.axes if any(m.axis == a for m in models)]:
-            hd = axis_data(d.aligned, axis)
+            cal = (planes or {}).get(axis, (None, None))[0]
+            try:
+                hd = axis_data(d.aligned, axis, planes=cal)
+            except EndocalError as exc:
+                for m in (m for m in models if m.axis == axis):
+                    skipped.append(NotEvaluated(m.label, d.label, axis, str(exc)))
+                continue
             span = float(np.ptp(hd.cmd_deg))
             preds: dict[str, tuple[np.ndarray, list[str]]] = {}
             for m in (m for m in models if m.axis == axis):

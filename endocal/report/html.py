@@ -140,11 +140,12 @@ def _ladder_table(report) -> str:
         test = ("&ndash;" if s["p_adjusted"] is None else f'{_p(s["p_adjusted"])} {stars(s["p_adjusted"])}')
         rows.append(
             f'<tr><td class="l">{escape(s["axis"])}</td><td class="l">{escape(s["data"])}</td>'
-            f'<td class="l">{escape(s["step"])}{why}</td><td>{s["n_effects"]}</td><td>{_f(s["train_rmse_deg"])}</td>'
+            f'<td class="l">{escape(s["step"])}{why}</td><td>{s["n_effects"]}</td>'
+            f'<td class="l">{escape(s.get("scheme") or "-")}</td><td>{_f(s["train_rmse_deg"])}</td>'
             f'{held}<td>{_pct(s["change_pct"])}</td><td>{test}</td><td>{_f(s["file_rmse_deg"])}</td>'
             f'<td class="l">{"in-sample" if s["file_fitted_on_record"] else "held-out"}</td></tr>')
     return ('<table><thead><tr><th class="l">axis</th><th class="l">record</th><th class="l">model</th><th>effects</th>'
-            '<th>in-sample RMSE (deg)<br><span class="muted">fold fits, training data</span></th>'
+            '<th class="l">scheme</th><th>in-sample RMSE (deg)<br><span class="muted">the fits, on their training data</span></th>'
             '<th>held-out RMSE (deg)<br><span class="muted">95 % CI</span></th><th>held-out change vs previous step</th>'
             '<th>p (one-sided, Holm)</th><th>model file RMSE (deg)</th><th class="l">model file fitted on record?</th>'
             f'</tr></thead><tbody>{"".join(rows)}</tbody></table>')
@@ -239,9 +240,11 @@ def render_html(report) -> str:
         "pairwise Wilcoxon tests for more. Significance level 0.05.</p>" + "".join(_tests(g) for g in report.groups),
         '<h2 id="records">Records</h2>' + "".join(record_sections),
         '<h2 id="ladder">Model ladder</h2><p class="muted">Does adding an effect pay? Each step adds effects to a '
-        "base model. Every step's structure (base and effects, with its model file's settings) is refitted on each "
-        "record by blocked rolling-origin cross-validation, as <code>endocal validate</code> does: fitted on the first "
-        "half and on every later origin, scored on the next block it has not seen. In-sample error falls with every "
+        "base model. Every step's structure (base and effects, with its model file's settings) is scored as "
+        "<code>endocal validate</code> scores it: when the model file names other records as its training data, "
+        "refitted on them (estimation data) and run over the whole record (validation data, never seen); otherwise "
+        "by blocked rolling-origin cross-validation on the record: fitted on the first half and on every later "
+        "origin, scored on the next block it has not seen. The scheme column says which. In-sample error falls with every "
         "parameter added; the held-out error falls only when the effect is real. The p-value tests the step's held-out "
         "gain over the previous step (one-sided paired test on block-mean loss differentials, Wilcoxon signed-rank, "
         "Holm-corrected over the steps of a record). The last columns give the model file as it was fitted.</p>"

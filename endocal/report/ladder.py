@@ -1,7 +1,15 @@
 """The model ladder: does each added effect pay on data the model was not fitted on?
 
-A rung is one model structure (``base + effects``, with the model file's settings). On every
-record of its axis the structure is refitted and scored by the blocked rolling-origin
+A rung is one model structure (``base + effects``, with the model file's settings), scored
+by the scheme ``endocal validate`` uses (:func:`endocal.validation.estimation.plan_estimation`):
+
+**Estimation/validation** when the model file names the records it was fitted on (found and
+unchanged) and the record scored is not one of them: the structure is refitted on that
+estimation data (decimated as validate's scan does) and run over the whole record, which it
+has never seen; its in-sample RMSE is that fit's error on the estimation data.
+
+**Rolling origin** otherwise (the model was fitted on this record, or records nothing): on
+every record of its axis the structure is refitted and scored by the blocked rolling-origin
 cross-validation that ``endocal validate`` uses for its held-out RMSE and its effect scan
 (:mod:`endocal.validation.suspects`): the first half of the record only trains, the rest is
 cut into ``folds`` contiguous test blocks, fold ``k`` is fitted on everything before block
@@ -34,15 +42,20 @@ from endocal.report.adapters import predict_clamped
 from endocal.report.evaluate import Group, ModelEntry
 from endocal.report.stats import holm
 from endocal.validation.metrics import ErrorMetrics, error_metrics
+from endocal.validation.data import axis_data
+from endocal.validation.estimation import plan_estimation
 from endocal.validation.suspects import (
     MAX_SCAN_SAMPLES,
     check_cv_data,
+    check_fit_data,
     effect_labels,
     fold_bounds,
     fold_split,
     heldout_errors,
     one_blas_thread,
     paired_test,
+    predict_errors,
+    split_fit,
 )
 
 #: Held-out blocks and the longest record scored undecimated: ``endocal validate``'s defaults
@@ -65,7 +78,10 @@ class HeldOut:
     errors_deg : (n_heldout,) array
         Held-out ``predicted - measured`` (deg), for the paired tests; not serialised.
     folds, stride, n_samples : int
-        Test blocks, decimation step and samples cross-validated.
+        Test blocks, decimation step and samples cross-validated (split scheme: 0 folds, the
+        estimation data's decimation step, the validation record's samples).
+    scheme : str
+        ``rolling-origin`` or ``estimation/validation``.
     """
 
     metrics: ErrorMetrics
@@ -74,6 +90,31 @@ class HeldOut:
     folds: int
     stride: int
     n_samples: int
+    scheme: str = "rolling-origin"
+
+
+def split_validate(model: HysteresisModel, train: HysteresisData, val: HysteresisData, *,
+                   max_samples: int = MAX_CV_SAMPLES, n_boot: int = 400, seed: int = 0) -> HeldOut:
+    """Refit ``model``'s structure on estimation data ``train`` and score it on ``val`` (never seen).
+
+    As ``endocal validate``'s estimation/validation scan: estimation data decimated to about
+    ``max_samples``, validation record run from its start at full rate.
+
+    Raises
+    ------
+    ModelError
+        The estimation data cannot be fitted.
+    """
+    check_fit_data(train, "estimation data")
+    stride = max(1, math.ceil(train.n_samples / max_samples))
+    with one_blas_thread():
+        fitted = split_fit(model, effect_labels(model), train, stride)
+    err = predict_errors(fitted, val)
+    dt = train.decimate(stride) if stride > 1 else train
+    train_err = predict_errors(fitted, dt)
+    return HeldOut(metrics=error_metrics(val.meas_deg, val.meas_deg + err, n_boot=n_boot, seed=seed),
+                   train_rmse_deg=float(np.sqrt(np.mean(train_err**2))), errors_deg=err, folds=0, stride=stride,
+                   n_samples=val.n_samples, scheme="estimation/validation")
 
 
 def cross_validate(model: HysteresisModel, data: HysteresisData, *, folds: int = FOLDS,
@@ -129,9 +170,21 @@ def ladder_size(models: list[ModelEntry], groups: list[Group]) -> int:
     return sum(1 for g in groups for e in g.evaluations if e.model in names)
 
 
+def _estimation(m: ModelEntry, record, planes) -> tuple[HysteresisData | None, str]:
+    """Estimation data for scoring ``m`` on ``record`` (AlignedData), as validate plans it; None: rolling."""
+    try:
+        plan = plan_estimation(m.model, [record], model_path=m.path, planes_path=planes)
+    except EndocalError as exc:
+        return None, f"rolling origin: {exc}"
+    if plan.train is None:
+        return None, plan.reason
+    return axis_data(plan.train, m.axis, planes=plan.planes), plan.reason
+
+
 def model_ladder(models: list[ModelEntry], groups: list[Group], *, folds: int = FOLDS, n_boot: int = 400,
                  seed: int = 0, alpha: float = 0.05,
-                 progress: Callable[[str, int, int], None] | None = None) -> list[dict]:
+                 progress: Callable[[str, int, int], None] | None = None,
+                 datas: list | None = None, planes=None) -> list[dict]:
     """Steps of the model ladder: per axis and record, each model structure cross-validated.
 
     Parameters
@@ -148,6 +201,12 @@ def model_ladder(models: list[ModelEntry], groups: list[Group], *, folds: int = 
         Level of the step tests (after Holm's correction over the steps of one record).
     progress : callable, optional
         ``progress(step, done, total)`` after each rung.
+    datas : list of DataEntry, optional
+        The records (their loaded tables): with them a rung whose model file names other
+        records as its training data is scored by the estimation/validation split; without
+        them every rung is cross-validated by rolling origin.
+    planes : path, optional
+        The report's ``--planes`` (overrides the planes models record, as in validate).
 
     Returns
     -------
@@ -155,13 +214,14 @@ def model_ladder(models: list[ModelEntry], groups: list[Group], *, folds: int = 
         In ladder order, with ``axis``, ``data``, ``model`` (label), ``step`` (name drawn on the
         axis), ``base``, ``n_effects``; the cross-validation: ``heldout_rmse_deg``,
         ``heldout_ci``, ``train_rmse_deg`` (in-sample, same fold fits), ``folds``, ``stride``,
-        ``n_samples``; against the previous cross-validated step on the same record:
+        ``n_samples``, ``scheme`` and ``scheme_reason``; against the previous step on the same record:
         ``change_pct`` (held-out RMSE), ``p_value`` (one-sided, raw) and ``p_adjusted``
         (Holm), ``significant``; ``heldout_error`` (why it could not be cross-validated, else
         None); and the model file as given: ``file_rmse_deg``, ``file_ci``,
         ``file_fitted_on_record``.
     """
     total = ladder_size(models, groups)
+    records = {d.label: d.aligned for d in (datas or [])}
     steps: list[dict] = []
     done = 0
     for axis in dict.fromkeys(m.axis for m in models):
@@ -180,8 +240,14 @@ def model_ladder(models: list[ModelEntry], groups: list[Group], *, folds: int = 
                 if progress:
                     progress(f"ladder: {m.label} on {g.data}", done, total)
                 cv, why = None, None
+                record = records.get(g.data)
+                train, reason = (_estimation(m, record, planes) if record is not None
+                                 else (None, "rolling origin: the records were not given"))
                 try:
-                    cv = cross_validate(m.model, g.hdata, folds=folds, n_boot=n_boot, seed=seed)
+                    if train is not None:
+                        cv = split_validate(m.model, train, g.hdata, n_boot=n_boot, seed=seed)
+                    else:
+                        cv = cross_validate(m.model, g.hdata, folds=folds, n_boot=n_boot, seed=seed)
                 except EndocalError as exc:
                     why = str(exc)
                 ci = e.metrics.ci.get("rmse_deg")
@@ -192,13 +258,15 @@ def model_ladder(models: list[ModelEntry], groups: list[Group], *, folds: int = 
                     "heldout_rmse_deg": None if cv is None else cv.metrics.rmse_deg,
                     "heldout_ci": None if hci is None else [hci[0], hci[1]],
                     "train_rmse_deg": None if cv is None else cv.train_rmse_deg,
-                    "folds": folds, "stride": None if cv is None else cv.stride,
+                    "folds": None if cv is None or cv.scheme != "rolling-origin" else folds,
+                    "scheme": None if cv is None else cv.scheme, "scheme_reason": reason,
+                    "stride": None if cv is None else cv.stride,
                     "n_samples": None if cv is None else cv.n_samples, "heldout_error": why,
                     "change_pct": None, "p_value": None, "p_adjusted": None, "significant": None,
                     "file_rmse_deg": e.metrics.rmse_deg, "file_ci": None if ci is None else [ci[0], ci[1]],
                     "file_fitted_on_record": e.in_sample,
                 }
-                if prev is not None and cv is not None:
+                if prev is not None and cv is not None and prev.scheme == cv.scheme:
                     if prev.metrics.rmse_deg > 0:
                         row["change_pct"] = 100.0 * (cv.metrics.rmse_deg / prev.metrics.rmse_deg - 1.0)
                     row["p_value"], _ = paired_test(prev.errors_deg, cv.errors_deg)

@@ -77,8 +77,22 @@ def _locate(recorded: str, model_path: Path | None) -> Path | None:
     return None
 
 
-def _recorded_planes(model, model_path: Path | None, planes_path: str | Path | None):
+def recorded_planes(model, model_path: str | Path | None, planes_path: str | Path | None = None):
+    """The bending planes to read data through for ``model``: ``planes_path`` when given, else
+    the planes its file records (looked up as given, then beside the model file; hash checked).
+
+    Returns
+    -------
+    (PlanesCalibration or None, str or None)
+
+    Raises
+    ------
+    ModelError
+        Recorded planes missing or changed since the fit.
+    """
     from endocal.planes import load_planes
+
+    model_path = Path(model_path) if model_path is not None else None
 
     if planes_path is not None:
         return load_planes(planes_path), str(planes_path)
@@ -132,7 +146,7 @@ def plan_estimation(model, val: Sequence[AlignedData], *, model_path: str | Path
     if cv not in CV_CHOICES:
         raise ModelError(f"--cv must be one of {', '.join(CV_CHOICES)}, got {cv!r}")
     mpath = Path(model_path) if model_path is not None else None
-    planes, ppath = _recorded_planes(model, mpath, planes_path)
+    planes, ppath = recorded_planes(model, mpath, planes_path)
     val_hashes = {a.sha256 for a in val}
     if cv == "rolling":
         if train_paths:

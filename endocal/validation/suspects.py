@@ -607,11 +607,21 @@ def _predict_errors(model: HysteresisModel, data: HysteresisData) -> np.ndarray:
         return model.predict(data) - data.meas_deg
 
 
+def split_fit(model: HysteresisModel, effects: Sequence[str], train: HysteresisData, stride: int = 1) -> HysteresisModel:
+    """``base + effects`` (with ``model``'s settings) fitted on ``train``, every ``stride``-th sample."""
+    dt = train.decimate(stride) if stride > 1 else train
+    return _template(model, effects).fit(dt)
+
+
+def predict_errors(model: HysteresisModel, data: HysteresisData) -> np.ndarray:
+    """``pred - meas`` (deg) of a fitted model run over ``data`` from its start (beyond-range commands clamped)."""
+    return _predict_errors(model, data)
+
+
 def split_errors(model: HysteresisModel, effects: Sequence[str], train: HysteresisData, val: HysteresisData,
                  stride: int = 1) -> np.ndarray:
     """Validation errors ``pred - meas`` (deg) of ``base + effects`` fitted on ``train`` (every ``stride``-th sample)."""
-    dt = train.decimate(stride) if stride > 1 else train
-    return _predict_errors(_template(model, effects).fit(dt), val)
+    return _predict_errors(split_fit(model, effects, train, stride), val)
 
 
 def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisData, *, alpha: float = 0.05,
