@@ -260,7 +260,8 @@ class HysteresisModel(ABC):
         return inputs + filters + outputs
 
     # ------------------------------------------------------------------ fit
-    def fit(self, data, meas_deg=None, *, t_s=None, extras=None, max_nfev: int | None = None):
+    def fit(self, data, meas_deg=None, *, t_s=None, extras=None, max_nfev: int | None = None,
+            warm_start: dict | None = None):
         """Fit the base and all effect terms jointly by least squares.
 
         Parameters
@@ -276,6 +277,12 @@ class HysteresisModel(ABC):
             Extra named columns (n,) needed by effects (``other_cmd_deg``, covariates).
         max_nfev : int, optional
             Cap on residual evaluations (default: scipy's, 100 × free parameters).
+        warm_start : dict, optional
+            Parameter values known to be good starts (full names, e.g. the ``params_`` of a
+            model with some of these effects fitted on similar data). An effect whose
+            parameters all appear starts from them and skips its start-candidate search;
+            the fit itself is unchanged. ``validate`` uses it to refit many candidate
+            structures that share the model's effects.
 
         Returns
         -------
@@ -291,9 +298,9 @@ class HysteresisModel(ABC):
         # The fit's linear algebra is on thin matrices (n × a few parameters): BLAS threads
         # only contend with each other there (10-20x slower on a loaded machine), so one.
         with threadpool_limits(limits=1, user_api="blas"):
-            return self._fit(data, meas_deg, t_s=t_s, extras=extras, max_nfev=max_nfev)
+            return self._fit(data, meas_deg, t_s=t_s, extras=extras, max_nfev=max_nfev, warm_start=warm_start)
 
-    def _fit(self, data, meas_deg, *, t_s, extras, max_nfev):
+    def _fit(self, data, meas_deg, *, t_s, extras, max_nfev, warm_start=None):
         self._check_common()
         d, _ = as_data(data, meas_deg, t_s=t_s, extras=extras)
         if d.meas_deg is None:
@@ -321,9 +328,16 @@ class HysteresisModel(ABC):
         # command it produces, and the one with the lowest start cost is kept (greedy, in
         # chain order).
         overrides: dict[str, float] = {}
+        warm = warm_start or {}
+        for e in effects:
+            known = [n for n in e.full_names() if n not in fixed]
+            if known and all(n in warm for n in known):
+                overrides.update({n: float(warm[n]) for n in known})
+        if overrides:
+            start, structure, owners = self._start(dd, effects, fixed, overrides)
         ds = dd.decimate(dd.n_samples // 4000) if dd.n_samples >= 8000 else dd
         for e in effects:
-            if not hasattr(e, "start_candidates"):
+            if not hasattr(e, "start_candidates") or all(n in overrides for n in e.full_names() if n not in fixed):
                 continue
             best = None
             for cand in e.start_candidates(dd, dd.cmd_deg):

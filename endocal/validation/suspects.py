@@ -608,9 +608,13 @@ def _predict_errors(model: HysteresisModel, data: HysteresisData) -> np.ndarray:
 
 
 def split_fit(model: HysteresisModel, effects: Sequence[str], train: HysteresisData, stride: int = 1) -> HysteresisModel:
-    """``base + effects`` (with ``model``'s settings) fitted on ``train``, every ``stride``-th sample."""
+    """``base + effects`` (with ``model``'s settings) fitted on ``train``, every ``stride``-th sample.
+
+    The effects ``model`` already has start from its fitted values (it was fitted on this
+    estimation data), so only a new effect searches its start candidates.
+    """
     dt = train.decimate(stride) if stride > 1 else train
-    return _template(model, effects).fit(dt)
+    return _template(model, effects).fit(dt, warm_start=getattr(model, "params_", None))
 
 
 def predict_errors(model: HysteresisModel, data: HysteresisData) -> np.ndarray:
