@@ -20,11 +20,12 @@ Safety
   turn torque off before the process ends. Ctrl-C raises ``KeyboardInterrupt`` as usual,
   and the caller's ``finally``/``with`` closes the backend.
 
-UDP stage protocol (ASCII, one datagram per message, numbers in the DoF's unit)
----------------------------------------------------------------------------------
+UDP stage protocol, version 1 (ASCII, one datagram per message, numbers in the DoF's unit)
+------------------------------------------------------------------------------------------
 host -> stage: ``GOAL <seq> <translation_mm> <rotation_deg>``, ``READ <seq>`` or ``STOP <seq>``;
 stage -> host: ``POS <seq> <translation_mm> <rotation_deg> [<translation_current_ma> <rotation_current_ma>]``
 answering ``GOAL`` and ``READ`` (``STOP`` needs no answer: the stage holds or disables its drives).
+Documented in full, with an emulator, in :mod:`endocal.emulate.stage`.
 """
 
 from __future__ import annotations
