@@ -174,6 +174,9 @@ def run_excitation(
         try:
             backend.close()
         finally:
+            timing = getattr(backend, "timing", None)  # a real-time loop's: set and achieved rate, overruns
+            if timing is not None and "backend" in meta:
+                meta["backend"]["timing"] = timing.describe()
             if guard is not None:
                 meta["force_guard"] = guard.describe()
                 meta["events"] = list(guard.events)

@@ -634,7 +634,14 @@ def test_chunk_columns_match_the_run_format(tmp_path):
         chunk2 = backend.execute(t2, g2)
         info = backend.describe()
     m = chunk.motor
-    assert list(m) == motor_columns(TEE)
+    assert list(m) == motor_columns(TEE) + ["tick_late_ms"]
+    assert (m["tick_late_ms"] >= 0).all()
+    timing = info["timing"]
+    assert timing["set_rate_hz"] == pytest.approx(1.0 / np.median(np.diff(t)))
+    assert timing["achieved_rate_hz"] == pytest.approx(timing["set_rate_hz"], rel=0.2)
+    assert timing["overrun_pct"] == pytest.approx(100.0 * timing["overruns"] / info["timing"]["ticks_played"])
+    tracker = info["tracker"]  # every frame stamped mid round trip: half of it bounds the stamp's error
+    assert tracker["frames_read"] > 0 and 0 <= tracker["stamp_uncertainty_ms"] <= tracker["round_trip_ms_max"] / 2
     assert all(len(v) == t.size for v in m.values())
     # never early: each tick is read after its scheduled time on the run clock
     assert (m["t_s"] >= t).all() and (np.diff(m["t_s"]) > 0).all() and chunk2.motor["t_s"][0] > m["t_s"][-1]

@@ -247,6 +247,7 @@ class AuroraTracker:
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self._rows: list[tuple] = []
+        self._round_trips: list[float] = []  # get_frame durations (s), for the stamp uncertainty
         self._error: BaseException | None = None
         self._last_numbers: tuple | None = None
         self.info: dict = {}
@@ -312,7 +313,9 @@ class AuroraTracker:
             while not self._stop.is_set():
                 t_before = clock()
                 frame = self._tracker.get_frame()
-                t_s = 0.5 * (t_before + clock())
+                t_after = clock()
+                t_s = 0.5 * (t_before + t_after)
+                self._round_trips.append(t_after - t_before)
                 rows, numbers = _frame_rows(frame, self.config.handles, t_s)
                 if numbers != self._last_numbers or None in numbers:
                     self._last_numbers = numbers
@@ -354,14 +357,25 @@ class AuroraTracker:
             self._tracking = False
             tracker.close()
 
+    def alignment(self) -> dict:
+        """How well frames sit on the motor clock: each is stamped at the middle of its
+        ``get_frame`` round trip, so half the round trip bounds the stamp's error."""
+        rt = np.asarray(self._round_trips, float)
+        if rt.size == 0:
+            return {}
+        return {"frames_read": int(rt.size), "round_trip_ms_mean": float(1000 * rt.mean()),
+                "round_trip_ms_max": float(1000 * rt.max()),
+                "stamp_uncertainty_ms": float(500 * np.percentile(rt, 99))}
+
     def describe(self) -> dict:
-        """Configuration, tools seen at open and package version, for ``run.json``."""
+        """Configuration, tools seen at open, frame-stamp uncertainty and package version, for ``run.json``."""
         return {
             "serial_port": self.config.serial_port,
             "port_handles": {s: h for s, h in self.config.handles.items()},
             "rom_files": list(self.config.rom_files),
             "rate_hz": self.config.rate_hz,
             "tools_seen": dict(self.info),
+            **self.alignment(),
             "scikit-surgerynditracker": tracker_package_version(),
         }
 

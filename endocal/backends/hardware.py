@@ -366,6 +366,47 @@ class UdpStage:
 
 
 # --- the backend --------------------------------------------------------------------------
+class LoopTiming:
+    """The control loop's timing: set rate, achieved rate, overruns.
+
+    A tick *overruns* when it begins more than :data:`OVERRUN_FRACTION` of a period after its
+    deadline (the previous tick's servo and stage traffic took too long, or the process was
+    not scheduled); the schedule then slides (``slip_s``) rather than hurrying the next goals.
+    """
+
+    #: A tick beginning this fraction of a period late is an overrun.
+    OVERRUN_FRACTION = 0.5
+
+    def __init__(self) -> None:
+        self.period_s: float | None = None
+        self.ticks = 0
+        self.overruns = 0
+        self.max_late_s = 0.0
+        self._first: float | None = None
+        self._last: float | None = None
+
+    def set_period(self, period_s: float) -> None:
+        self.period_s = period_s
+
+    def tick(self, late_s: float) -> None:
+        """Record one tick that began ``late_s`` after its deadline (0 when on time)."""
+        now = time.monotonic()
+        self._first = now if self._first is None else self._first
+        self._last = now
+        self.ticks += 1
+        self.max_late_s = max(self.max_late_s, late_s)
+        if self.period_s is not None and late_s > self.OVERRUN_FRACTION * self.period_s:
+            self.overruns += 1
+
+    def describe(self) -> dict:
+        achieved = ((self.ticks - 1) / (self._last - self._first)
+                    if self.ticks > 1 and self._last > self._first else None)
+        return {"set_rate_hz": None if not self.period_s else 1.0 / self.period_s, "achieved_rate_hz": achieved,
+                "overruns": self.overruns, "overrun_pct": 100.0 * self.overruns / self.ticks if self.ticks else 0.0,
+                "overrun_threshold_s": None if not self.period_s else self.OVERRUN_FRACTION * self.period_s,
+                "max_late_ms": 1000.0 * self.max_late_s}
+
+
 class HardwareBackend:
     """The rig as a :class:`~endocal.backends.base.Backend`: plays goals in real time, logs motors and tracker.
 
@@ -443,6 +484,7 @@ class HardwareBackend:
         self.tracker = AuroraTracker(config.tracker, tracker_factory=tracker_factory)
         self.stage = UdpStage(stage) if stage.mode == "udp" else None
         self.slip_s = 0.0
+        self.timing = LoopTiming()
         self.ticks_played = 0
         #: Per-tick hook (:class:`endocal.force.guard.ForceGuard`) or None; see :meth:`attach_guard`.
         self.force_guard = None
@@ -567,9 +609,9 @@ class HardwareBackend:
         Returns
         -------
         StreamChunk
-            ``motor`` has exactly ``motor_columns(probe)``; its ``t_s`` is when each tick's
-            present state was read (run clock); ``tracker`` holds every frame received since
-            the previous chunk.
+            ``motor`` has ``motor_columns(probe)`` and ``tick_late_ms`` (how late each tick
+            began against its schedule); its ``t_s`` is when each tick's present state was
+            read (run clock); ``tracker`` holds every frame received since the previous chunk.
 
         Raises
         ------
@@ -588,16 +630,22 @@ class HardwareBackend:
 
         n = t.size
         cols = {c: np.zeros(n) for c in motor_columns(self.probe)}
+        cols["tick_late_ms"] = np.zeros(n)  # how late each tick began against its schedule
+        if n > 1:
+            self.timing.set_period(float(np.median(np.diff(t))))
         knobs = self.probe.bending_axes
         for i in range(n):
             deadline = self._t0 + t[i] + self.slip_s
-            now = time.monotonic()
-            if now > deadline:
+            late_s = time.monotonic() - deadline
+            if late_s > 0:
                 # Behind schedule: slide the rest of the schedule instead of hurrying, so that no
                 # goal step happens faster than the (checked) planned one.
-                self.slip_s += now - deadline
+                self.slip_s += late_s
             else:
                 _wait_until(deadline)
+                late_s = max(0.0, time.monotonic() - deadline)  # the wake-up's own jitter
+            self.timing.tick(late_s)
+            cols["tick_late_ms"][i] = 1000.0 * late_s
             self.tracker.check()
             knob_goals = {a: float(goals[a][i]) for a in knobs}
             guard = self.force_guard
@@ -774,7 +822,7 @@ class HardwareBackend:
             "tracker": self.tracker.describe(),
             "stage": {"mode": self.config.stage.mode,
                       **({"address": self.stage.address} if self.stage is not None else {})},
-            "timing": {"ticks_played": self.ticks_played, "slip_s": self.slip_s},
+            "timing": {"ticks_played": self.ticks_played, "slip_s": self.slip_s, **self.timing.describe()},
             "packages": {"endocal-toolkit": __version__, "dynamixel-sdk": sdk_version(),
                          "scikit-surgerynditracker": tracker_package_version()},
         }
