@@ -130,6 +130,15 @@ def test_real_piezo_one_cycle_to_fit_one_to_validate(tmp_path):
     # a piezo stack creeps (its displacement lags the drive's history, relaxing after each move):
     # the first suggestion pays on the unseen cycle by more than the 30 % bar, and never makes it worse
     assert after <= 0.7 * before, (first["suspects"][0]["effect"], before, after)
+    # the thesis's B-spline on the same single cycle: 200 samples for its 21 parameters fit (with a
+    # warning), and a smaller spline set with --set is kept by every refit command validate prints
+    res = _run("fit", "hysteresis", tmp_path / "est.csv", "--axis", "piezo", "--model", "bspline", "--out",
+               tmp_path / "bs.json")
+    assert "fewer than 10 per parameter" in res.stdout
+    _run("fit", "hysteresis", tmp_path / "est.csv", "--axis", "piezo", "--model", "bspline", "--set", "n_knots=3",
+         "--out", tmp_path / "bs3.json")
+    v = _validate_json(tmp_path, tmp_path / "bs3.json", tmp_path / "val.csv")
+    assert v["scan"]["tested"] and all("--set n_knots=3" in t["command"] for t in v["scan"]["tested"])
 
 
 @pytest.fixture(scope="module")

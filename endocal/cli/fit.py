@@ -62,6 +62,7 @@ def hysteresis(
     out_path: Path = typer.Option(..., "--out", "-o", help="Model file to write (versioned JSON)."),
     force: bool = typer.Option(False, "--force", help="Overwrite --out."),
     as_json: bool = typer.Option(False, "--json", help="Print the model file's content as JSON."),
+    sets: list[str] = typer.Option([], "--set", help="A base-model setting, e.g. --set n_knots=3 (bspline: n_knots, degree; pi: n_operators, weights, offset); repeatable."),
 ) -> None:
     """Fit a hysteresis model (knob command -> bending angle) of one axis.
 
@@ -85,7 +86,8 @@ def hysteresis(
 
         planes = load_planes(planes_file)
     effect_list = [e.strip() for e in effects.split(",") if e.strip()]
-    result = fit_hysteresis(data, axis, model, effect_list, planes=planes)
+    settings = _settings(model, sets)
+    result = fit_hysteresis(data, axis, model, effect_list, planes=planes, **settings)
     provenance = {
         "software": software_versions(),
         "created_utc": utc_now(),
@@ -115,3 +117,21 @@ def hysteresis(
 from endocal.cli.force import fit_force_cmd  # noqa: E402  (registered here so `fit --help` lists it)
 
 app.command("force")(fit_force_cmd)
+
+
+def _settings(base: str, sets: list[str]) -> dict:
+    """``--set key=value`` as base-model settings; a key the base does not have is an error naming those it has."""
+    import inspect
+
+    from endocal.errors import ModelError
+    from endocal.models.registry import BASES
+    from endocal.protocols import parse_overrides
+
+    settings = parse_overrides(sets)
+    if base in BASES:
+        known = [k for k in inspect.signature(BASES[base].__init__).parameters
+                 if k not in ("self", "effects", "fixed", "axis", "out_of_range")]
+        unknown = [k for k in settings if k not in known]
+        if unknown:
+            raise ModelError(f"--set {unknown[0]}: model '{base}' has no such setting; it has {', '.join(known) or 'none'}")
+    return settings

@@ -359,9 +359,13 @@ class HysteresisModel(ABC):
         names = list(owners)
         free = [n for n in names if n not in fixed]
         n_free = len(free)
-        need = max(50, 10 * n_free)
+        # Refuse only what cannot be fitted with any confidence: at least two samples per free
+        # parameter (and 20 spare); below ten per parameter the fit runs and its report warns.
+        need = 2 * n_free + 20
         if d.n_samples < need:
-            raise ModelError(f"too few samples to fit {n_free} parameters: got {d.n_samples}, need at least {need}")
+            raise ModelError(f"too few samples to fit {n_free} parameters: got {d.n_samples}, need at least {need} "
+                             "(record longer, or a model with fewer parameters: bspline --set n_knots=3, pi "
+                             "n_operators=8, or linear)")
 
         self._owner_map_ = owners
         x0 = np.array([start[n].clipped_start() for n in free])
@@ -410,7 +414,9 @@ class HysteresisModel(ABC):
             nfev=int(res.nfev), njev=int(res.njev or 0), cost=float(res.cost),
             rmse_deg=float(math.sqrt(float(r @ r) / m)), n_samples=d.n_samples, n_runs=d.n_runs,
             n_free=n_free, rank_deficient=rank_def,
-            warnings=_loose_parameters(free, owners, values, stderr, lo, hi),
+            warnings=([f"{d.n_samples} samples for {n_free} free parameters (fewer than 10 per parameter): the "
+                       "fit may follow the noise; check it on a record it was not fitted on (endocal validate)"]
+                      if d.n_samples < 10 * n_free else []) + _loose_parameters(free, owners, values, stderr, lo, hi),
         )
         return self
 

@@ -464,6 +464,21 @@ def takes_column(name: str) -> bool:
     return False
 
 
+def settings_args(model: HysteresisModel) -> list[str]:
+    """``--set key=value`` for each base setting of ``model`` that differs from its default, so a
+    refit keeps the model's structure (``n_knots``, ``n_operators``, ...)."""
+    import inspect
+    import json
+
+    sig = inspect.signature(type(model).__init__)
+    out = []
+    for k, v in model.get_settings().items():
+        default = sig.parameters[k].default
+        if default is not inspect.Parameter.empty and v != default:
+            out += ["--set", f"{k}={json.dumps(v)}"]
+    return out
+
+
 def refit_command(data_paths: Sequence[str], axis: str | None, base: str, effects: Sequence[str], out: str,
                   extra_args: Sequence[str] = ()) -> str:
     """``endocal fit hysteresis DATA... --axis AXIS --model BASE --effects E1,E2 [EXTRA...] --out OUT``."""
@@ -711,7 +726,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
         evidence = (f"not enough evidence ({units.n} units, {need} needed)" if thin else
                     "significant" if significant else "not significant")
         cmd = refit_command(data_paths, model.axis, model.base_name, have + [c], refit_path(model_path, c),
-                            refit_args)
+                            [*refit_args, *settings_args(model)])
         tested.append(Suspect(effect=c, column=col or None, gain_pct=gain, p_value=float(pa), p_raw=float(p),
                               rmse_heldout_deg=rmse, base_rmse_heldout_deg=rmse_base, significant=significant,
                               command=cmd, cause=cls.cause, signature=cls.signature, protocol=cls.protocol,
@@ -857,7 +872,7 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
         cls = EFFECTS[name]
         gain = 100.0 * (1.0 - rmse / rmse_base) if rmse_base > 0 else 0.0
         cmd = refit_command(data_paths, model.axis, model.base_name, have + [c], refit_path(model_path, c),
-                            refit_args)
+                            [*refit_args, *settings_args(model)])
         significant = bool(pa < alpha and gain >= min_gain_pct)
         tested.append(Suspect(effect=c, column=col or None, gain_pct=gain, p_value=float(pa), p_raw=p,
                               rmse_heldout_deg=rmse, base_rmse_heldout_deg=rmse_base,
