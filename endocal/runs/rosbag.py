@@ -30,20 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
-from endocal.streams import StreamChunk
 from endocal.errors import RunFormatError
 from endocal.probe import TRANSLATION, ProbeConfig
-from endocal.runs.format import (
-    MOTOR,
-    RUN_JSON,
-    create_run_folder,
-    prepare_output,
-    run_meta,
-    sha256_of,
-    utc_now,
-    write_json,
-)
-from endocal.runs.logger import StreamLogger, finish_run
+from endocal.runs.format import prepare_output, sha256_of
+from endocal.runs.imported import tracker_stream, write_imported_run
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 POSE_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/TransformStamped")
@@ -247,30 +237,17 @@ def import_rosbag(bag: str | Path, out: str | Path, probe: ProbeConfig, joints: 
     if n == 0:
         raise RunFormatError(f"{bag}: no tip pose has a base pose within {pair_tolerance_s:g} s ({tip.shape[0]} tip, "
                              f"{base.shape[0]} base poses); if the driver stamps them further apart, raise --pair-tolerance")
-    frames = np.concatenate([tip_ok, base_ok])
-    tracker = {"t_s": frames[:, 0] - t0, "sensor": np.array(["tip"] * n + ["base"] * n, dtype=object)}
-    for j, col in enumerate(("x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz"), start=1):
-        tracker[col] = frames[:, j]
-    tracker["valid"] = np.ones(2 * n, bool)
-    order = np.argsort(tracker["t_s"], kind="stable")
-    tracker = {k: v[order] for k, v in tracker.items()}
+    tip_ok[:, 0] -= t0
+    base_ok[:, 0] -= t0
+    tracker = tracker_stream(tip_ok, base_ok)
 
-    dt = np.diff(motor["t_s"])
     backend = {"name": "rosbag", "topics": {"joints": topics.joints, "goals": topics.goals, "tip": topics.tip,
                                             "base": topics.base},
                "joints": dict(joints), "pair_tolerance_s": pair_tolerance_s, "unpaired_tip_frames": unpaired,
                "command_source": "goal topic" if goal_msgs is not None else
                "knob position (no goal topic: the servo's lag is not in the data)"}
-    meta = run_meta(protocol={"name": "ros-import", "source": str(bag), "sha256": sha256_of(bag)}, probe=probe,
-                    backend=backend, seed=None, realtime=True, command=command,
-                    sample_rate_hz=float(1.0 / np.median(dt)) if dt.size and np.median(dt) > 0 else None,
-                    planned_duration_s=float(motor["t_s"][-1]))
-    meta["started_utc"] = utc_now()
-    create_run_folder(out)
-    write_json(out / RUN_JSON, meta)
-    logger = StreamLogger(out)
-    logger.append(StreamChunk(motor=motor, tracker=tracker))
-    logger.flush()
-    finish_run(out, meta, logger, "complete", None, time.monotonic() - wall0, probe)
-    return ImportResult(out, logger.rows_written[MOTOR], n, meta["counts"].get("aligned_rows", 0), unpaired,
+    meta = write_imported_run(out, motor, tracker, probe, source={"name": "ros-import", "source": str(bag),
+                                                                  "sha256": sha256_of(bag)},
+                              backend=backend, command=command, wall0=wall0)
+    return ImportResult(out, meta["motor_rows"], n, meta["counts"].get("aligned_rows", 0), unpaired,
                         meta.get("alignment_error"))
