@@ -14,8 +14,6 @@ models must differ significantly in the paired test.
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -25,25 +23,18 @@ from endocal.errors import ProtocolError
 from endocal.kinematics import ProbeKinematics, UnreachableError
 from endocal.probe import PRESETS, ROTATION, TRANSLATION
 from endocal.protocols.paths import list_paths, load_path, path_trajectory
+from tests._cli import endocal as run_endocal
+from tests._cli import one_line_exit_2
 
 ROOT = Path(__file__).resolve().parents[1]
 TEE = PRESETS["tee"]
 
 
 def endocal(*args, ok=True):
-    proc = subprocess.run([sys.executable, "-m", "endocal", *map(str, args)], capture_output=True, text=True,
-                          cwd=ROOT, timeout=600)
+    proc = run_endocal(*args)
     if ok:
         assert proc.returncode == 0, (args, proc.stdout, proc.stderr)
     return proc
-
-
-def one_line_exit_2(proc, *fragments):
-    assert proc.returncode == 2, (proc.returncode, proc.stdout, proc.stderr)
-    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
-    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
-    for f in fragments:
-        assert f in lines[0], lines[0]
 
 
 # --------------------------------------------------------------------------- geometry

@@ -2,6 +2,7 @@
 
 from endocal.cli import app
 from endocal.cli import fit as _fit
+from endocal.cli import imports as _imports
 from endocal.cli import protocols as _protocols
 from endocal.cli.effects import effects
 from endocal.cli.excite import excite
@@ -18,3 +19,4 @@ app.command("report")(report)
 app.command("import-ros")(import_ros)
 app.add_typer(_protocols.app, name="protocols")
 app.add_typer(_fit.app, name="fit")
+app.add_typer(_imports.app, name="import")

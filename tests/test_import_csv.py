@@ -1,0 +1,120 @@
+"""`endocal import csv` (endocal/runs/csvlog.py): a lab's CSV log into a run folder.
+
+Round trip: a simulated run is written out as a lab would log it, through the documented
+example map (time in ms, knob positions and goals in servo ticks, poses in metres with
+scalar-first quaternions, separate motor and tracker rows), imported back, and must give the
+same aligned table: the bending angles computed again by thesis eq. 1 from the poses.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from endocal.runs.aligned import load_aligned, read_stream
+from tests._cli import endocal, one_line_exit_2
+
+ROOT = Path(__file__).resolve().parents[1]
+MAP = ROOT / "configs" / "csv-map.example.toml"
+TICKS_PER_DEG = 4096 / 360.0
+
+
+@pytest.fixture(scope="module")
+def sim_log(tmp_path_factory):
+    """A simulated run and the CSV log a lab would have written of it (the example map's columns)."""
+    tmp = tmp_path_factory.mktemp("csv")
+    proc = endocal("excite", "lissajous", "--set", "duration_s=20", "--out", tmp / "run", "--seed", "4", "-q")
+    assert proc.returncode == 0, proc.stderr
+    motor, tracker = read_stream(tmp / "run", "motor"), read_stream(tmp / "run", "tracker")
+    rows = pd.DataFrame({"stamp_ms": 1000.0 * (motor["t_s"] + 12.5)})  # a clock that does not start at 0
+    for axis in ("ap", "ml"):
+        rows[f"{axis}_present_ticks"] = 2048 + motor[f"{axis}_pos_deg"] * TICKS_PER_DEG
+        rows[f"{axis}_goal_ticks"] = 2048 + motor[f"{axis}_goal_deg"] * TICKS_PER_DEG
+    rows["ap_current_ma"] = motor["ap_current_ma"]
+    frames = []
+    for sensor in ("tip", "base"):
+        f = tracker[tracker["sensor"] == sensor].set_index("t_s")
+        frames.append(pd.DataFrame({f"{sensor}_x_m": f["x_mm"] / 1000, f"{sensor}_y_m": f["y_mm"] / 1000,
+                                    f"{sensor}_z_m": f["z_mm"] / 1000, f"{sensor}_qw": f["qw"],
+                                    f"{sensor}_qx": f["qx"], f"{sensor}_qy": f["qy"], f"{sensor}_qz": f["qz"]}))
+    poses = pd.concat(frames, axis=1).reset_index()
+    poses.insert(0, "stamp_ms", 1000.0 * (poses.pop("t_s") + 12.5))
+    log = pd.concat([rows, poses], ignore_index=True).sort_values("stamp_ms", kind="stable")
+    # a motor tick and a frame at the same instant are one row, as a logger would write them
+    log = log.groupby("stamp_ms", as_index=False, sort=True).first()
+    log.to_csv(tmp / "log.csv", index=False)
+    return tmp
+
+
+def test_round_trip_gives_the_same_aligned_table(sim_log):
+    tmp = sim_log
+    proc = endocal("import", "csv", tmp / "log.csv", "--map", MAP, "--out", tmp / "imported")
+    assert proc.returncode == 0, proc.stderr
+    assert "motor samples" in proc.stdout and "ap <- ap_present_ticks" in proc.stdout
+    a, b = load_aligned(tmp / "run").table, load_aligned(tmp / "imported").table
+    assert len(a) == len(b)
+    np.testing.assert_allclose(b["t_s"], a["t_s"], atol=1e-9)  # ms through float text: sub-nanosecond
+    for axis in ("ap", "ml"):
+        # ticks back to degrees: exact up to the CSV's 17 significant digits
+        np.testing.assert_allclose(b[f"{axis}_cmd_deg"], a[f"{axis}_cmd_deg"], atol=1e-9)
+        # eq. 1 again from poses written in metres: the same angles to 1e-9 deg
+        np.testing.assert_allclose(b[f"{axis}_meas_deg"], a[f"{axis}_meas_deg"], atol=1e-9)
+    np.testing.assert_allclose(b["ap_current_ma"], a["ap_current_ma"], atol=1e-9)
+    meta = load_aligned(tmp / "imported").meta
+    assert meta["backend"]["name"] == "csv-import" and meta["protocol"]["sha256"]
+    assert meta["backend"]["command_source"] == "goal columns"
+
+
+def test_duplicated_stamps_are_refused_or_dropped(sim_log, tmp_path):
+    log = pd.read_csv(sim_log / "log.csv")
+    # a bridge writing one row three times: data row 100 is on line 102, its repeats on 103 and 104
+    rep = pd.concat([log.iloc[:101], log.iloc[100:101], log.iloc[100:101], log.iloc[101:]], ignore_index=True)
+    rep.to_csv(tmp_path / "rep.csv", index=False)
+    one_line_exit_2(endocal("import", "csv", tmp_path / "rep.csv", "--map", MAP, "--out", tmp_path / "r1"),
+                    "2 rows repeat a time stamp", "line 103", "--dedupe")
+    assert not (tmp_path / "r1").exists()
+    ok = endocal("import", "csv", tmp_path / "rep.csv", "--map", MAP, "--out", tmp_path / "r2", "--dedupe")
+    assert ok.returncode == 0 and "dropped 2 row(s)" in ok.stderr, ok.stderr
+    np.testing.assert_allclose(load_aligned(tmp_path / "r2").table["ap_meas_deg"],
+                               load_aligned(sim_log / "run").table["ap_meas_deg"], atol=1e-9)
+    clash = log.copy()
+    clash.loc[101, "stamp_ms"] = clash.loc[100, "stamp_ms"]  # the same stamp on rows that differ
+    clash.to_csv(tmp_path / "clash.csv", index=False)
+    one_line_exit_2(endocal("import", "csv", tmp_path / "clash.csv", "--map", MAP, "--out", tmp_path / "r3",
+                            "--dedupe"), "differ share a time stamp", "line 103")
+
+
+def _map(tmp_path: Path, old: str, new: str) -> Path:
+    text = MAP.read_text()
+    assert old in text
+    p = tmp_path / "map.toml"
+    p.write_text(text.replace(old, new))
+    return p
+
+
+@pytest.mark.parametrize("old, new, fragments", [
+    ('position = "ap_present_ticks"', 'position = "ap_pos"', ("names column 'ap_pos'", "its columns: stamp_ms")),
+    ('unit = "m"                                          # ...in mm or m', 'unit = "inch"', ("unknown length unit 'inch'",)),
+    ('unit = "ms"', 'unit = "minutes"', ("unknown time unit 'minutes'",)),
+    ('order = "wxyz"                                      # wxyz', 'order = "zyxw"                                      #',
+     ("unknown quaternion order 'zyxw'",)),
+    ('zero_ticks = 2048             # ticks', '# ticks', ("unit 'ticks' needs zero_ticks and ticks_per_rev",)),
+    ("[knobs.ml]", "[knobs.lr]", ("probe 'tee' has no axis 'lr'",)),
+])
+def test_bad_maps_are_one_line(sim_log, tmp_path, old, new, fragments):
+    one_line_exit_2(endocal("import", "csv", sim_log / "log.csv", "--map", _map(tmp_path, old, new), "--out",
+                            tmp_path / "run"), *fragments)
+    assert not (tmp_path / "run").exists()
+
+
+def test_not_a_table_and_existing_output(sim_log, tmp_path):
+    (tmp_path / "prose.csv").write_text("just one line of prose\n")
+    one_line_exit_2(endocal("import", "csv", tmp_path / "prose.csv", "--map", MAP, "--out", tmp_path / "r"),
+                    "not a CSV table")
+    shutil.copytree(sim_log / "run", tmp_path / "exists")
+    one_line_exit_2(endocal("import", "csv", sim_log / "log.csv", "--map", MAP, "--out", tmp_path / "exists"),
+                    "already exists", "--force")
