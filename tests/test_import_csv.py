@@ -75,7 +75,7 @@ def test_duplicated_stamps_are_refused_or_dropped(sim_log, tmp_path):
     rep = pd.concat([log.iloc[:101], log.iloc[100:101], log.iloc[100:101], log.iloc[101:]], ignore_index=True)
     rep.to_csv(tmp_path / "rep.csv", index=False)
     one_line_exit_2(endocal("import", "csv", tmp_path / "rep.csv", "--map", MAP, "--out", tmp_path / "r1"),
-                    "2 rows repeat a time stamp", "line 103", "--dedupe")
+                    "2 row(s) repeat a time stamp", "line 103", "--dedupe")
     assert not (tmp_path / "r1").exists()
     ok = endocal("import", "csv", tmp_path / "rep.csv", "--map", MAP, "--out", tmp_path / "r2", "--dedupe")
     assert ok.returncode == 0 and "dropped 2 row(s)" in ok.stderr, ok.stderr

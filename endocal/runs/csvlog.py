@@ -264,8 +264,8 @@ def _dedupe(df: pd.DataFrame, t: np.ndarray, lines: np.ndarray, dedupe: bool,
     same = np.concatenate([[False], np.diff(t) == 0])
     if same.any():
         first = int(np.flatnonzero(same)[0])
-        what = ("rows that differ share a time stamp even after dropping exact repeats" if dedupe else
-                "rows repeat a time stamp (pass --dedupe to drop rows that repeat an earlier row exactly)")
+        what = ("row(s) that differ share a time stamp even after dropping exact repeats" if dedupe else
+                "row(s) repeat a time stamp (pass --dedupe to drop rows that repeat an earlier row exactly)")
         raise RunFormatError(f"{where}: {int(same.sum())} {what}; the first at line {lines[first]} (t = {t[first]:g})")
     return df, t, lines, dropped
 
