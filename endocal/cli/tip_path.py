@@ -73,7 +73,19 @@ def run_trajectory(files: list[Path], compare: list[Path], trajectory: str, *, b
     path = load_path(trajectory, overrides=parse_overrides(sets) or None)
     path_trajectory(path, probe_cfg)  # every point reachable, before anything else is loaded or moves
     groups = model_sets(files, compare)
-    cal = load_planes(planes) if planes is not None else None
+    if planes is not None:
+        cal = load_planes(planes)
+    else:  # the planes the models were fitted through (recorded in their files), as offline validate does
+        from endocal.validation.estimation import recorded_planes
+
+        found = {}
+        for f in groups[0].values():
+            c, p = recorded_planes(load_model(f), f)
+            found[str(Path(p).resolve()) if p else None] = (c, p)
+        if len(found) > 1:
+            raise ModelError("the models were fitted through different bending planes "
+                             f"({', '.join(str(p) for _, p in found.values())}): give the planes to play with --planes")
+        cal, planes = next(iter(found.values()))
     make_backend(backend, probe_cfg, seed=seed, sim_config=sim_config, hardware_config=hardware_config)  # configs first
     make_guard = guard_factory(force_model, max_force_n, probe_cfg)
     root = Path(runs_out) if runs_out is not None else None
