@@ -76,7 +76,8 @@ class FakeBus:
         self.log: list[tuple] = []
         self.goal_writes = 0
         self.interrupt_sync_read_at: int | None = None  # raise KeyboardInterrupt mid-transaction
-        self.fail_sync_read_at: int | None = None  # answer with a timeout
+        self.fail_sync_read_at: int | None = None  # answer with a timeout from this read on
+        self.lose_sync_read_at: int | None = None  # lose this one reply only
         self.sync_reads = 0
         self.pending: list[int] = []
 
@@ -188,8 +189,10 @@ class FakeBus:
         if self.interrupt_sync_read_at == self.sync_reads:
             self.is_using = True  # what the SDK leaves behind when interrupted inside txRxPacket
             raise KeyboardInterrupt
-        if self.fail_sync_read_at == self.sync_reads:
-            return COMM_RX_TIMEOUT
+        if self.fail_sync_read_at is not None and self.sync_reads >= self.fail_sync_read_at:
+            return COMM_RX_TIMEOUT  # from then on
+        if self.lose_sync_read_at == self.sync_reads:
+            return COMM_RX_TIMEOUT  # once: a reply lost on the bus
         self._sync = (start, length)
         return COMM_SUCCESS
 
@@ -479,6 +482,16 @@ def test_torque_off_after_exception_in_execute(tmp_path):
         with backend:
             backend.execute(*sine_chunk())
     assert bus.torques() == {1: 0, 2: 0} and not bus.is_open
+
+
+def test_one_lost_reply_is_retried_within_the_tick_and_counted(tmp_path):
+    backend, bus, _ = make_backend(tmp_path)
+    bus.lose_sync_read_at = 5
+    with backend:
+        chunk = backend.execute(*sine_chunk())
+        info = backend.describe()
+    assert len(chunk.motor["t_s"]) == len(sine_chunk()[0])
+    assert info["dynamixel"]["recovered_reads"] == 1
 
 
 def test_torque_off_after_keyboard_interrupt_inside_a_bus_transaction(tmp_path):

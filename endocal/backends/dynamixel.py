@@ -62,7 +62,19 @@ DPS_PER_VELOCITY_UNIT = RPM_PER_VELOCITY_UNIT * 360.0 / 60.0  # 1.374 deg/s per 
 MA_PER_CURRENT_UNIT = 2.69
 
 COMM_SUCCESS = 0  # dynamixel_sdk.COMM_SUCCESS
+ERRBIT_ALERT = 0x80  # status packet error byte: the servo has a hardware error
 TORQUE_OFF_ATTEMPTS = 3
+READ_ATTEMPTS = 2  # a sync read is retried once within the tick: a lost reply is recovered, and counted
+HARDWARE_ERRORS = {0x01: "input voltage", 0x04: "overheating", 0x08: "motor encoder", 0x10: "electrical shock",
+                   0x20: "overload"}
+
+
+def _hardware_error_text(status: int) -> str:
+    """The Hardware Error Status bits in words (XM430 e-manual, address 70)."""
+    if status == 0xFF:
+        return "unreadable"
+    named = [text for bit, text in HARDWARE_ERRORS.items() if status & bit]
+    return ", ".join(named) or "no bit set"
 
 
 # --- unit conversions ---------------------------------------------------------------------
@@ -335,6 +347,8 @@ class KnobServos:
         self._sync_write = None
         self._sync_read = None
         self.info: dict[str, dict] = {}
+        #: Sync reads that succeeded on their retry (a reply lost or corrupted on the bus).
+        self.recovered_reads = 0
 
     # -- helpers -----------------------------------------------------------------------
     def _where(self, motor: MotorConfig) -> str:
@@ -465,29 +479,92 @@ class KnobServos:
     def read_state(self) -> ServoState:
         """Present position (deg), velocity (deg/s) and current (mA) of every knob, in one sync read.
 
+        A reply lost or corrupted on the bus is retried once (:data:`READ_ATTEMPTS`), within
+        the tick; each recovery is counted (:attr:`recovered_reads`, in :meth:`describe`). A
+        status packet with the hardware alert bit (overload, overheating, ...) stops the run:
+        the servo has dropped its torque.
+
         Raises
         ------
         HardwareError
-            The sync read failed or a servo's data is missing.
+            The sync read failed twice, a servo's data is missing, or a servo raised its alert.
         """
-        group = self._sync_read
-        result = group.fastSyncRead() if self.config.fast_sync_read else group.txRxPacket()
-        if result != COMM_SUCCESS:
+        last = ""
+        for attempt in range(READ_ATTEMPTS):
+            self._port.is_using = False
+            raw, result, alert = (self._fast_sync_read() if self.config.fast_sync_read else self._sync_read_each())
+            if result == COMM_SUCCESS:
+                if attempt:
+                    self.recovered_reads += 1
+                break
+            last = str(self._ph.getTxRxResult(result))
+        else:
             raise HardwareError(
                 f"sync read of present position/velocity/current on {self.config.port} failed "
-                f"({self._ph.getTxRxResult(result)}): check cables and power"
+                f"({last}, {READ_ATTEMPTS} tries): check cables and power"
+            )
+        for axis in alert:
+            motor = self.config.motors[axis]
+            # the alert bit rides on every status packet now: only the error number counts here
+            status, result, error = self._ph.read1ByteTxRx(self._port, motor.id, ADDR_HARDWARE_ERROR_STATUS)
+            if result != COMM_SUCCESS or error & ~ERRBIT_ALERT:
+                status = 0xFF
+            raise HardwareError(
+                f"{self._where(motor)} raised its hardware alert (Hardware Error Status {status:#04x}: "
+                f"{_hardware_error_text(status)}); the servo has switched its torque off: check the load and the "
+                "supply, then reboot it"
             )
         pos, vel, cur = {}, {}, {}
         for axis, motor in self.config.motors.items():
-            if not group.isAvailable(motor.id, ADDR_PRESENT_CURRENT, LEN_PRESENT_BLOCK):
+            data = raw.get(axis)
+            if data is None or len(data) < LEN_PRESENT_BLOCK:
                 raise HardwareError(f"{self._where(motor)}: no data in the sync read reply")
-            raw_cur = to_signed(group.getData(motor.id, ADDR_PRESENT_CURRENT, 2), 2)
-            raw_vel = to_signed(group.getData(motor.id, ADDR_PRESENT_VELOCITY, 4), 4)
-            raw_pos = to_signed(group.getData(motor.id, ADDR_PRESENT_POSITION, 4), 4)
+            raw_cur = to_signed(int.from_bytes(bytes(data[0:2]), "little"), 2)
+            raw_vel = to_signed(int.from_bytes(bytes(data[2:6]), "little"), 4)
+            raw_pos = to_signed(int.from_bytes(bytes(data[6:10]), "little"), 4)
             pos[axis] = float(motor.to_deg(raw_pos))
             vel[axis] = float(velocity_units_to_knob_dps(raw_vel, motor.direction, motor.gear_ratio))
             cur[axis] = float(current_units_to_ma(raw_cur, motor.direction))
         return ServoState(pos, vel, cur)
+
+    def _sync_read_each(self) -> tuple[dict, int, list]:
+        """Sync Read: one instruction, one status packet per servo (its error byte checked)."""
+        result = self._sync_read.txPacket()
+        if result != COMM_SUCCESS:
+            return {}, result, []
+        raw, alert = {}, []
+        for axis, motor in self.config.motors.items():
+            data, result, error = self._ph.readRx(self._port, motor.id, LEN_PRESENT_BLOCK)
+            if result != COMM_SUCCESS:
+                return {}, result, []
+            raw[axis] = data
+            if error & ERRBIT_ALERT:
+                alert.append(axis)
+        return raw, COMM_SUCCESS, alert
+
+    def _fast_sync_read(self) -> tuple[dict, int, list]:
+        """Fast Sync Read: one status packet for all, ``ERR ID DATA CRC`` per servo."""
+        group = self._sync_read
+        result = group.fastSyncReadTxPacket()
+        if result != COMM_SUCCESS:
+            return {}, result, []
+        n = len(self.config.motors)
+        data, result, _ = self._ph.fastSyncReadRx(self._port, 0xFE, (LEN_PRESENT_BLOCK + 4) * n)
+        if result != COMM_SUCCESS:
+            return {}, result, []
+        by_id = {}
+        for k in range(n):
+            chunk = data[k * (LEN_PRESENT_BLOCK + 4):(k + 1) * (LEN_PRESENT_BLOCK + 4)]
+            if len(chunk) >= 2 + LEN_PRESENT_BLOCK:
+                by_id[chunk[1]] = (chunk[0], chunk[2:2 + LEN_PRESENT_BLOCK])
+        raw, alert = {}, []
+        for axis, motor in self.config.motors.items():
+            if motor.id in by_id:
+                error, block = by_id[motor.id]
+                raw[axis] = block
+                if error & ERRBIT_ALERT:
+                    alert.append(axis)
+        return raw, COMM_SUCCESS, alert
 
     def write_goals_deg(self, goal_deg: dict[str, float]) -> None:
         """Send one Goal Position per knob in a single GroupSyncWrite.
@@ -583,6 +660,7 @@ class KnobServos:
             "baudrate": self.config.baudrate,
             "operating_mode": self.config.operating_mode,
             "fast_sync_read": self.config.fast_sync_read,
+            "recovered_reads": self.recovered_reads,
             "servos": {axis: dict(info) for axis, info in self.info.items()},
         }
 
