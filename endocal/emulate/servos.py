@@ -31,6 +31,7 @@ import tty
 from dataclasses import dataclass, field
 
 from endocal.emulate import dxl_wire as w
+from endocal.emulate._serving import Served
 
 MODEL_XM430_W350 = 1020
 FIRMWARE = 46
@@ -176,8 +177,8 @@ class Servo:
         self._sync_present()
 
 
-class ServoBus:
-    """Servos on one pseudo-terminal, served by a background thread.
+class ServoBus(Served):
+    """Servos on one pseudo-terminal, served by a background thread (``with ServoBus(...) as bus``).
 
     Parameters
     ----------
@@ -197,8 +198,11 @@ class ServoBus:
         ``bus unplugged``.
     """
 
+    thread_name = "dynamixel-bus"
+
     def __init__(self, ids=(1, 2), *, model_number: int = MODEL_XM430_W350, present_ticks=2048,
                  baudrate: int = 57600, faults: BusFaults | None = None, seed: int = 0, on_event=None) -> None:
+        super().__init__()
         start = present_ticks if isinstance(present_ticks, dict) else {i: present_ticks for i in ids}
         self.servos = {i: Servo(i, model_number=model_number, present_ticks=start.get(i, 2048)) for i in ids}
         self.faults = faults or BusFaults()
@@ -208,8 +212,6 @@ class ServoBus:
         self._parser = w.PacketParser()
         self._master: int | None = None
         self._slave: int | None = None
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
         self._t_last = time.monotonic()
         self._t_first: float | None = None
         self._unplugged = False
@@ -221,33 +223,20 @@ class ServoBus:
         self.corrupted = 0
 
     # -- life cycle -------------------------------------------------------------------
-    def start(self) -> ServoBus:
-        """Open the pty (raw mode) and serve it; :attr:`port` is the path to give the host."""
+    def _open(self) -> None:
+        """Open the pty in raw mode; :attr:`port` is the path to give the host."""
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave)
         self.port = os.ttyname(self._slave)
-        self._thread = threading.Thread(target=self._serve, name="dynamixel-bus", daemon=True)
-        self._thread.start()
-        return self
 
-    def close(self) -> None:
-        """Stop serving and close the pty. Idempotent."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
+    def _release(self) -> None:
         for fd in (self._master, self._slave):
             if fd is not None:
                 try:
                     os.close(fd)
                 except OSError:
                     pass
-        self._master = self._slave = self._thread = None
-
-    def __enter__(self) -> ServoBus:
-        return self.start()
-
-    def __exit__(self, *exc) -> None:
-        self.close()
+        self._master = self._slave = None
 
     # -- what the probe behind the knobs sees -----------------------------------------
     def positions_ticks(self) -> dict[int, float]:

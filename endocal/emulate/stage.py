@@ -29,6 +29,8 @@ import threading
 import time
 from dataclasses import dataclass
 
+from endocal.emulate._serving import Served
+
 PROTOCOL_VERSION = 1
 
 
@@ -51,7 +53,7 @@ class StageFaults:
     delay_s: float = 0.0
 
 
-class StageEmulator:
+class StageEmulator(Served):
     """The stage on ``127.0.0.1:<port>`` (an ephemeral port unless given), in a background thread.
 
     Parameters
@@ -69,9 +71,12 @@ class StageEmulator:
         Called with one line per event (``stage stopped``, ``stage silent``).
     """
 
+    thread_name = "stage-emulator"
+
     def __init__(self, port: int = 0, *, time_constant_s: float = 0.05, max_translation_speed_mmps: float = 20.0,
                  max_rotation_speed_dps: float = 60.0, faults: StageFaults | None = None, seed: int = 0,
                  on_event=None) -> None:
+        super().__init__()
         self.requested_port = port
         self.time_constant_s = time_constant_s
         self.max_speed = (max_translation_speed_mmps, max_rotation_speed_dps)
@@ -79,8 +84,6 @@ class StageEmulator:
         self.on_event = on_event or (lambda line: None)
         self._rng = random.Random(seed)
         self._sock: socket.socket | None = None
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
         self._lock = threading.Lock()
         self.position = [0.0, 0.0]
         self.goal = [0.0, 0.0]
@@ -96,29 +99,15 @@ class StageEmulator:
             raise RuntimeError("the stage emulator is not started")
         return self._sock.getsockname()[1]
 
-    def start(self) -> StageEmulator:
-        """Bind and serve in a daemon thread; returns self."""
+    def _open(self) -> None:
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.bind(("127.0.0.1", self.requested_port))
         self._sock.settimeout(0.05)
-        self._thread = threading.Thread(target=self._serve, name="stage-emulator", daemon=True)
-        self._thread.start()
-        return self
 
-    def close(self) -> None:
-        """Stop serving and release the port. Idempotent."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
+    def _release(self) -> None:
         if self._sock is not None:
             self._sock.close()
-        self._sock = self._thread = None
-
-    def __enter__(self) -> StageEmulator:
-        return self.start()
-
-    def __exit__(self, *exc) -> None:
-        self.close()
+        self._sock = None
 
     def _advance(self, now: float) -> None:
         """Move both axes towards their goals over the time since the last request."""

@@ -1,0 +1,48 @@
+"""The life cycle every emulator shares: open its endpoint, serve it from a daemon thread, stop."""
+
+from __future__ import annotations
+
+import threading
+
+
+class Served:
+    """Base of the emulators: :meth:`start` opens the endpoint (``_open``) and runs ``_serve``
+    in a daemon thread until :meth:`close` (idempotent) sets ``_stop`` and releases it
+    (``_release``); usable as a context manager."""
+
+    thread_name = "emulator"
+
+    def __init__(self) -> None:
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def _open(self) -> None:
+        raise NotImplementedError
+
+    def _serve(self) -> None:
+        raise NotImplementedError
+
+    def _release(self) -> None:
+        raise NotImplementedError
+
+    def start(self):
+        """Open the endpoint and serve it in the background; returns self."""
+        self._stop.clear()
+        self._open()
+        self._thread = threading.Thread(target=self._serve, name=self.thread_name, daemon=True)
+        self._thread.start()
+        return self
+
+    def close(self) -> None:
+        """Stop serving and release the endpoint. Idempotent."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+        self._thread = None
+        self._release()
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
