@@ -129,3 +129,26 @@ def test_an_unplugged_bus_fails_the_run_and_says_to_cut_power():
         with pytest.raises(HardwareError, match="could not turn torque off .* CUT THE SERVO POWER NOW"):
             ks.close()
     assert "bus unplugged (fault)" in events
+
+
+def test_endocal_emulate_dynamixel_prints_its_port_and_every_torque_switch():
+    import signal
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-m", "endocal", "emulate", "dynamixel", "--ids", "1,2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        first = proc.stdout.readline().strip()
+        assert first.startswith("dynamixel bus on /dev/pts/") and first.endswith("(ids 1, 2, 57600 bd)"), first
+        port = first.split(" on ")[1].split(" ")[0]
+        ks = KnobServos(DynamixelConfig(port=port, motors={"ap": MotorConfig("ap", 1), "ml": MotorConfig("ml", 2)}))
+        ks.open()
+        ks.torque_on()
+        ks.close()
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        rest, errors = proc.communicate(timeout=10)
+    assert proc.returncode == 0, errors
+    assert rest.splitlines() == ["servo 1 torque on", "servo 2 torque on", "servo 1 torque off", "servo 2 torque off",
+                                 "stopped"]

@@ -1,6 +1,7 @@
 """Registers every subcommand on the root app (kept apart so importing the app stays cheap)."""
 
 from endocal.cli import app
+from endocal.cli import emulate as _emulate
 from endocal.cli import fit as _fit
 from endocal.cli import imports as _imports
 from endocal.cli import protocols as _protocols
@@ -20,3 +21,4 @@ app.command("import-ros")(import_ros)
 app.add_typer(_protocols.app, name="protocols")
 app.add_typer(_fit.app, name="fit")
 app.add_typer(_imports.app, name="import")
+app.add_typer(_emulate.app, name="emulate")

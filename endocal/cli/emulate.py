@@ -1,0 +1,103 @@
+"""`endocal emulate dynamixel|stage`: emulated rig devices that speak the real wire protocols.
+
+Each command starts its emulator, prints where to reach it on one line, then one line per
+event (a servo's torque switching, an injected fault), and runs until Ctrl-C or SIGTERM.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from typing import Optional
+
+import typer
+
+from endocal.cli._common import cli_errors, out
+
+app = typer.Typer(help="Emulated rig devices speaking the real wire protocols, for rehearsals and tests.",
+                  no_args_is_help=True)
+
+
+def _run_until_stopped(emulator) -> None:
+    """Serve until Ctrl-C or SIGTERM, then close the emulator."""
+    stop = threading.Event()
+    previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        while not stop.wait(0.2):
+            pass
+    except KeyboardInterrupt:
+        pass
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        emulator.close()
+        out.print("stopped", markup=False)
+
+
+def _event(line: str) -> None:
+    out.print(line, markup=False)
+
+
+@app.command("dynamixel")
+@cli_errors
+def dynamixel(
+    ids: str = typer.Option("1,2", "--ids", help="Servo IDs on the bus, comma-separated."),
+    baudrate: int = typer.Option(57600, "--baud", help="Baud rate the servos answer at."),
+    model_number: int = typer.Option(1020, "--model-number", help="What the servos answer a ping with (1020: XM430-W350)."),
+    drop: float = typer.Option(0.0, "--drop", help="Fault: probability of losing each reply."),
+    corrupt: float = typer.Option(0.0, "--corrupt", help="Fault: probability of a wrong CRC on each reply."),
+    delay_ms: float = typer.Option(0.0, "--delay-ms", help="Fault: hold every reply back this long."),
+    unplug_after: Optional[float] = typer.Option(None, "--unplug-after", help="Fault: the bus goes silent this many seconds after the first packet."),
+    hardware_error: list[str] = typer.Option([], "--hardware-error", help="Fault: ID=overload or ID=overheating (repeatable), raised --hardware-error-after seconds in."),
+    hardware_error_after: float = typer.Option(5.0, "--hardware-error-after", help="Seconds after the first packet."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the lost and corrupted replies."),
+) -> None:
+    """An emulated bus of Dynamixel XM430-W350 servos on a pseudo-terminal (Protocol 2.0).
+
+    Point `[dynamixel] port` of a rig TOML at the printed path.
+    """
+    from endocal.emulate.servos import HW_ERRORS, BusFaults, ServoBus
+    from endocal.errors import ConfigError
+
+    try:
+        id_list = [int(x) for x in ids.split(",") if x.strip()]
+    except ValueError:
+        raise ConfigError(f"--ids {ids!r}: give servo IDs as integers, e.g. --ids 1,2") from None
+    errors = {}
+    for item in hardware_error:
+        k, sep, kind = item.partition("=")
+        if not sep or not k.strip().isdigit() or kind not in HW_ERRORS:
+            raise ConfigError(f"--hardware-error {item!r}: write ID=overload or ID=overheating")
+        errors[int(k)] = kind
+    faults = BusFaults(drop_probability=drop, corrupt_probability=corrupt, delay_s=delay_ms / 1000.0,
+                       unplug_after_s=unplug_after, hardware_error=errors, hardware_error_after_s=hardware_error_after)
+    bus = ServoBus(id_list, model_number=model_number, baudrate=baudrate, faults=faults, seed=seed, on_event=_event)
+    bus.start()
+    out.print(f"dynamixel bus on {bus.port} (ids {', '.join(map(str, id_list))}, {baudrate} bd)", markup=False)
+    _run_until_stopped(bus)
+
+
+@app.command("stage")
+@cli_errors
+def stage(
+    port: int = typer.Option(5005, "--port", help="UDP port on 127.0.0.1 (0: any free one)."),
+    drop: float = typer.Option(0.0, "--drop", help="Fault: probability of losing each reply."),
+    delay_ms: float = typer.Option(0.0, "--delay-ms", help="Fault: hold every reply back this long."),
+    silent_after: Optional[float] = typer.Option(None, "--silent-after", help="Fault: stop answering this many seconds after the first request."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the lost replies."),
+) -> None:
+    """An emulated translation/rotation stage on loopback UDP (endocal's stage protocol, version 1).
+
+    Point `[stage] host`/`port` of a rig TOML at the printed address, with mode = "udp".
+    """
+    from endocal.emulate.stage import StageEmulator, StageFaults
+
+    emu = StageEmulator(port, faults=StageFaults(drop_probability=drop, silent_after_s=silent_after,
+                                                 delay_s=delay_ms / 1000.0), seed=seed, on_event=_event)
+    try:
+        emu.start()
+    except OSError as exc:
+        from endocal.errors import ConfigError
+
+        raise ConfigError(f"cannot listen on 127.0.0.1:{port} ({exc.strerror}): pick another --port") from None
+    out.print(f"stage on 127.0.0.1:{emu.port} (UDP, stage protocol version 1)", markup=False)
+    _run_until_stopped(emu)
