@@ -1,4 +1,4 @@
-"""`endocal emulate dynamixel|stage`: emulated rig devices that speak the real wire protocols.
+"""`endocal emulate dynamixel|aurora|stage`: emulated rig devices that speak the real wire protocols.
 
 Each command starts its emulator, prints where to reach it on one line, then one line per
 event (a servo's torque switching, an injected fault), and runs until Ctrl-C or SIGTERM.
@@ -74,6 +74,33 @@ def dynamixel(
     bus.start()
     out.print(f"dynamixel bus on {bus.port} (ids {', '.join(map(str, id_list))}, {baudrate} bd)", markup=False)
     _run_until_stopped(bus)
+
+
+@app.command("aurora")
+@cli_errors
+def aurora(
+    tip_port_handle: int = typer.Option(0x0A, "--tip-port-handle", help="Port handle of the tip sensor."),
+    base_port_handle: int = typer.Option(0x0B, "--base-port-handle", help="Port handle of the base sensor."),
+    missing: list[str] = typer.Option([], "--missing", help="Fault: report this sensor (tip or base) MISSING in every frame (repeatable)."),
+    silent_after: Optional[float] = typer.Option(None, "--silent-after", help="Fault: stop answering this many seconds after TSTART."),
+) -> None:
+    """An emulated NDI Aurora (System Control Unit) on a pseudo-terminal, in a process of its own.
+
+    Serves a still tip 60 mm above the base; `endocal emulate rig` moves them with the knobs.
+    Point `[tracker] serial_port` of a rig TOML at the printed path.
+    """
+    from endocal.emulate.aurora import AuroraEmulator, AuroraFaults
+    from endocal.errors import ConfigError
+
+    bad = [m for m in missing if m not in ("tip", "base")]
+    if bad:
+        raise ConfigError(f"--missing {bad[0]!r}: name a sensor, tip or base")
+    emu = AuroraEmulator(tip_port_handle, base_port_handle,
+                         faults=AuroraFaults(missing=tuple(missing), silent_after_s=silent_after))
+    emu.start()
+    out.print(f"aurora on {emu.port} (tip port handle {tip_port_handle:#04x}, base {base_port_handle:#04x}, 40 Hz)",
+              markup=False)
+    _run_until_stopped(emu)
 
 
 @app.command("stage")

@@ -46,3 +46,28 @@ class Served:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def open_raw_pty() -> tuple[int, int, str]:
+    """A pseudo-terminal in raw mode (no echo, no line editing): ``(master, slave, slave_path)``.
+
+    The emulator reads and writes the master; the host opens the slave path as a serial port.
+    """
+    import os
+    import tty
+
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    return master, slave, os.ttyname(slave)
+
+
+def close_fds(*fds) -> None:
+    """Close file descriptors, ignoring those already closed (or None)."""
+    import os
+
+    for fd in fds:
+        if fd is not None:
+            try:
+                os.close(fd)
+            except OSError:
+                pass

@@ -27,11 +27,10 @@ import select
 import termios
 import threading
 import time
-import tty
 from dataclasses import dataclass, field
 
 from endocal.emulate import dxl_wire as w
-from endocal.emulate._serving import Served
+from endocal.emulate._serving import Served, close_fds, open_raw_pty
 
 MODEL_XM430_W350 = 1020
 FIRMWARE = 46
@@ -225,17 +224,10 @@ class ServoBus(Served):
     # -- life cycle -------------------------------------------------------------------
     def _open(self) -> None:
         """Open the pty in raw mode; :attr:`port` is the path to give the host."""
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._slave)
-        self.port = os.ttyname(self._slave)
+        self._master, self._slave, self.port = open_raw_pty()
 
     def _release(self) -> None:
-        for fd in (self._master, self._slave):
-            if fd is not None:
-                try:
-                    os.close(fd)
-                except OSError:
-                    pass
+        close_fds(self._master, self._slave)
         self._master = self._slave = None
 
     # -- what the probe behind the knobs sees -----------------------------------------

@@ -1,0 +1,239 @@
+"""An emulated NDI Aurora System Control Unit on a pseudo-terminal, speaking NDI's serial API.
+
+The host opens the pty's slave path (:attr:`AuroraEmulator.port`) as the Aurora's serial port
+and talks to it through ``scikit-surgerynditracker`` and NDI's C library ``ndicapi``. This
+emulator answers the commands they send (NDI Combined API, ASCII form): ``INIT``, the probe's
+``GETINFO``, ``COMM``, ``VER``, ``PHSR``, ``PINIT``, ``PENA``, ``TSTART``, ``TX`` and
+``TSTOP``. Every command and reply carries NDI's CRC-16 (polynomial x^16 + x^15 + x^2 + 1,
+computed as ndicapi's ``CalcCRC16``) as four hex digits before the carriage return. ``VER``
+reports firmware "AURORA Rev 008", for which scikit-surgerynditracker reads frames with
+``TX:0801``: per port handle the rotation quaternion (4 x 6 characters, 1e-4), the position
+(3 x 7 characters, 0.01 mm), the RMS error, the port status and the frame number, or
+``MISSING``.
+
+It runs in a process of its own: ndicapi holds Python's interpreter lock while it waits
+for a reply, so an emulator thread in the host's process could never answer. The sensor
+poses (mm, quaternion w, x, y, z) are set from the host process through shared memory
+(:meth:`AuroraEmulator.set_poses`); frame numbers advance at 40 Hz from ``TSTART``.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import select
+import time
+from dataclasses import dataclass
+
+from endocal.emulate._serving import close_fds, open_raw_pty
+
+SENSOR_SLOTS = ("tip", "base")
+_ODD_PARITY = (0, 1, 1, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, 1, 1, 0)
+
+
+def ndi_crc16(text: str | bytes) -> int:
+    """NDI's CRC-16 of a command or reply (ndicapi's ``CalcCRC16``, run over every character)."""
+    crc = 0
+    for ch in (text.encode("ascii") if isinstance(text, str) else text):
+        data = (ch ^ (crc & 0xFF)) & 0xFF
+        crc >>= 8
+        if _ODD_PARITY[data & 0x0F] ^ _ODD_PARITY[data >> 4]:
+            crc ^= 0xC001
+        data <<= 6
+        crc ^= data
+        data <<= 1
+        crc ^= data
+        crc &= 0xFFFF
+    return crc
+
+
+def reply(text: str) -> bytes:
+    """``text`` + its CRC (4 hex digits) + carriage return."""
+    return f"{text}{ndi_crc16(text):04X}\r".encode("ascii")
+
+
+def _signed(value: float, scale: float, width: int) -> str:
+    """NDI's fixed-width signed decimal: sign then ``width - 1`` digits of ``value / scale``."""
+    n = int(round(value / scale))
+    limit = 10 ** (width - 1) - 1
+    n = max(-limit, min(limit, n))
+    return f"{'+' if n >= 0 else '-'}{abs(n):0{width - 1}d}"
+
+
+def tx_transform(pos_mm, quat_wxyz, rms_error: float = 0.0) -> str:
+    """The 51 characters of one TX transform: q0 qx qy qz (1e-4), x y z (0.01 mm), error (1e-4)."""
+    return ("".join(_signed(q, 1e-4, 6) for q in quat_wxyz) + "".join(_signed(p, 0.01, 7) for p in pos_mm)
+            + _signed(rms_error, 1e-4, 6))
+
+
+@dataclass
+class AuroraFaults:
+    """Faults of the emulated Aurora.
+
+    Attributes
+    ----------
+    missing : tuple of str
+        Sensors (``tip``, ``base``) reported ``MISSING`` in every frame.
+    silent_after_s : float or None
+        Stop answering this long after ``TSTART`` (a pulled cable, a crashed unit).
+    """
+
+    missing: tuple = ()
+    silent_after_s: float | None = None
+
+
+class _Unit:
+    """The System Control Unit's state machine (runs in the emulator's process)."""
+
+    def __init__(self, handles: dict[str, int], shared, faults: AuroraFaults, rate_hz: float) -> None:
+        self.handles = handles
+        self.shared = shared
+        self.faults = faults
+        self.rate_hz = rate_hz
+        self.initialised: set[int] = set()
+        self.enabled: set[int] = set()
+        self.t_start: float | None = None
+
+    def frame(self) -> int:
+        return 0 if self.t_start is None else int((time.monotonic() - self.t_start) * self.rate_hz)
+
+    def handle(self, line: str) -> bytes | None:
+        name, sep, rest = line.partition(":")
+        if not sep:
+            return reply("ERROR01")  # invalid command
+        if name == "GETINFO":  # the probe asks for the firmware feature list
+            return reply("Features.Firmware.Version=008")
+        body = f"{name}:{rest[:-4]}"
+        if len(rest) < 4 or ndi_crc16(body) != int(rest[-4:], 16):
+            return reply("ERROR04")  # bad CRC
+        arg = rest[:-4]
+        if name in ("INIT", "COMM", "TSTOP"):
+            if name == "TSTOP":
+                self.t_start = None
+            return reply("OKAY")
+        if name == "VER":
+            return reply("Aurora Control Unit\nFreeze Tag: AURORA Rev 008\nendocal emulator\n")
+        if name == "PHSR":
+            kind = arg[:2] or "00"
+            all_h = sorted(self.handles.values())
+            pick = {"00": all_h, "01": [], "02": [h for h in all_h if h not in self.initialised],
+                    "03": [h for h in all_h if h in self.initialised and h not in self.enabled],
+                    "04": sorted(self.enabled)}.get(kind, all_h)
+            return reply(f"{len(pick):02X}" + "".join(f"{h:02X}001" for h in pick))
+        if name == "PINIT":
+            self.initialised.add(int(arg[:2], 16))
+            return reply("OKAY")
+        if name == "PENA":
+            self.enabled.add(int(arg[:2], 16))
+            return reply("OKAY")
+        if name == "TSTART":
+            self.t_start = time.monotonic()
+            return reply("OKAY")
+        if name == "TX":
+            return reply(self._tx())
+        return reply("ERROR01")
+
+    def _tx(self) -> str:
+        values = list(self.shared)
+        n = self.frame()
+        parts = [f"{len(self.handles):02X}"]
+        for k, sensor in enumerate(SENSOR_SLOTS):
+            h = self.handles[sensor]
+            chunk = values[8 * k:8 * k + 8]
+            seen = chunk[7] > 0 and sensor not in self.faults.missing and h in self.enabled
+            pose = tx_transform(chunk[0:3], chunk[3:7]) if seen else "MISSING"
+            status = 0x31 if seen else 0x01
+            parts.append(f"{h:02X}{pose}{status:08X}{n:08X}\n")
+        parts.append("0000")  # system status
+        return "".join(parts)
+
+    def silent(self) -> bool:
+        f = self.faults.silent_after_s
+        return f is not None and self.t_start is not None and time.monotonic() - self.t_start >= f
+
+
+def _serve(master: int, handles: dict, shared, faults: AuroraFaults, rate_hz: float, stop, ready) -> None:
+    unit = _Unit(handles, shared, faults, rate_hz)
+    buf = b""
+    ready.set()
+    while not stop.is_set():
+        try:
+            r, _, _ = select.select([master], [], [], 0.05)
+            if not r:
+                continue
+            buf += os.read(master, 4096)
+        except OSError:
+            return
+        while b"\r" in buf:
+            line, buf = buf.split(b"\r", 1)
+            if unit.silent():
+                continue
+            out = unit.handle(line.decode("ascii", errors="replace").strip())
+            if out:
+                try:
+                    os.write(master, out)
+                except OSError:
+                    return
+
+
+class AuroraEmulator:
+    """An Aurora with a tip and a base 6-DoF sensor, served from a child process.
+
+    Parameters
+    ----------
+    tip_port_handle, base_port_handle : int
+        Port handles the sensors appear on (the rig TOML's ``tracker.*_port_handle``).
+    rate_hz : float
+        Frame rate (the Aurora's: 40 Hz).
+    faults : AuroraFaults, optional
+    """
+
+    def __init__(self, tip_port_handle: int = 0x0A, base_port_handle: int = 0x0B, *, rate_hz: float = 40.0,
+                 faults: AuroraFaults | None = None) -> None:
+        self.handles = {"tip": tip_port_handle, "base": base_port_handle}
+        self.rate_hz = rate_hz
+        self.faults = faults or AuroraFaults()
+        ctx = mp.get_context("fork")
+        self._shared = ctx.Array("d", 8 * len(SENSOR_SLOTS), lock=False)  # x y z qw qx qy qz seen, per sensor
+        self._stop = ctx.Event()
+        self._ready = ctx.Event()
+        self._ctx = ctx
+        self._proc = None
+        self._master = self._slave = None
+        self.port = ""
+        self.set_poses({"tip": ((0.0, 0.0, 60.0), (1.0, 0.0, 0.0, 0.0)), "base": ((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0))})
+
+    def set_poses(self, poses: dict) -> None:
+        """Sensor -> ``(position_mm (3,), quaternion_wxyz (4,))``, or None for a sensor not seen."""
+        for k, sensor in enumerate(SENSOR_SLOTS):
+            pose = poses.get(sensor)
+            if pose is None:
+                self._shared[8 * k + 7] = 0.0
+                continue
+            pos, quat = pose
+            self._shared[8 * k:8 * k + 7] = [*map(float, pos), *map(float, quat)]
+            self._shared[8 * k + 7] = 1.0
+
+    def start(self) -> AuroraEmulator:
+        self._master, self._slave, self.port = open_raw_pty()
+        self._proc = self._ctx.Process(target=_serve, name="aurora-emulator", daemon=True,
+                                       args=(self._master, self.handles, self._shared, self.faults, self.rate_hz,
+                                             self._stop, self._ready))
+        self._proc.start()
+        self._ready.wait(5.0)
+        return self
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._proc is not None:
+            self._proc.join(timeout=2.0)
+            if self._proc.is_alive():
+                self._proc.kill()
+        close_fds(self._master, self._slave)
+        self._proc = self._master = self._slave = None
+
+    def __enter__(self) -> AuroraEmulator:
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -1,0 +1,71 @@
+"""The Aurora backend (endocal/backends/aurora.py) through the real scikit-surgerynditracker and
+ndicapi against the emulated System Control Unit on a pseudo-terminal (endocal/emulate/aurora.py)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from endocal.backends.aurora import AuroraConfig, AuroraTracker
+from endocal.emulate.aurora import AuroraEmulator, AuroraFaults, ndi_crc16, tx_transform
+from endocal.errors import HardwareError
+
+pytest.importorskip("sksurgerynditracker")
+
+TIP = ((12.3456, -4.5, 230.25), (0.9238795, 0.3826834, 0.0, 0.0))  # 45 deg about x
+BASE = ((1.0, 2.0, 180.0), (1.0, 0.0, 0.0, 0.0))
+
+
+def test_crc_matches_the_constants_ndicapi_sends_and_expects():
+    # ndicapi hard-codes these: "INIT:E3A5", "OKAYA896", "RESETBE6F", "VER:065EE", "...Version0492"
+    assert [f"{ndi_crc16(s):04X}" for s in ("INIT:", "OKAY", "RESET", "VER:0",
+                                            "GETINFO:Features.Firmware.Version")] == \
+        ["E3A5", "A896", "BE6F", "65EE", "0492"]
+    t = tx_transform((12.3456, -4.5, 230.25), (1.0, 0.0, -0.5, 0.0), 0.0012)
+    assert len(t) == 51 and t == "+10000+00000-05000+00000+001235-000450+023025+00012"
+
+
+def _tracker(emu: AuroraEmulator, **kw) -> AuroraTracker:
+    return AuroraTracker(AuroraConfig.from_dict({"serial_port": emu.port, "tip_port_handle": 10,
+                                                 "base_port_handle": 11, **kw}, "rig.toml"))
+
+
+def test_frames_decode_to_the_poses_served():
+    with AuroraEmulator(0x0A, 0x0B) as emu:
+        emu.set_poses({"tip": TIP, "base": BASE})
+        tr = _tracker(emu)
+        tr.open()
+        assert tr.info["port_handles"] == [10, 11]
+        tr.start(time.monotonic)
+        time.sleep(0.4)
+        frames = tr.drain()
+        tr.close()
+    tip = frames["sensor"] == "tip"
+    assert 8 <= tip.sum() <= 20  # 40 Hz for 0.4 s, repeats dropped
+    assert frames["valid"].all()
+    # TX replies: positions to 0.01 mm, quaternion components to 1e-4 (then renormalised)
+    np.testing.assert_allclose(np.column_stack([frames[c][tip] for c in ("x_mm", "y_mm", "z_mm")]),
+                               np.tile(TIP[0], (tip.sum(), 1)), atol=0.005 + 1e-9)
+    q = np.column_stack([frames[c][tip] for c in ("qw", "qx", "qy", "qz")])
+    np.testing.assert_allclose(np.abs(q), np.tile(np.abs(TIP[1]), (tip.sum(), 1)), atol=2e-4)
+    t = frames["t_s"][tip]
+    assert np.all(np.diff(t) > 0)  # stamped on arrival, in order
+
+
+def test_a_sensor_the_tracker_does_not_see_is_refused_at_open():
+    with AuroraEmulator(0x0A, 0x0B, faults=AuroraFaults(missing=("base",))) as emu:
+        tr = _tracker(emu, detect_timeout_s=0.5)
+        with pytest.raises(HardwareError, match=r"base \(port handle 0x0b\) reported no valid pose"):
+            tr.open()
+        tr.close()
+
+
+def test_a_port_handle_not_on_the_unit_is_named():
+    with AuroraEmulator(0x0A, 0x0C) as emu:
+        tr = _tracker(emu)
+        with pytest.raises(HardwareError, match=r"no tool on port handle 11 \(0x0b\) for the base sensor.*tools seen: "
+                                                r"10 \(0x0a\), 12 \(0x0c\)"):
+            tr.open()
+        tr.close()
