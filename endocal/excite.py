@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from endocal.backends.base import Backend
-from endocal.errors import ConfigError, OutputPathError
+from endocal.errors import ConfigError, HardwareError, OutputPathError
 from endocal.probe import ProbeConfig
 from endocal.runs.format import (
     MOTOR,
@@ -172,7 +172,7 @@ def run_excitation(
         raise
     finally:
         try:
-            backend.close()
+            _close_keeping_the_cause(backend)
         finally:
             timing = getattr(backend, "timing", None)  # a real-time loop's: set and achieved rate, overruns
             if timing is not None and "backend" in meta:
@@ -194,6 +194,20 @@ def run_excitation(
         alignment_error=meta.get("alignment_error"),
         events=list(meta.get("events", [])),
     )
+
+
+def _close_keeping_the_cause(backend: Backend) -> None:
+    """Close ``backend``; when closing fails while a failure is already on its way out (a bus
+    that died mid-run cannot confirm torque off either), say both, the cause first."""
+    import sys
+
+    cause = sys.exc_info()[1]
+    try:
+        backend.close()
+    except HardwareError as exc:
+        if cause is None or isinstance(cause, KeyboardInterrupt):
+            raise
+        raise HardwareError(f"{cause}; then {exc}") from cause
 
 
 def prepare_backend(backend: Backend, protocol, probe: ProbeConfig, *, tip_load_n: float | None = None):

@@ -14,7 +14,10 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
-from endocal.errors import EndocalError
+from endocal.errors import EndocalError, HardwareError
+
+#: Exit code of a hardware fault (a device failed, is missing or answered wrongly); bad input exits 2.
+HARDWARE_EXIT_CODE = 3
 
 F = TypeVar("F", bound=Callable)
 
@@ -30,7 +33,8 @@ def fail(message: str, code: int = 2) -> None:
 
 
 def cli_errors(func: F) -> F:
-    """Decorate a command so that user errors become one line on stderr and exit code 2.
+    """Decorate a command so that user errors become one line on stderr and exit code 2
+    (hardware faults: exit code 3).
 
     :class:`~endocal.errors.EndocalError` (and OS errors on paths the user named) are the
     user's to fix; anything else is a bug and keeps its traceback.
@@ -40,6 +44,8 @@ def cli_errors(func: F) -> F:
     def wrapper(*args, **kwargs):
         try:
             return func(*args, **kwargs)
+        except HardwareError as exc:  # a device failed or is missing: exit code 3, not the user's input
+            fail(str(exc), code=HARDWARE_EXIT_CODE)
         except EndocalError as exc:
             fail(str(exc))
         except (FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError) as exc:

@@ -1,4 +1,4 @@
-"""`endocal emulate dynamixel|aurora|stage`: emulated rig devices that speak the real wire protocols.
+"""`endocal emulate rig|dynamixel|aurora|stage`: emulated rig devices that speak the real wire protocols.
 
 Each command starts its emulator, prints where to reach it on one line, then one line per
 event (a servo's torque switching, an injected fault), and runs until Ctrl-C or SIGTERM.
@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import signal
 import threading
+from pathlib import Path
 from typing import Optional
 
 import typer
@@ -33,6 +34,20 @@ def _run_until_stopped(emulator) -> None:
         out.print("stopped", markup=False)
 
 
+def _hardware_errors(items: list[str]) -> dict[int, str]:
+    """``--hardware-error ID=overload`` options as servo ID -> kind."""
+    from endocal.emulate.servos import HW_ERRORS
+    from endocal.errors import ConfigError
+
+    errors = {}
+    for item in items:
+        k, sep, kind = item.partition("=")
+        if not sep or not k.strip().isdigit() or kind not in HW_ERRORS:
+            raise ConfigError(f"--hardware-error {item!r}: write ID=overload or ID=overheating")
+        errors[int(k)] = kind
+    return errors
+
+
 def _event(line: str) -> None:
     out.print(line, markup=False)
 
@@ -55,25 +70,62 @@ def dynamixel(
 
     Point `[dynamixel] port` of a rig TOML at the printed path.
     """
-    from endocal.emulate.servos import HW_ERRORS, BusFaults, ServoBus
+    from endocal.emulate.servos import BusFaults, ServoBus
     from endocal.errors import ConfigError
 
     try:
         id_list = [int(x) for x in ids.split(",") if x.strip()]
     except ValueError:
         raise ConfigError(f"--ids {ids!r}: give servo IDs as integers, e.g. --ids 1,2") from None
-    errors = {}
-    for item in hardware_error:
-        k, sep, kind = item.partition("=")
-        if not sep or not k.strip().isdigit() or kind not in HW_ERRORS:
-            raise ConfigError(f"--hardware-error {item!r}: write ID=overload or ID=overheating")
-        errors[int(k)] = kind
+    errors = _hardware_errors(hardware_error)
     faults = BusFaults(drop_probability=drop, corrupt_probability=corrupt, delay_s=delay_ms / 1000.0,
                        unplug_after_s=unplug_after, hardware_error=errors, hardware_error_after_s=hardware_error_after)
     bus = ServoBus(id_list, model_number=model_number, baudrate=baudrate, faults=faults, seed=seed, on_event=_event)
     bus.start()
     out.print(f"dynamixel bus on {bus.port} (ids {', '.join(map(str, id_list))}, {baudrate} bd)", markup=False)
     _run_until_stopped(bus)
+
+
+@app.command("rig")
+@cli_errors
+def rig(
+    config_out: Path = typer.Option(..., "--config-out", help="Rig TOML to write, pointing at the emulated devices (for --hardware-config)."),
+    probe: str = typer.Option("tee", "--probe", help="Probe preset or .toml (as for excite)."),
+    sim_config: Optional[Path] = typer.Option(None, "--sim-config", help="Simulator TOML: the probe's physics behind the emulated devices."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the simulator's noise."),
+    drop: float = typer.Option(0.0, "--drop", help="Fault: probability of losing each servo reply."),
+    corrupt: float = typer.Option(0.0, "--corrupt", help="Fault: probability of a wrong CRC on each servo reply."),
+    unplug_after: Optional[float] = typer.Option(None, "--unplug-after", help="Fault: the servo bus goes silent this many seconds after its first packet."),
+    hardware_error: list[str] = typer.Option([], "--hardware-error", help="Fault: ID=overload or ID=overheating (repeatable)."),
+    hardware_error_after: float = typer.Option(5.0, "--hardware-error-after", help="Seconds after the first packet."),
+    missing: list[str] = typer.Option([], "--missing", help="Fault: a tracker sensor (tip or base) reported MISSING."),
+) -> None:
+    """The thesis rig, emulated: Dynamixel servos and an NDI Aurora whose sensors follow the
+    simulated probe the knobs bend, so `endocal excite P --backend hardware --hardware-config
+    RIG.toml` runs unchanged through the real SDKs. Runs until Ctrl-C or SIGTERM.
+    """
+    from endocal.emulate.aurora import AuroraFaults
+    from endocal.emulate.rig import EmulatedRig
+    from endocal.emulate.servos import BusFaults
+    from endocal.errors import ConfigError
+    from endocal.probe import load_probe
+    from endocal.sim import SimConfig
+
+    errors = _hardware_errors(hardware_error)
+    if [m for m in missing if m not in ("tip", "base")]:
+        raise ConfigError(f"--missing: name a sensor, tip or base (got {', '.join(missing)})")
+    if not config_out.resolve().parent.is_dir():
+        raise ConfigError(f"cannot write {config_out}: its folder does not exist")
+    cfg = SimConfig.from_toml(sim_config) if sim_config is not None else None
+    rig_ = EmulatedRig(load_probe(probe), cfg, seed=seed, on_event=_event,
+                       bus_faults=BusFaults(drop_probability=drop, corrupt_probability=corrupt, unplug_after_s=unplug_after,
+                                            hardware_error=errors, hardware_error_after_s=hardware_error_after),
+                       aurora_faults=AuroraFaults(missing=tuple(missing)))
+    rig_.start()
+    rig_.write_config(config_out)
+    out.print(f"emulated rig: servos on {rig_.bus.port}, aurora on {rig_.aurora.port}, stage absent; "
+              f"wrote {config_out}", markup=False)
+    _run_until_stopped(rig_)
 
 
 @app.command("aurora")

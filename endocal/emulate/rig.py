@@ -1,0 +1,129 @@
+"""An emulated thesis rig: Dynamixel knob servos and an NDI Aurora whose sensors follow the knobs.
+
+:class:`EmulatedRig` starts an emulated servo bus (:mod:`endocal.emulate.servos`) and an
+emulated Aurora (:mod:`endocal.emulate.aurora`), and a physics thread that, every
+``physics_period_s``, reads the servos' present positions and steps the simulator
+(:mod:`endocal.sim`) with them as knob positions, serving the tip and base sensor poses it
+computes through the Aurora. The simulator's own knob servo is switched off (the emulated
+servo is the lag now); everything else (tendon-sheath friction, slack, the bending section,
+the tracker's noise and latency) is the simulator's, as in a ``--backend sim`` run.
+
+:meth:`EmulatedRig.write_config` writes a rig TOML pointing at the emulators, so that
+``endocal excite PROTOCOL --backend hardware --hardware-config rig.toml`` runs unchanged
+through the real ``dynamixel-sdk``, ``scikit-surgerynditracker`` and ``ndicapi``.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from endocal.emulate._serving import Served
+from endocal.emulate.aurora import AuroraEmulator, AuroraFaults
+from endocal.emulate.servos import BusFaults, ServoBus
+from endocal.probe import ProbeConfig
+from endocal.sim import SimConfig, Simulator
+
+ZERO_TICKS = 2048
+TICKS_PER_DEG = 4096 / 360.0
+
+
+class EmulatedRig(Served):
+    """Servo bus + Aurora + the simulator's probe between them.
+
+    Parameters
+    ----------
+    probe : ProbeConfig
+    sim_config : SimConfig, optional
+        The probe's physics (default: the simulator's defaults); its knob servo is replaced.
+    seed : int
+        Seed of the simulator's noise.
+    ids : dict, optional
+        Bending axis -> servo ID (default 1 and 2).
+    bus_faults, aurora_faults : optional
+        Faults of the two devices.
+    physics_period_s : float
+        How often the probe is stepped (default 5 ms).
+    on_event : callable, optional
+        One line per device event (torque switching, faults).
+    """
+
+    def __init__(self, probe: ProbeConfig, sim_config: SimConfig | None = None, *, seed: int = 0, ids: dict | None = None,
+                 bus_faults: BusFaults | None = None, aurora_faults: AuroraFaults | None = None,
+                 physics_period_s: float = 0.005, baudrate: int = 57600, on_event=None) -> None:
+        super().__init__()
+        self.probe = probe
+        self.ids = ids or {a: k + 1 for k, a in enumerate(probe.bending_axes)}
+        cfg = (sim_config or SimConfig.default()).replace(motor={"knob_time_constant_s": 0.0})
+        self.sim = Simulator(cfg, probe, seed)
+        self.bus = ServoBus(list(self.ids.values()), baudrate=baudrate, faults=bus_faults, seed=seed,
+                            on_event=on_event)
+        self.aurora = AuroraEmulator(faults=aurora_faults)
+        self.period_s = physics_period_s
+        self._t0 = 0.0
+        self.steps = 0
+        self.error: BaseException | None = None
+
+    thread_name = "rig-physics"
+
+    def _open(self) -> None:
+        self.bus.start()
+        self.aurora.start()
+        self._t0 = time.monotonic()
+        self._step(1e-6)  # poses at rest before anyone asks
+
+    def _release(self) -> None:
+        self.aurora.close()
+        self.bus.close()
+
+    def _step(self, t: float) -> None:
+        ticks = self.bus.positions_ticks()
+        goal = {d: np.array([0.0]) for d in self.probe.dofs}
+        for axis, i in self.ids.items():
+            goal[axis] = np.array([(ticks[i] - ZERO_TICKS) / TICKS_PER_DEG])
+        chunk = self.sim.execute(np.array([t]), goal)
+        tr = chunk.tracker
+        if len(tr["t_s"]):
+            poses = {}
+            for sensor in ("tip", "base"):
+                k = np.flatnonzero(tr["sensor"] == sensor)
+                if k.size:
+                    j = k[-1]
+                    ok = bool(tr["valid"][j])
+                    poses[sensor] = ((tr["x_mm"][j], tr["y_mm"][j], tr["z_mm"][j]),
+                                     (tr["qw"][j], tr["qx"][j], tr["qy"][j], tr["qz"][j])) if ok else None
+            self.aurora.set_poses(poses)
+        self.steps += 1
+
+    def _serve(self) -> None:
+        next_t = time.monotonic()
+        try:
+            while not self._stop.is_set():
+                now = time.monotonic()
+                self._step(max(now - self._t0, self.sim_time() + 1e-6))
+                next_t += self.period_s
+                self._stop.wait(max(0.0, next_t - time.monotonic()))
+        except BaseException as exc:  # noqa: BLE001 - reported by the command that runs the rig
+            self.error = exc
+
+    def sim_time(self) -> float:
+        return float(self.sim._t_last or 0.0)
+
+    def write_config(self, path: str | Path) -> Path:
+        """A rig TOML pointing at the emulated devices (stage absent), for ``--hardware-config``."""
+        path = Path(path)
+        motors = "".join(
+            f"\n[dynamixel.motors.{axis}]\nid = {i}\nzero_ticks = {ZERO_TICKS}\ndirection = 1\n"
+            f"limits_deg = [{self.probe.knob_limits_deg[axis][0]:g}, {self.probe.knob_limits_deg[axis][1]:g}]\n"
+            for axis, i in self.ids.items())
+        path.write_text(
+            "# Written by `endocal emulate rig`: the emulated devices of this session.\n"
+            'name = "emulated rig"\n\n'
+            f'[dynamixel]\nport = "{self.bus.port}"\nbaudrate = {self.bus.baudrate}\nmodel_number = 1020\n'
+            f"{motors}\n"
+            f'[tracker]\nserial_port = "{self.aurora.port}"\ntip_port_handle = {self.aurora.handles["tip"]}\n'
+            f'base_port_handle = {self.aurora.handles["base"]}\ndetect_timeout_s = 3.0\n\n'
+            '[stage]\nmode = "absent"\n')
+        return path
