@@ -152,3 +152,17 @@ def test_endocal_emulate_dynamixel_prints_its_port_and_every_torque_switch():
     assert proc.returncode == 0, errors
     assert rest.splitlines() == ["servo 1 torque on", "servo 2 torque on", "servo 1 torque off", "servo 2 torque off",
                                  "stopped"]
+
+
+def test_replies_later_than_the_sdk_waits_fail_the_read_and_a_port_that_is_no_device_is_refused(tmp_path):
+    # the SDK waits 2 x 16 ms latency + 2 ms + the bytes' time for a status packet: 100 ms is too late
+    with ServoBus([1, 2], faults=BusFaults(delay_s=0.1)) as bus:
+        ks = _servos(bus)
+        with pytest.raises(HardwareError, match="did not answer a ping"):
+            ks.open()
+        ks.close()
+    not_a_device = tmp_path / "ttyUSB9"
+    ks = KnobServos(DynamixelConfig(port=str(not_a_device), motors={"ap": MotorConfig("ap", 1), "ml": MotorConfig("ml", 2)}))
+    with pytest.raises(HardwareError, match=f"cannot open Dynamixel port {not_a_device}"):
+        ks.open()
+    ks.close()
