@@ -65,6 +65,8 @@ def test_a_run_on_the_emulated_rig_matches_the_simulator(tmp_path, protocol):
 
 
 @pytest.mark.parametrize("rig_kw, fragments", [
+    ({"aurora_faults": AuroraFaults(missing=("tip",), missing_after_s=2.0)},
+     ("tip sensor (port handle 0x0a) has reported no valid pose", "max_lost_s")),
     ({"bus_faults": BusFaults(hardware_error={2: "overload"}, hardware_error_after_s=2.0)},
      ("ID 2 (knob 'ml')", "hardware alert", "overload")),
     ({"bus_faults": BusFaults(unplug_after_s=2.0)}, ("sync read", "failed", "check cables and power")),
@@ -77,7 +79,7 @@ def test_a_device_fault_mid_run_ends_safely(tmp_path, rig_kw, fragments):
     meta = json.loads((tmp_path / "rig-run" / "run.json").read_text())
     assert meta["status"] == "failed" and "HardwareError" in meta["error"]
     assert len(read_stream(tmp_path / "rig-run", "motor")) > 50  # what was logged before the fault is readable
-    if "unplug_after_s" not in repr(rig_kw):
+    if "unplug_after_s=2.0" not in repr(rig_kw):
         assert torque == {1: False, 2: False}  # the emulator saw torque switched off on every servo
         assert "servo 1 torque off" in events and "servo 2 torque off" in events
 

@@ -29,7 +29,8 @@ from endocal.backends.base import SENSORS, TRACKER_COLUMNS
 from endocal.errors import ConfigError, HardwareError
 
 INSTALL_HINT = "pip install 'endocal-toolkit[aurora]'"
-TRACKER_KEYS = {"serial_port", "tip_port_handle", "base_port_handle", "rom_files", "rate_hz", "detect_timeout_s"}
+TRACKER_KEYS = {"serial_port", "tip_port_handle", "base_port_handle", "rom_files", "rate_hz", "detect_timeout_s",
+                "max_lost_s"}
 
 
 def matrix_to_pose(sensor2tracker) -> tuple[np.ndarray, np.ndarray]:
@@ -105,6 +106,9 @@ class AuroraConfig:
         How often the background thread asks for a frame (the Aurora measures at 40 Hz).
     detect_timeout_s : float
         How long :meth:`AuroraTracker.open` waits for both sensors to report a valid pose.
+    max_lost_s : float
+        A sensor that reports no valid pose for this long during a run (unplugged, out of the
+        field volume) stops the run: bending angles cannot be measured without it.
     """
 
     tip_port_handle: int
@@ -113,6 +117,7 @@ class AuroraConfig:
     rom_files: tuple[str, ...] = ()
     rate_hz: float = 40.0
     detect_timeout_s: float = 2.0
+    max_lost_s: float = 1.0
 
     def __post_init__(self) -> None:
         if self.tip_port_handle == self.base_port_handle:
@@ -121,6 +126,8 @@ class AuroraConfig:
             raise ConfigError(f"tracker: rate_hz must be in (0, 1000], got {self.rate_hz}")
         if not self.detect_timeout_s > 0:
             raise ConfigError(f"tracker: detect_timeout_s must be positive, got {self.detect_timeout_s}")
+        if not self.max_lost_s > 0:
+            raise ConfigError(f"tracker: max_lost_s must be positive, got {self.max_lost_s}")
 
     @property
     def handles(self) -> dict[str, int]:
@@ -165,6 +172,7 @@ class AuroraConfig:
                 rom_files=tuple(roms),
                 rate_hz=float(d.get("rate_hz", 40.0)),
                 detect_timeout_s=float(d.get("detect_timeout_s", 2.0)),
+                max_lost_s=float(d.get("max_lost_s", 1.0)),
             )
         except ConfigError as exc:
             raise ConfigError(f"{where}: {exc}") from None
@@ -248,6 +256,7 @@ class AuroraTracker:
         self._lock = threading.Lock()
         self._rows: list[tuple] = []
         self._round_trips: list[float] = []  # get_frame durations (s), for the stamp uncertainty
+        self._last_valid: dict[str, float] = {}  # sensor -> monotonic time of its last valid pose
         self._error: BaseException | None = None
         self._last_numbers: tuple | None = None
         self.info: dict = {}
@@ -303,6 +312,7 @@ class AuroraTracker:
         if self._thread is not None:
             return
         self._stop.clear()
+        self._last_valid = {s: time.monotonic() for s in SENSORS}  # both were seen at open
         self._thread = threading.Thread(target=self._run, args=(clock,), name="endocal-aurora", daemon=True)
         self._thread.start()
 
@@ -317,6 +327,9 @@ class AuroraTracker:
                 t_s = 0.5 * (t_before + t_after)
                 self._round_trips.append(t_after - t_before)
                 rows, numbers = _frame_rows(frame, self.config.handles, t_s)
+                for row in rows:  # the last valid pose of each sensor, for check()
+                    if row[-1]:
+                        self._last_valid[row[1]] = time.monotonic()
                 if numbers != self._last_numbers or None in numbers:
                     self._last_numbers = numbers
                     with self._lock:
@@ -331,9 +344,21 @@ class AuroraTracker:
             self._error = exc
 
     def check(self) -> None:
-        """Raise :class:`HardwareError` if the reader thread died."""
+        """Raise :class:`HardwareError` if the reader thread died or a sensor is lost.
+
+        A sensor is lost when it has reported no valid pose for ``max_lost_s``.
+        """
         if self._error is not None:
             raise HardwareError(f"NDI Aurora: reading frames failed ({self._error}); check the tracker cable and power")
+        now = time.monotonic()
+        for sensor, last in self._last_valid.items():
+            if now - last > self.config.max_lost_s:
+                handle = self.config.handles[sensor]
+                raise HardwareError(
+                    f"NDI Aurora: the {sensor} sensor (port handle {handle:#04x}) has reported no valid pose for "
+                    f"{now - last:.1f} s (tracker.max_lost_s = {self.config.max_lost_s:g}): check its cable and that it "
+                    "stays inside the field generator's volume"
+                )
 
     def drain(self) -> dict[str, np.ndarray]:
         """Every frame received since the last drain, as tracker-stream columns."""

@@ -73,12 +73,15 @@ class AuroraFaults:
     Attributes
     ----------
     missing : tuple of str
-        Sensors (``tip``, ``base``) reported ``MISSING`` in every frame.
+        Sensors (``tip``, ``base``) reported ``MISSING``...
+    missing_after_s : float
+        ...from this long after ``TSTART`` on (0: from the start, even before tracking).
     silent_after_s : float or None
         Stop answering this long after ``TSTART`` (a pulled cable, a crashed unit).
     """
 
     missing: tuple = ()
+    missing_after_s: float = 0.0
     silent_after_s: float | None = None
 
 
@@ -140,7 +143,10 @@ class _Unit:
         for k, sensor in enumerate(SENSOR_SLOTS):
             h = self.handles[sensor]
             chunk = values[8 * k:8 * k + 8]
-            seen = chunk[7] > 0 and sensor not in self.faults.missing and h in self.enabled
+            lost = sensor in self.faults.missing and (
+                self.faults.missing_after_s <= 0 or (self.t_start is not None
+                                                     and time.monotonic() - self.t_start >= self.faults.missing_after_s))
+            seen = chunk[7] > 0 and not lost and h in self.enabled
             pose = tx_transform(chunk[0:3], chunk[3:7]) if seen else "MISSING"
             status = 0x31 if seen else 0x01
             parts.append(f"{h:02X}{pose}{status:08X}{n:08X}\n")
