@@ -99,6 +99,7 @@ def rig(
     hardware_error: list[str] = typer.Option([], "--hardware-error", help="Fault: ID=overload or ID=overheating (repeatable)."),
     hardware_error_after: float = typer.Option(5.0, "--hardware-error-after", help="Seconds after the first packet."),
     missing: list[str] = typer.Option([], "--missing", help="Fault: a tracker sensor (tip or base) reported MISSING."),
+    missing_after: float = typer.Option(0.0, "--missing-after", help="...from this many seconds after tracking starts (0: always)."),
 ) -> None:
     """The thesis rig, emulated: Dynamixel servos and an NDI Aurora whose sensors follow the
     simulated probe the knobs bend, so `endocal excite P --backend hardware --hardware-config
@@ -120,7 +121,7 @@ def rig(
     rig_ = EmulatedRig(load_probe(probe), cfg, seed=seed, on_event=_event,
                        bus_faults=BusFaults(drop_probability=drop, corrupt_probability=corrupt, unplug_after_s=unplug_after,
                                             hardware_error=errors, hardware_error_after_s=hardware_error_after),
-                       aurora_faults=AuroraFaults(missing=tuple(missing)))
+                       aurora_faults=AuroraFaults(missing=tuple(missing), missing_after_s=missing_after))
     rig_.start()
     rig_.write_config(config_out)
     out.print(f"emulated rig: servos on {rig_.bus.port}, aurora on {rig_.aurora.port}, stage absent; "
@@ -133,7 +134,8 @@ def rig(
 def aurora(
     tip_port_handle: int = typer.Option(0x0A, "--tip-port-handle", help="Port handle of the tip sensor."),
     base_port_handle: int = typer.Option(0x0B, "--base-port-handle", help="Port handle of the base sensor."),
-    missing: list[str] = typer.Option([], "--missing", help="Fault: report this sensor (tip or base) MISSING in every frame (repeatable)."),
+    missing: list[str] = typer.Option([], "--missing", help="Fault: report this sensor (tip or base) MISSING (repeatable)..."),
+    missing_after: float = typer.Option(0.0, "--missing-after", help="...from this many seconds after TSTART (0: always)."),
     silent_after: Optional[float] = typer.Option(None, "--silent-after", help="Fault: stop answering this many seconds after TSTART."),
 ) -> None:
     """An emulated NDI Aurora (System Control Unit) on a pseudo-terminal, in a process of its own.
@@ -148,7 +150,8 @@ def aurora(
     if bad:
         raise ConfigError(f"--missing {bad[0]!r}: name a sensor, tip or base")
     emu = AuroraEmulator(tip_port_handle, base_port_handle,
-                         faults=AuroraFaults(missing=tuple(missing), silent_after_s=silent_after))
+                         faults=AuroraFaults(missing=tuple(missing), missing_after_s=missing_after,
+                                             silent_after_s=silent_after))
     emu.start()
     out.print(f"aurora on {emu.port} (tip port handle {tip_port_handle:#04x}, base {base_port_handle:#04x}, 40 Hz)",
               markup=False)
