@@ -32,8 +32,12 @@ def _tracker(emu: AuroraEmulator, **kw) -> AuroraTracker:
                                                  "base_port_handle": 11, **kw}, "rig.toml"))
 
 
-def test_frames_decode_to_the_poses_served():
-    with AuroraEmulator(0x0A, 0x0B) as emu:
+@pytest.mark.parametrize("firmware, tol_mm, tol_q", [
+    ("AURORA Rev 008", 0.005 + 1e-9, 2e-4),  # TX (ASCII): 0.01 mm and 1e-4 steps
+    ("AURORA Rev 009", 1e-4, 1e-6),  # BX (binary float32): 7 significant digits of 230 mm
+])
+def test_frames_decode_to_the_poses_served(firmware, tol_mm, tol_q):
+    with AuroraEmulator(0x0A, 0x0B, firmware=firmware) as emu:
         emu.set_poses({"tip": TIP, "base": BASE})
         tr = _tracker(emu)
         tr.open()
@@ -45,11 +49,11 @@ def test_frames_decode_to_the_poses_served():
     tip = frames["sensor"] == "tip"
     assert 8 <= tip.sum() <= 20  # 40 Hz for 0.4 s, repeats dropped
     assert frames["valid"].all()
-    # TX replies: positions to 0.01 mm, quaternion components to 1e-4 (then renormalised)
+    # positions and quaternion components to the reply format's resolution
     np.testing.assert_allclose(np.column_stack([frames[c][tip] for c in ("x_mm", "y_mm", "z_mm")]),
-                               np.tile(TIP[0], (tip.sum(), 1)), atol=0.005 + 1e-9)
+                               np.tile(TIP[0], (tip.sum(), 1)), atol=tol_mm)
     q = np.column_stack([frames[c][tip] for c in ("qw", "qx", "qy", "qz")])
-    np.testing.assert_allclose(np.abs(q), np.tile(np.abs(TIP[1]), (tip.sum(), 1)), atol=2e-4)
+    np.testing.assert_allclose(np.abs(q), np.tile(np.abs(TIP[1]), (tip.sum(), 1)), atol=tol_q)
     t = frames["t_s"][tip]
     assert np.all(np.diff(t) > 0)  # stamped on arrival, in order
 

@@ -5,11 +5,11 @@ and talks to it through ``scikit-surgerynditracker`` and NDI's C library ``ndica
 emulator answers the commands they send (NDI Combined API, ASCII form): ``INIT``, the probe's
 ``GETINFO``, ``COMM``, ``VER``, ``PHSR``, ``PINIT``, ``PENA``, ``TSTART``, ``TX`` and
 ``TSTOP``. Every command and reply carries NDI's CRC-16 (polynomial x^16 + x^15 + x^2 + 1,
-computed as ndicapi's ``CalcCRC16``) as four hex digits before the carriage return. ``VER``
-reports firmware "AURORA Rev 008", for which scikit-surgerynditracker reads frames with
-``TX:0801``: per port handle the rotation quaternion (4 x 6 characters, 1e-4), the position
-(3 x 7 characters, 0.01 mm), the RMS error, the port status and the frame number, or
-``MISSING``.
+computed as ndicapi's ``CalcCRC16``) as four hex digits before the carriage return. Frames
+come as ``TX:0801`` (ASCII: per port handle the rotation quaternion, 4 x 6 characters at
+1e-4, the position, 3 x 7 characters at 0.01 mm, the RMS error, the port status and the frame
+number, or ``MISSING``) or ``BX:0801`` (binary: the same as float32 and uint32 with a header,
+a header CRC and a final CRC), whichever the firmware ``VER`` reports makes the driver ask for.
 
 It runs in a process of its own: ndicapi holds Python's interpreter lock while it waits
 for a reply, so an emulator thread in the host's process could never answer. The sensor
@@ -22,6 +22,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import select
+import struct
 import time
 from dataclasses import dataclass
 
@@ -88,7 +89,9 @@ class AuroraFaults:
 class _Unit:
     """The System Control Unit's state machine (runs in the emulator's process)."""
 
-    def __init__(self, handles: dict[str, int], shared, faults: AuroraFaults, rate_hz: float) -> None:
+    def __init__(self, handles: dict[str, int], shared, faults: AuroraFaults, rate_hz: float,
+                 firmware: str = "AURORA Rev 008") -> None:
+        self.firmware = firmware
         self.handles = handles
         self.shared = shared
         self.faults = faults
@@ -115,7 +118,7 @@ class _Unit:
                 self.t_start = None
             return reply("OKAY")
         if name == "VER":
-            return reply("Aurora Control Unit\nFreeze Tag: AURORA Rev 008\nendocal emulator\n")
+            return reply(f"Aurora Control Unit\nFreeze Tag: {self.firmware}\nendocal emulator\n")
         if name == "PHSR":
             kind = arg[:2] or "00"
             all_h = sorted(self.handles.values())
@@ -134,32 +137,56 @@ class _Unit:
             return reply("OKAY")
         if name == "TX":
             return reply(self._tx())
+        if name == "BX":
+            return self._bx()
         return reply("ERROR01")
 
     def _tx(self) -> str:
-        values = list(self.shared)
         n = self.frame()
         parts = [f"{len(self.handles):02X}"]
+        for h, seen, pos, quat in self._poses():
+            pose = tx_transform(pos, quat) if seen else "MISSING"
+            parts.append(f"{h:02X}{pose}{0x31 if seen else 0x01:08X}{n:08X}\n")
+        parts.append("0000")  # system status
+        return "".join(parts)
+
+    def _poses(self):
+        """Per sensor: handle, whether it is seen, position (3), quaternion (4)."""
+        values = list(self.shared)
+        out = []
         for k, sensor in enumerate(SENSOR_SLOTS):
             h = self.handles[sensor]
             chunk = values[8 * k:8 * k + 8]
             lost = sensor in self.faults.missing and (
                 self.faults.missing_after_s <= 0 or (self.t_start is not None
                                                      and time.monotonic() - self.t_start >= self.faults.missing_after_s))
-            seen = chunk[7] > 0 and not lost and h in self.enabled
-            pose = tx_transform(chunk[0:3], chunk[3:7]) if seen else "MISSING"
-            status = 0x31 if seen else 0x01
-            parts.append(f"{h:02X}{pose}{status:08X}{n:08X}\n")
-        parts.append("0000")  # system status
-        return "".join(parts)
+            out.append((h, chunk[7] > 0 and not lost and h in self.enabled, chunk[0:3], chunk[3:7]))
+        return out
+
+    def _bx(self) -> bytes:
+        """A BX reply (binary): header ``C4 A5``, body length, header CRC; per handle its handle,
+        status (1 valid, 2 missing), q0 qx qy qz x y z error as float32, port status and frame
+        number (uint32); system status (uint16); CRC of everything before (all little endian)."""
+        n = self.frame()
+        body = bytearray((len(self.handles),))
+        for h, seen, pos, quat in self._poses():
+            body += bytes((h, 0x01 if seen else 0x02))
+            if seen:
+                body += struct.pack("<8f", *quat, *pos, 0.0)
+            body += struct.pack("<II", 0x31 if seen else 0x01, n)
+        body += struct.pack("<H", 0)
+        head = b"\xc4\xa5" + struct.pack("<H", len(body))
+        frame = head + struct.pack("<H", ndi_crc16(head)) + bytes(body)
+        return frame + struct.pack("<H", ndi_crc16(frame))
 
     def silent(self) -> bool:
         f = self.faults.silent_after_s
         return f is not None and self.t_start is not None and time.monotonic() - self.t_start >= f
 
 
-def _serve(master: int, handles: dict, shared, faults: AuroraFaults, rate_hz: float, stop, ready) -> None:
-    unit = _Unit(handles, shared, faults, rate_hz)
+def _serve(master: int, handles: dict, shared, faults: AuroraFaults, rate_hz: float, firmware: str, stop,
+           ready) -> None:
+    unit = _Unit(handles, shared, faults, rate_hz, firmware)
     buf = b""
     ready.set()
     while not stop.is_set():
@@ -192,10 +219,15 @@ class AuroraEmulator:
     rate_hz : float
         Frame rate (the Aurora's: 40 Hz).
     faults : AuroraFaults, optional
+    firmware : str
+        What ``VER`` reports after "Freeze Tag:". scikit-surgerynditracker reads frames with
+        ``TX`` (ASCII) from "AURORA Rev 007/008" and with ``BX`` (binary, float32) otherwise;
+        both are served.
     """
 
     def __init__(self, tip_port_handle: int = 0x0A, base_port_handle: int = 0x0B, *, rate_hz: float = 40.0,
-                 faults: AuroraFaults | None = None) -> None:
+                 faults: AuroraFaults | None = None, firmware: str = "AURORA Rev 008") -> None:
+        self.firmware = firmware
         self.handles = {"tip": tip_port_handle, "base": base_port_handle}
         self.rate_hz = rate_hz
         self.faults = faults or AuroraFaults()
@@ -224,7 +256,7 @@ class AuroraEmulator:
         self._master, self._slave, self.port = open_raw_pty()
         self._proc = self._ctx.Process(target=_serve, name="aurora-emulator", daemon=True,
                                        args=(self._master, self.handles, self._shared, self.faults, self.rate_hz,
-                                             self._stop, self._ready))
+                                             self.firmware, self._stop, self._ready))
         self._proc.start()
         self._ready.wait(5.0)
         return self
