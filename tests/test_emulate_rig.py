@@ -12,6 +12,7 @@ import pytest
 from endocal.emulate.aurora import AuroraFaults
 from endocal.emulate.rig import EmulatedRig
 from endocal.emulate.servos import BusFaults
+from endocal.emulate.stage import StageFaults
 from endocal.probe import PRESETS
 from endocal.runs.aligned import load_aligned, read_stream
 from tests._cli import endocal
@@ -70,6 +71,8 @@ def test_a_run_on_the_emulated_rig_matches_the_simulator(tmp_path, protocol):
     ({"bus_faults": BusFaults(hardware_error={2: "overload"}, hardware_error_after_s=2.0)},
      ("ID 2 (knob 'ml')", "hardware alert", "overload")),
     ({"bus_faults": BusFaults(unplug_after_s=2.0)}, ("sync read", "failed", "check cables and power")),
+    ({"stage": True, "stage_faults": StageFaults(silent_after_s=2.0)},
+     ("translation/rotation stage at 127.0.0.1:", "stopped answering", "check the LabVIEW PC")),
 ])
 def test_a_device_fault_mid_run_ends_safely(tmp_path, rig_kw, fragments):
     proc, events, torque = _excite_on_rig(tmp_path, SINE, **rig_kw)
@@ -89,3 +92,13 @@ def test_a_tracker_that_does_not_see_both_sensors_is_refused_before_torque(tmp_p
     assert proc.returncode == 3, proc.stderr
     assert "tip (port handle 0x0a) reported no valid pose" in proc.stderr
     assert not [e for e in events if e.endswith("torque on")] and torque == {1: False, 2: False}
+
+
+def test_the_rig_with_its_udp_stage_plays_and_records_it(tmp_path):
+    proc, events, torque = _excite_on_rig(tmp_path, SINE, stage=True)
+    assert proc.returncode == 0, proc.stderr
+    assert "stage stopped" in events and torque == {1: False, 2: False}  # STOP sent at close
+    meta = json.loads((tmp_path / "rig-run" / "run.json").read_text())
+    assert meta["backend"]["stage"]["mode"] == "udp"
+    motor = read_stream(tmp_path / "rig-run", "motor")
+    assert np.abs(motor["translation_pos_mm"]).max() < 1e-6  # a bending protocol holds the stage at 0

@@ -100,6 +100,8 @@ def rig(
     hardware_error_after: float = typer.Option(5.0, "--hardware-error-after", help="Seconds after the first packet."),
     missing: list[str] = typer.Option([], "--missing", help="Fault: a tracker sensor (tip or base) reported MISSING."),
     missing_after: float = typer.Option(0.0, "--missing-after", help="...from this many seconds after tracking starts (0: always)."),
+    stage: bool = typer.Option(False, "--stage", help="Also emulate the UDP translation/rotation stage (the probe follows it)."),
+    stage_silent_after: Optional[float] = typer.Option(None, "--stage-silent-after", help="Fault: the stage stops answering this many seconds after its first request."),
 ) -> None:
     """The thesis rig, emulated: Dynamixel servos and an NDI Aurora whose sensors follow the
     simulated probe the knobs bend, so `endocal excite P --backend hardware --hardware-config
@@ -108,6 +110,7 @@ def rig(
     from endocal.emulate.aurora import AuroraFaults
     from endocal.emulate.rig import EmulatedRig
     from endocal.emulate.servos import BusFaults
+    from endocal.emulate.stage import StageFaults
     from endocal.errors import ConfigError
     from endocal.probe import load_probe
     from endocal.sim import SimConfig
@@ -121,11 +124,13 @@ def rig(
     rig_ = EmulatedRig(load_probe(probe), cfg, seed=seed, on_event=_event,
                        bus_faults=BusFaults(drop_probability=drop, corrupt_probability=corrupt, unplug_after_s=unplug_after,
                                             hardware_error=errors, hardware_error_after_s=hardware_error_after),
-                       aurora_faults=AuroraFaults(missing=tuple(missing), missing_after_s=missing_after))
+                       aurora_faults=AuroraFaults(missing=tuple(missing), missing_after_s=missing_after),
+                       stage=stage, stage_faults=StageFaults(silent_after_s=stage_silent_after))
     rig_.start()
     rig_.write_config(config_out)
-    out.print(f"emulated rig: servos on {rig_.bus.port}, aurora on {rig_.aurora.port}, stage absent; "
-              f"wrote {config_out}", markup=False)
+    where = f"stage on 127.0.0.1:{rig_.stage.port}" if rig_.stage is not None else "stage absent"
+    out.print(f"emulated rig: servos on {rig_.bus.port}, aurora on {rig_.aurora.port}, {where}; wrote {config_out}",
+              markup=False)
     _run_until_stopped(rig_)
 
 

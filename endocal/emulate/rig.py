@@ -23,6 +23,7 @@ import numpy as np
 from endocal.emulate._serving import Served
 from endocal.emulate.aurora import AuroraEmulator, AuroraFaults
 from endocal.emulate.servos import BusFaults, ServoBus
+from endocal.emulate.stage import StageEmulator, StageFaults
 from endocal.probe import ProbeConfig
 from endocal.sim import SimConfig, Simulator
 
@@ -46,13 +47,17 @@ class EmulatedRig(Served):
         Faults of the two devices.
     physics_period_s : float
         How often the probe is stepped (default 5 ms).
+    stage : bool
+        Also emulate the UDP translation/rotation stage (the probe follows its drives).
+    stage_faults : StageFaults, optional
     on_event : callable, optional
         One line per device event (torque switching, faults).
     """
 
     def __init__(self, probe: ProbeConfig, sim_config: SimConfig | None = None, *, seed: int = 0, ids: dict | None = None,
                  bus_faults: BusFaults | None = None, aurora_faults: AuroraFaults | None = None,
-                 physics_period_s: float = 0.005, baudrate: int = 57600, on_event=None) -> None:
+                 physics_period_s: float = 0.005, baudrate: int = 57600, stage: bool = False,
+                 stage_faults: StageFaults | None = None, on_event=None) -> None:
         super().__init__()
         self.probe = probe
         self.ids = ids or {a: k + 1 for k, a in enumerate(probe.bending_axes)}
@@ -61,6 +66,7 @@ class EmulatedRig(Served):
         self.bus = ServoBus(list(self.ids.values()), baudrate=baudrate, faults=bus_faults, seed=seed,
                             on_event=on_event)
         self.aurora = AuroraEmulator(faults=aurora_faults)
+        self.stage = StageEmulator(0, faults=stage_faults, on_event=on_event) if stage else None
         self.period_s = physics_period_s
         self._t0 = 0.0
         self.steps = 0
@@ -71,10 +77,14 @@ class EmulatedRig(Served):
     def _open(self) -> None:
         self.bus.start()
         self.aurora.start()
+        if self.stage is not None:
+            self.stage.start()
         self._t0 = time.monotonic()
         self._step(1e-6)  # poses at rest before anyone asks
 
     def _release(self) -> None:
+        if self.stage is not None:
+            self.stage.close()
         self.aurora.close()
         self.bus.close()
 
@@ -83,6 +93,8 @@ class EmulatedRig(Served):
         goal = {d: np.array([0.0]) for d in self.probe.dofs}
         for axis, i in self.ids.items():
             goal[axis] = np.array([(ticks[i] - ZERO_TICKS) / TICKS_PER_DEG])
+        if self.stage is not None:  # the probe translates and rotates where the stage's drives are
+            goal["translation"], goal["rotation"] = (np.array([v]) for v in self.stage.position)
         chunk = self.sim.execute(np.array([t]), goal)
         tr = chunk.tracker
         if len(tr["t_s"]):
@@ -112,7 +124,7 @@ class EmulatedRig(Served):
         return float(self.sim._t_last or 0.0)
 
     def write_config(self, path: str | Path) -> Path:
-        """A rig TOML pointing at the emulated devices (stage absent), for ``--hardware-config``."""
+        """A rig TOML pointing at the emulated devices, for ``--hardware-config``."""
         path = Path(path)
         motors = "".join(
             f"\n[dynamixel.motors.{axis}]\nid = {i}\nzero_ticks = {ZERO_TICKS}\ndirection = 1\n"
@@ -125,5 +137,7 @@ class EmulatedRig(Served):
             f"{motors}\n"
             f'[tracker]\nserial_port = "{self.aurora.port}"\ntip_port_handle = {self.aurora.handles["tip"]}\n'
             f'base_port_handle = {self.aurora.handles["base"]}\ndetect_timeout_s = 3.0\n\n'
-            '[stage]\nmode = "absent"\n')
+            + ('[stage]\nmode = "absent"\n' if self.stage is None else
+               f'[stage]\nmode = "udp"\nhost = "127.0.0.1"\nport = {self.stage.port}\ntimeout_s = 0.02\n'
+               'max_missed_replies = 5\ntranslation_limits_mm = [-50.0, 50.0]\nrotation_limits_deg = [-90.0, 90.0]\n'))
         return path
