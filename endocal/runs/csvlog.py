@@ -38,6 +38,7 @@ from endocal.runs.imported import tracker_stream, write_imported_run
 
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 ANGLE_UNITS = ("deg", "rad", "ticks")
+_SCALE = {"deg": 1.0, "rad": 180.0 / np.pi, "mm": 1.0, "m": 1000.0}  # to the run's deg or mm
 LENGTH_UNITS = {"mm": 1.0, "m": 1000.0}
 CURRENT_UNITS = {"mA": 1.0, "A": 1000.0}
 QUAT_ORDERS = ("xyzw", "wxyz")
@@ -76,11 +77,9 @@ class _Knob:
 
     def convert(self, v: np.ndarray) -> np.ndarray:
         """Raw column values in the run's unit: deg (knobs, rotation) or mm (translation)."""
-        if self.unit == "deg":
-            return v * self.direction
-        if self.unit == "rad":
-            return np.degrees(v) * self.direction
-        return (v - self.zero_ticks) * 360.0 / self.ticks_per_rev * self.direction
+        if self.unit == "ticks":
+            return (v - self.zero_ticks) * 360.0 / self.ticks_per_rev * self.direction
+        return v * _SCALE[self.unit] * self.direction
 
 
 @dataclass(frozen=True)
@@ -217,12 +216,8 @@ def read_map(path: str | Path) -> CsvMap:
         if not isinstance(k.get("position"), str):
             raise RunFormatError(f"{w}: position must name a column")
         cur_unit = _choice(k.get("current_unit", "mA"), CURRENT_UNITS, "current unit", w)
-        if dof == TRANSLATION:  # lengths: deg/rad/ticks do not apply
-            knobs[dof] = _Knob(k["position"], "deg", k.get("goal"), k.get("current"), 0.0, 1.0,
-                               float(direction) * LENGTH_UNITS[unit], CURRENT_UNITS[cur_unit])
-        else:
-            knobs[dof] = _Knob(k["position"], unit, k.get("goal"), k.get("current"), float(k.get("zero_ticks", 0)),
-                               float(k.get("ticks_per_rev", 4096)), float(direction), CURRENT_UNITS[cur_unit])
+        knobs[dof] = _Knob(k["position"], unit, k.get("goal"), k.get("current"), float(k.get("zero_ticks", 0)),
+                           float(k.get("ticks_per_rev", 4096)), float(direction), CURRENT_UNITS[cur_unit])
     missing = [a for a in probe.bending_axes if a not in knobs]
     if missing:
         raise RunFormatError(f"{where}: no [knobs.{missing[0]}] table: every bending axis of probe '{probe.name}' "
