@@ -108,11 +108,11 @@ def test_lost_and_corrupt_replies_are_retried_and_counted():
             try:
                 ks.read_state()
                 ok += 1
-            except HardwareError:  # both tries lost: p = 0.1^2 per read
+            except HardwareError:  # both tries lost: a try needs two replies, p(fail) = 1 - 0.9^2, twice: 3.5 %
                 pass
         ks.close()
     assert bus.dropped + bus.corrupted > 0
-    assert ks.recovered_reads > recovered_before and ok >= 95
+    assert ks.recovered_reads > recovered_before and ok >= 90  # 96.5 expected
 
 
 def test_an_unplugged_bus_fails_the_run_and_says_to_cut_power():
