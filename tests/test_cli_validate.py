@@ -77,7 +77,7 @@ def test_refitted_model_shows_the_error_falling(drifting):
     res = _invoke(tmp / "m-drift.json", csv, "--json-out", tmp / "v.json")
     assert res.exit_code == 0, res.output
     assert "Watch the error fall" in res.stdout and "bspline -> " not in res.stdout
-    assert "bspline+drift" in res.stdout and "nothing significant" in res.stdout
+    assert "bspline+drift" in res.stdout and "Which effect is missing: nothing" in res.stdout
     d = json.loads(_invoke(tmp / "m-drift.json", csv, "--json").stdout)
     # --json-out keeps the terminal view and writes the same object --json prints (what scripts parse)
     assert json.loads((tmp / "v.json").read_text()) == d

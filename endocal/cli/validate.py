@@ -102,8 +102,10 @@ def render(result) -> None:
     what = "validation" if scan.scheme == "estimation/validation" else "held-out"
     if result.suspects:
         thin = not any(s.significant for s in result.suspects)
-        head = (f"candidates by {what} gain (not enough evidence for significance)" if thin else
-                f"{what} gain, Holm-corrected p")
+        few = all(s.evidence.startswith("not enough") for s in result.suspects)
+        head = (f"{what} gain, Holm-corrected p" if not thin else
+                f"candidates by {what} gain (not enough evidence for significance)" if few else
+                f"candidates by {what} gain: none significant, the gain is not consistent across the record")
         out.print(f"[bold]Which effect is missing[/] ({head}):")
         for i, s in enumerate(result.suspects, 1):
             stat = s.evidence if thin else f"p = {s.p_value:.2g}"
@@ -118,9 +120,14 @@ def render(result) -> None:
     elif result.pointers:
         out.print("[bold]Which effect is missing:[/] no catalog effect confirmed by the scan, but the residual "
                   "points at effects it could not settle (below).")
+    elif scan.tested and scan.tested[0].gain_pct >= scan.min_gain_pct:
+        best = scan.tested[0]
+        out.print(f"[bold]Which effect is missing:[/] nothing significant: the best candidate, {best.effect}, lowers the "
+                  f"{what} RMSE by {best.gain_pct:.0f} % but not consistently (Holm-corrected p = {best.p_value:.2g}); "
+                  "the residual points at nothing the scan could not test.", markup=False)
     else:
-        out.print("[bold]Which effect is missing:[/] nothing significant; the model explains this data as well as "
-                  "any catalog effect would, and the residual points at nothing the scan could not test.")
+        out.print(f"[bold]Which effect is missing:[/] nothing: no catalog effect lowers the {what} RMSE by "
+                  f"{scan.min_gain_pct:g} % or more, and the residual points at nothing the scan could not test.")
     if result.pointers:
         out.print("[bold]Untested suspects[/] (the residual points at them; the scan did not confirm them):")
         for p in result.pointers:

@@ -121,8 +121,10 @@ class ValidationResult:
 
     @property
     def clean(self) -> bool:
-        """True when nothing is missing: no suspect, no residual pointer, and the scan ran."""
-        return not self.suspects and not self.pointers and self.scan.scheme != "none"
+        """True when nothing is missing: the scan ran, found no suspect and no candidate that clears
+        the gain bar, and the residual points at no effect."""
+        unsettled = any(s.gain_pct >= self.scan.min_gain_pct for s in self.scan.tested)
+        return not self.suspects and not self.pointers and not unsettled and self.scan.scheme != "none"
 
     def to_dict(self) -> dict:
         """One JSON-able object: ``metrics``, ``regimes``, ``residuals``, ``suspects``, ``notes`` and more."""
