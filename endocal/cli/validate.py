@@ -118,8 +118,8 @@ def render(result) -> None:
     elif scan.scheme == "none":
         out.print("[bold]Which effect is missing:[/] not tested: " + escape(scan.scheme_reason))
     elif result.pointers:
-        out.print("[bold]Which effect is missing:[/] no catalog effect confirmed by the scan, but the residual "
-                  "points at effects it could not settle (below).")
+        out.print("[bold]Which effect is missing:[/] no catalog effect confirmed by the scan, but the data "
+                  "point at effects it could not settle (below).")
     elif scan.tested and scan.tested[0].gain_pct >= scan.min_gain_pct:
         best = scan.tested[0]
         out.print(f"[bold]Which effect is missing:[/] nothing significant: the best candidate, {best.effect}, lowers the "
@@ -129,7 +129,7 @@ def render(result) -> None:
         out.print(f"[bold]Which effect is missing:[/] nothing: no catalog effect lowers the {what} RMSE by "
                   f"{scan.min_gain_pct:g} % or more, and the residual points at nothing the scan could not test.")
     if result.pointers:
-        out.print("[bold]Untested suspects[/] (the residual points at them; the scan did not confirm them):")
+        out.print("[bold]Untested suspects[/] (the data point at them; the scan did not confirm them):")
         for p in result.pointers:
             out.print(f"  {p.effect} ({p.status}): {p.evidence}", markup=False)
             out.print(f"     why not confirmed: {p.why}", markup=False)

@@ -308,6 +308,7 @@ class HysteresisModel(ABC):
         effects = self._ordered(self._effects())
         for e in effects:
             e.check(d)
+            e.check_fit(d)
         if d.n_reversals() == 0:
             raise ModelError("backlash cannot be identified: the command never reverses; "
                              "fit on data that moves the knob back and forth (e.g. a damped sine)")

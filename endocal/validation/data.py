@@ -160,8 +160,8 @@ def is_smooth(values: np.ndarray, data: HysteresisData, min_lag1: float = 0.5) -
     return den > 0 and num / den >= min_lag1
 
 
-def check_columns(data: HysteresisData, columns: Sequence[str]) -> None:
-    """Refuse ``load:COLUMN`` on a column that is absent or constant.
+def check_columns(data: HysteresisData, columns: Sequence[str], vary: bool = True, what: str = "the data") -> None:
+    """Refuse ``load:COLUMN`` on a column that is absent, or constant where ``vary`` (data to fit on).
 
     Raises
     ------
@@ -171,9 +171,9 @@ def check_columns(data: HysteresisData, columns: Sequence[str]) -> None:
     have = ", ".join(sorted(data.extras)) or "none"
     for c in columns:
         if c not in data.extras:
-            raise ModelError(f"load:{c}: the data has no column '{c}' (extra columns present: {have})")
-        if is_constant(data.extras[c]):
-            raise ModelError(f"load:{c}: column '{c}' is constant in the data, so a load on it cannot be "
+            raise ModelError(f"load:{c}: {what} has no column '{c}' (extra columns present: {have})")
+        if vary and is_constant(data.extras[c]):
+            raise ModelError(f"load:{c}: column '{c}' is constant in {what}, so a load on it cannot be "
                              "identified; log a covariate that varies, or drop the term")
 
 

@@ -33,7 +33,8 @@ from endocal.validation.suspects import (
     scan_split,
     split_errors,
 )
-from endocal.validation.verdict import Pointer, residual_pointers
+from endocal.validation.shift import RecordShift, covariate_changes, record_shift
+from endocal.validation.verdict import Pointer, residual_pointers, shift_pointers
 
 
 @dataclass(frozen=True)
@@ -96,11 +97,14 @@ class ValidationResult:
     compare : Comparison or None
         A previous model's error beside this one.
     pointers : tuple of Pointer
-        Effects the residuals point at that the scan could not test or did not confirm
-        (:mod:`endocal.validation.verdict`).
+        Effects the residuals point at that the scan could not test or did not confirm, and a
+        condition that changed between the records (:mod:`endocal.validation.verdict`).
     estimation : list of dict
         ``source``, ``sha256``, ``n_samples`` of each estimation table (empty under
         rolling-origin cross-validation).
+    shift : RecordShift or None
+        A zero shift and a friction change fitted on the validation data with the model held
+        (:mod:`endocal.validation.shift`; estimation/validation scheme only).
     """
 
     axis: str
@@ -114,6 +118,7 @@ class ValidationResult:
     compare: Comparison | None = None
     pointers: tuple[Pointer, ...] = ()
     estimation: list = ()
+    shift: RecordShift | None = None
 
     @property
     def suspects(self):
@@ -141,6 +146,7 @@ class ValidationResult:
             "scheme": {"name": self.scan.scheme, "reason": self.scan.scheme_reason},
             "estimation": list(self.estimation),
             "pointers": [p.to_dict() for p in self.pointers],
+            "shift": None if self.shift is None else self.shift.to_dict(),
             "clean": self.clean,
             "notes": list(self.notes),
             "compare": None if self.compare is None else self.compare.to_dict(),
@@ -297,9 +303,12 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
         if train_paths is None:
             train_paths = est_paths or ["TRAIN"]
     labels = effect_labels(model)
-    check_columns(data, [lab.partition(":")[2] for lab in labels if lab.startswith("load:")])
-    if load_columns:
-        check_columns(data, load_columns)
+    # load:COLUMN is fitted where the scan fits (the estimation data, else these data): the column must
+    # vary there; the validation data only need it (a record at one sheath curvature is valid data)
+    own = [lab.partition(":")[2] for lab in labels if lab.startswith("load:")] + list(load_columns or [])
+    check_columns(data, own, vary=est is None)
+    if est is not None:
+        check_columns(est, own, what="the estimation data")
 
     pred, clamped = predict_clamped(model, data)
     metrics = error_metrics(data.meas_deg, pred, n_boot=n_boot, seed=seed)
@@ -333,6 +342,11 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
         notes.append(f"{clamped} samples command beyond the model's fitted range [{lo:.3g}, {hi:.3g}] deg and were "
                      "clamped: refit on data that covers them")
     pointers = residual_pointers(model, data, resid, regimes, scan)
+    shift = None
+    if scan.scheme == "estimation/validation":
+        shift = record_shift(model, data)
+        named = {p.effect for p in pointers}
+        pointers += [p for p in shift_pointers(shift, scan, covariate_changes(est, data)) if p.effect not in named]
     notes += list(scan.notes)
     comp = None
     if compare is not None and scan.scheme != "none":
@@ -354,4 +368,4 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
                   "equation": model.equation()}
     return ValidationResult(axis=ax, model=model_info, data=info, metrics=metrics, regimes=regimes,
                             residuals=resid, scan=scan, notes=tuple(notes), compare=comp, pointers=tuple(pointers),
-                            estimation=est_info)
+                            estimation=est_info, shift=shift)

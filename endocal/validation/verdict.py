@@ -140,3 +140,57 @@ def residual_pointers(model: HysteresisModel, data: HysteresisData, resid, regim
             continue
         out.append(Pointer(effect, "; ".join(dict.fromkeys(ev)), status, why, experiment))
     return out
+
+
+#: A change between the records is named when refitting it on the validation record cuts the
+#: error by this fraction (the issue's bar for an effect worth a term, 30 %) and leaves it this
+#: far below every catalog effect fitted on the estimation record.
+SHIFT_CUT = 0.7
+
+
+def shift_pointers(shift, scan, covariates: list[str] = ()) -> list[Pointer]:
+    """A condition that changed between the estimation and validation records, as a pointer.
+
+    Parameters
+    ----------
+    shift : RecordShift
+        :func:`~endocal.validation.shift.record_shift` of the model on the validation data.
+    scan : ScanResult
+        The estimation/validation scan (its best candidate is the bar to beat).
+    covariates : list of str
+        :func:`~endocal.validation.shift.covariate_changes`, in words.
+
+    Returns
+    -------
+    list of Pointer
+        ``load`` (friction changed) or ``drift`` (the zero moved), or nothing.
+    """
+    if shift is None or scan.scheme != "estimation/validation" or not shift.rmse_deg > 0:
+        return []
+    best = min([scan.baseline_rmse_heldout_deg] + [s.rmse_heldout_deg for s in scan.tested])
+    fr, zr, base = shift.friction_rmse_deg, shift.zero_rmse_deg, shift.rmse_deg
+    if not (fr <= SHIFT_CUT * base and fr <= SHIFT_CUT * best):
+        return []
+    fitted = f"with the estimation record's parameters the validation RMSE is {base:.3g} deg"
+    seen = ("; " + "; ".join(covariates)) if covariates else ""
+    if base - zr >= 0.75 * (base - fr):  # the zero alone does most of it
+        return [Pointer(
+            "drift",
+            f"{fitted}; shifting the prediction by {shift.zero_deg:+.3g} deg, fitted on this record alone, brings it "
+            f"to {zr:.3g} deg (-{100 * (1 - zr / base):.0f} %){seen}",
+            "untested",
+            "the zero moved between the records (a sensor re-mounted, a knob re-homed, the probe re-seated): a "
+            "drift fitted within the estimation record cannot know it",
+            "home the knobs and keep the base sensor fixed the same way before every record, or record estimation "
+            "and validation data in one session")]
+    wider = "wider" if shift.width_deg > 0 else "narrower"
+    column = covariates[0].split("'")[1] if covariates else "COLUMN"
+    return [Pointer(
+        "load",
+        f"{fitted}; a loop {abs(shift.width_deg):.3g} knob deg per side {wider} with {100 * (shift.gain - 1):+.0f} % "
+        f"slope, fitted on this record alone, brings it to {fr:.3g} deg (-{100 * (1 - fr / base):.0f} %){seen}",
+        "untested",
+        "the friction changed between the records (insertion-tube curvature, tendon tension, lubrication): every "
+        "candidate is fitted on the estimation record, which holds one condition",
+        f"log the condition as a column of every record (e.g. sheath_wrap_deg), record two or more conditions, "
+        f"fit load:{column} on them and validate on another")]

@@ -68,6 +68,9 @@ class Effect(ABC):
     def check(self, data: HysteresisData) -> None:
         """Raise ModelError when ``data`` lacks what this effect needs (columns, time)."""
 
+    def check_fit(self, data: HysteresisData) -> None:
+        """Raise ModelError when ``data`` cannot identify this effect's parameters (default: it can)."""
+
     @abstractmethod
     def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
         """Full-named parameters with bounds and a data-driven start; ``u`` is the command reaching this effect."""

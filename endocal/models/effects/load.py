@@ -85,9 +85,14 @@ class Load(InputEffect):
 
     def check(self, data: HysteresisData) -> None:
         try:
-            x = data.column(self.column)
+            data.column(self.column)
         except ModelError as exc:
             raise ModelError(f"effect '{self.label}': {exc}") from None
+
+    def check_fit(self, data: HysteresisData) -> None:
+        """A fit needs the covariate to vary (a record at one condition, e.g. one sheath curvature, cannot show
+        how it acts); a fitted model predicts at any value, a constant one included."""
+        x = data.column(self.column)
         if np.ptp(x) == 0.0:
             raise ModelError(f"effect '{self.label}': column '{self.column}' is constant ({x[0]:g}) in the data, "
                              "so friction scaling with it cannot be identified; log a covariate that varies")
