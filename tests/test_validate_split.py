@@ -207,6 +207,12 @@ def test_report_ladder_follows_validates_scheme(sine_sweeps):
     assert on_val["heldout_rmse_deg"] == pytest.approx(v["heldout_rmse_deg"], rel=1e-9)
     on_est = next(s for s in rep.ladder if s["data"] == "est")  # fitted on it: rolling origin, as validate would
     assert on_est["scheme"] in ("rolling-origin", None), on_est
+    # the summary names the scheme its rungs ran
+    _run("fit", "hysteresis", tmp / "est", "--axis", "ap", "--model", "pi", "--effects", "envelope,deadzone",
+         "--out", tmp / "pe-dz.json", "--force")
+    rep = build_report([tmp / "pe.json", tmp / "pe-dz.json"], [tmp / "val"], regime_boot=0)
+    line = next(x for x in rep.summary_lines() if x.startswith("ladder val"))
+    assert "(held-out RMSE deg, fitted on the estimation data)" in line, line
 
 
 @pytest.fixture(scope="module")

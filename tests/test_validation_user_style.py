@@ -90,6 +90,6 @@ def test_the_refit_halves_the_validation_error(hidden):
 def test_control_with_nothing_hidden_lists_nothing():
     res, _, _, _, noise = _case(None)
     assert res.scan.suspects == (), [(s.effect, round(s.gain_pct, 1), s.p_value) for s in res.scan.suspects]
-    # the model is right for this probe: its validation error is the tracker noise (x1.1: the
-    # lag and slack the B-spline and delay approximate, measured 1.01x)
+    # the model is right for this probe: its validation error is the tracker noise (x1.1 for
+    # the servo lag that `delay` approximates as a pure latency; measured 1.01x)
     assert res.scan.baseline_rmse_heldout_deg <= 1.1 * noise

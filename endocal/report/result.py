@@ -122,8 +122,11 @@ class Report:
                 if s["change_pct"] is not None:
                     txt += f" ({s['change_pct']:+.0f} %, p = {s['p_adjusted']:.2g})"
                 parts.append(txt)
-            out.append(f"ladder {key[1]}, {key[0]} (held-out RMSE deg, {steps[0]['folds']}-fold rolling origin): "
-                       + " -> ".join(parts))
+            schemes = {s["scheme"] for s in steps if s["scheme"]}
+            how = (f"{steps[0]['folds']}-fold rolling origin" if schemes == {"rolling-origin"} else
+                   "fitted on the estimation data" if schemes == {"estimation/validation"} else
+                   "mixed schemes: " + ", ".join(sorted(schemes)))
+            out.append(f"ladder {key[1]}, {key[0]} (held-out RMSE deg, {how}): " + " -> ".join(parts))
         return out
 
     def __str__(self) -> str:
