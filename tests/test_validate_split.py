@@ -143,12 +143,12 @@ def test_real_piezo_one_cycle_to_fit_one_to_validate(tmp_path):
 
 @pytest.fixture(scope="module")
 def thesis(tmp_path_factory):
-    """The thesis's calibration: planes sweeps, then a shortened sine-set to fit and another to validate."""
+    """The thesis's calibration as the issue runs it: a shortened sine-set, its bending planes fitted
+    from its own sweeps (each knob in turn), the same run to fit the hysteresis, another to validate."""
     tmp = tmp_path_factory.mktemp("thesis")
     short = ["--set", "periods_s=[20.0,10.0,5.0]", "--set", "cycles=2"]
-    _run("excite", "planes", "--out", tmp / "planes", "--seed", "1", "--quiet")
-    _run("fit", "planes", tmp / "planes", "--out", tmp / "planes.json")
     _run("excite", "sine-set", *short, "--out", tmp / "est", "--seed", "2", "--quiet")
+    _run("fit", "planes", tmp / "est", "--out", tmp / "planes.json")
     _run("excite", "sine-set", *short, "--out", tmp / "val", "--seed", "3", "--quiet")
     return tmp
 
