@@ -269,3 +269,24 @@ def test_the_same_condition_names_no_change_between_the_records(sine_sweeps):
     d = _validate_json(sine_sweeps, sine_sweeps / "pe.json", sine_sweeps / "val")
     assert not {"load", "drift"} & {p["effect"] for p in d["pointers"]}, d["pointers"]
     assert d["shift"]["friction_rmse_deg"] > 0.7 * d["shift"]["rmse_deg"] or d["suspects"]
+
+
+def test_a_load_that_varies_only_in_the_validation_data_is_pointed_at():
+    """The sheath curvature changes during the validation run only: the scan cannot fit load on the
+    estimation run (its wrap is constant), but the residual follows wrap x direction of motion."""
+    from endocal.models import make_model
+    from endocal.sim import SimConfig
+    from endocal.validation.data import axis_data
+    from endocal.validation.offline import validate_offline
+    from tests.test_validation_hidden import NO_SLACK, simulate
+
+    cfg = SimConfig.default().replace(**NO_SLACK)
+    est = [simulate(cfg, "sine", {"cycles": 3}, seed=0)[0]]
+    val, _ = simulate(cfg.replace(load={"enabled": True, "amplitude_deg": 150.0}), "sine", {"cycles": 6}, seed=1)
+    res = validate_offline(make_model("bspline", axis="ap").fit(axis_data(est, "ap")), [val], train=est,
+                           model_path="m.json")
+    x = next(c for c in res.residuals.cross if c.signal == "load:sheath_wrap_deg")
+    assert x.significant and x.max_abs_corr >= 0.5, x  # measured 0.77
+    ptr = {p.effect: p for p in res.pointers}
+    assert ptr["load:sheath_wrap_deg"].status == "untested" and not res.clean, res.pointers
+    assert "varies here but not in the data the candidates are fitted on" in ptr["load:sheath_wrap_deg"].why

@@ -17,7 +17,7 @@ from endocal.errors import ModelError
 from endocal.models import HysteresisData
 from endocal.models.base import HysteresisModel, OutOfRangeWarning
 from endocal.runs.aligned import AlignedData
-from endocal.validation.data import axis_data, check_columns
+from endocal.validation.data import axis_data, check_columns, load_candidates
 from endocal.validation.metrics import ErrorMetrics, error_metrics
 from endocal.validation.regimes import RegimeBreakdown, error_by_regime
 from endocal.validation.residuals import ResidualTests, residual_tests
@@ -313,7 +313,8 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     pred, clamped = predict_clamped(model, data)
     metrics = error_metrics(data.meas_deg, pred, n_boot=n_boot, seed=seed)
     regimes = error_by_regime(data, pred, seed=seed)
-    resid = residual_tests(data, data.meas_deg - pred, alpha=alpha)
+    load_cols = list(dict.fromkeys([*(load_columns or []), *load_candidates(data, axes_all)[0]]))
+    resid = residual_tests(data, data.meas_deg - pred, alpha=alpha, load_columns=load_cols)
     notes = []
     if est is not None:
         same = {d["sha256"] for d in est_info if d["sha256"]} & {d["sha256"] for d in info if d["sha256"]}

@@ -8,8 +8,9 @@ input at every lag. Tested here:
   ``Q = n (n + 2) sum_k rho_e(k)^2 / (n - k)`` (chi-squared with ``h`` degrees of freedom
   under whiteness) and the correlation time (first lag below ``1/e``);
 - **cross-correlation** ``r(tau) = corr(e(t), x(t - tau))`` with the command, its signed
-  speed, its speed magnitude, the other knob and time. Positive ``tau``: the residual
-  follows the signal's past (lagged input: a delay). Both series are autocorrelated, so
+  speed, its speed magnitude, the other knob, time, and each load candidate column times
+  the direction of motion. Positive ``tau``: the residual follows the signal's past (lagged
+  input: a delay). Both series are autocorrelated, so
   the null band uses Bartlett's variance ``var r(tau) ~ (1/n) sum_k rho_e(k) rho_x(k)``
   and a Bonferroni correction over the lags searched; white-noise bands (``1.96/sqrt(n)``)
   would flag almost anything on 100 Hz data.
@@ -17,6 +18,7 @@ input at every lag. Tested here:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -24,6 +26,7 @@ from scipy.stats import chi2, norm
 
 from endocal.models.data import OTHER_CMD, HysteresisData
 from endocal.validation.data import is_constant, speed_dps
+from endocal.validation.shift import direction_of_motion
 
 
 @dataclass(frozen=True)
@@ -124,12 +127,20 @@ def _xcorr(a: np.ndarray, b: np.ndarray, max_lag: int) -> np.ndarray:
     return full / denom if denom > 0 else np.zeros(2 * max_lag + 1)
 
 
+def _hint(signal: str) -> str:
+    if signal.startswith("load:"):
+        col = signal.partition(":")[2]
+        return (f"the error follows the direction of motion in proportion to '{col}': friction that scales with it "
+                f"({signal})")
+    return _HINTS[signal]
+
+
 def _acf(x: np.ndarray, max_lag: int) -> np.ndarray:
     return _xcorr(x, x, max_lag)[max_lag:]
 
 
 def residual_tests(data: HysteresisData, resid_deg: np.ndarray, *, max_lag_s: float = 2.0,
-                   alpha: float = 0.05) -> ResidualTests:
+                   alpha: float = 0.05, load_columns: Sequence[str] = ()) -> ResidualTests:
     """Whiteness of ``resid_deg`` and its cross-correlation with the input, speed and lagged input.
 
     Parameters
@@ -142,6 +153,10 @@ def residual_tests(data: HysteresisData, resid_deg: np.ndarray, *, max_lag_s: fl
         Lags searched, ``+-max_lag_s`` (s; converted with the median sample interval).
     alpha : float
         Level of every test.
+    load_columns : sequence of str
+        Extra columns that may carry a load: the residual is also correlated with each one
+        (centred) times the direction of motion, the signature of friction scaling with it
+        (``load:COLUMN``), as signal ``load:COLUMN``.
 
     Returns
     -------
@@ -175,6 +190,12 @@ def residual_tests(data: HysteresisData, resid_deg: np.ndarray, *, max_lag_s: fl
     if OTHER_CMD in data.extras:
         signals["other command"] = data.extras[OTHER_CMD]
     signals["time"] = data.t_s if data.t_s is not None else np.arange(n, dtype=float)
+    if load_columns:
+        d = direction_of_motion(data)
+        for col in load_columns:
+            if col in data.extras:
+                x = np.asarray(data.extras[col], dtype=float)
+                signals[f"load:{col}"] = (x - x.mean()) * d
     z = float(norm.ppf(1 - alpha / (2 * (2 * max_lag + 1))))
     cross = []
     for name, x in signals.items():
@@ -188,5 +209,5 @@ def residual_tests(data: HysteresisData, resid_deg: np.ndarray, *, max_lag_s: fl
         i = int(np.argmax(np.abs(r)))
         cross.append(CrossCorrelation(
             signal=name, corr_at_zero=float(r[max_lag]), max_abs_corr=float(abs(r[i])),
-            lag_s=float((i - max_lag) * dt), bound=bound, significant=bool(abs(r[i]) > bound), hint=_HINTS[name]))
+            lag_s=float((i - max_lag) * dt), bound=bound, significant=bool(abs(r[i]) > bound), hint=_hint(name)))
     return ResidualTests(white, tuple(cross))

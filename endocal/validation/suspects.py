@@ -551,14 +551,16 @@ def candidate_effects(model: HysteresisModel, data: HysteresisData, candidates: 
         cands: list[str] = []
         for name in EFFECTS:
             if takes_column(name):
+                constant: list[str] = []
                 if load_columns is None:
-                    cols, _constant = load_candidates(data, bending_axes)
+                    cols, constant = load_candidates(data, bending_axes)
                 else:
                     cols = list(load_columns)
                 cols = [c for c in cols if f"{name}:{c}" not in have]
                 if not cols:
-                    untestable[name] = (f"no varying extra column: {name} cannot be identified "
-                                        "(log a covariate such as sheath_wrap_deg)")
+                    where = "the estimation data" if not rolling else "the data"
+                    untestable[name] = (f"no extra column varies in {where} ({len(constant)} constant): {name} cannot "
+                                        "be identified (log a covariate such as sheath_wrap_deg, at two or more values)")
                 cands += [f"{name}:{c}" for c in cols]
             elif name not in have_names:
                 cands.append(name)

@@ -18,6 +18,7 @@ the other knob's command                  ``coupling``
 time                                      ``drift``
 the signed knob speed                     ``delay``, ``rate``
 the unsigned knob speed                   ``rate``
+a load column times the direction         ``load:COLUMN``
 ========================================  ===================
 
 and the error of a regime well above the whole record's: the other knob's low or high
@@ -80,9 +81,14 @@ class Pointer:
 def _evidence(resid, regimes) -> dict[str, list[str]]:
     out: dict[str, list[str]] = {}
     for x in resid.significant():
-        if x.signal not in _BY_SIGNAL or x.max_abs_corr < MIN_CORR:
+        if x.max_abs_corr < MIN_CORR:
             continue
-        effects, words = _BY_SIGNAL[x.signal]
+        if x.signal.startswith("load:"):
+            effects, words = (x.signal,), f"'{x.signal.partition(':')[2]}' times the direction of motion"
+        elif x.signal in _BY_SIGNAL:
+            effects, words = _BY_SIGNAL[x.signal]
+        else:
+            continue
         for e in effects:
             out.setdefault(e, []).append(f"the residual follows {words} (|r| = {x.max_abs_corr:.2f} at lag "
                                          f"{x.lag_s:+.3g} s)")
@@ -116,17 +122,25 @@ def residual_pointers(model: HysteresisModel, data: HysteresisData, resid, regim
     list of Pointer
         In the order of the table in the module docstring.
     """
-    have = {lab.partition(":")[0] for lab in (e.label for e in model.effects_)}
-    confirmed = {s.effect.partition(":")[0] for s in scan.suspects}
-    tested = {s.effect.partition(":")[0]: s for s in scan.tested}
-    untestable = {k.partition(":")[0]: v for k, v in scan.untestable.items()}
+    def key(label: str) -> str:  # load is per column; every other effect is one term whatever its column
+        return label if label.startswith("load:") else label.partition(":")[0]
+
+    have = {key(e.label) for e in model.effects_}
+    confirmed = {key(s.effect) for s in scan.suspects}
+    tested = {key(s.effect): s for s in scan.tested}
+    untestable = {key(k): v for k, v in scan.untestable.items()}
     out = []
     for effect, ev in _evidence(resid, regimes).items():
-        if effect in have or effect in confirmed or effect not in EFFECTS:
+        name = effect.partition(":")[0]
+        if effect in have or effect in confirmed or name not in EFFECTS:
             continue
-        experiment = f"record {EFFECTS[effect].protocol}"
+        experiment = f"record {EFFECTS[name].protocol}"
         if effect in untestable:
             status, why = "untested", untestable[effect]
+        elif name == "load" and "load" in untestable:
+            col = effect.partition(":")[2]
+            status, why = "untested", (f"'{col}' varies here but not in the data the candidates are fitted on: "
+                                       f"{effect} cannot be fitted there")
         elif scan.scheme == "none":
             status, why = "untested", scan.scheme_reason
         elif effect in tested:
