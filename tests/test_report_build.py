@@ -23,7 +23,7 @@ from endocal.report.ladder import FOLDS, MAX_CV_SAMPLES
 from endocal.runs.aligned import load_aligned
 from endocal.validation.data import axis_data, prefix
 from endocal.validation.metrics import error_metrics
-from endocal.validation.offline import predict_clamped, validate_offline
+from endocal.validation.offline import predict_extrapolated, validate_offline
 from endocal.validation.suspects import effect_labels, fold_bounds, heldout_errors
 from tests.test_cli_excite import endocal
 
@@ -191,7 +191,7 @@ def test_ladder_heldout_equals_a_direct_rolling_origin_computation(sim, report):
     for label in ("linear", "pi_env"):
         model = load_model(p[label])
         err, fitted = heldout_errors(model, effect_labels(model), d, bounds)
-        train = np.concatenate([predict_clamped(m, prefix(d, a))[0] - d.meas_deg[:a] for m, (a, _) in zip(fitted, bounds)])
+        train = np.concatenate([predict_extrapolated(m, prefix(d, a))[0] - d.meas_deg[:a] for m, (a, _) in zip(fitted, bounds)])
         assert d.run_starts.size == 1  # one record: its folds are plain prefixes
         step = next(s for s in rep.ladder if s["data"] == "held" and s["model"] == label)
         assert step["heldout_rmse_deg"] == pytest.approx(np.sqrt(np.mean(err**2)), rel=1e-12)

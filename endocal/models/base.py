@@ -36,6 +36,10 @@ from endocal.models.effects.base import OutputFilter
 from endocal.models.params import Parameter
 
 OUT_OF_RANGE_CHOICES = ("error", "clamp")
+#: ``out_of_range`` values a model accepts: the users' choices, and ``"extrapolate"``, with which
+#: :meth:`HysteresisModel.predict` continues the model's own branches beyond the fitted range (B-spline end
+#: tangents, straight lines, saturated plays) as validation scores it; the inverse clamps then.
+_OUT_OF_RANGE_MODES = OUT_OF_RANGE_CHOICES + ("extrapolate",)
 
 
 class OutOfRangeWarning(UserWarning):
@@ -121,7 +125,7 @@ class HysteresisModel(ABC):
         return {k: getattr(self, k) for k in sig.parameters if k != "self" and k not in self._common}
 
     def _check_common(self) -> None:
-        if self.out_of_range not in OUT_OF_RANGE_CHOICES:
+        if self.out_of_range not in _OUT_OF_RANGE_MODES:
             raise ModelError(f"out_of_range must be one of {OUT_OF_RANGE_CHOICES}, got {self.out_of_range!r}")
 
     def _effects(self) -> list[Effect]:
@@ -597,7 +601,7 @@ class HysteresisModel(ABC):
         d, was_list = as_data(data, t_s=t_s, extras=extras)
         for e in self.effects_:
             e.check(d)
-        cmd = self._range_check(d.cmd_deg, "command")
+        cmd = d.cmd_deg if self.out_of_range == "extrapolate" else self._range_check(d.cmd_deg, "command")
         if cmd is not d.cmd_deg:
             d = HysteresisData(cmd_deg=cmd, t_s=d.t_s, extras=d.extras, run_starts=d.run_starts)
         base_p, eff_p = self._grouped(self.params_)

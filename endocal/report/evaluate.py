@@ -19,7 +19,7 @@ import numpy as np
 
 from endocal.errors import EndocalError, ModelError, RunFormatError
 from endocal.models import HysteresisData, HysteresisModel, load_model
-from endocal.report.adapters import RegimeBreakdown, axis_data, error_by_regime, predict_clamped
+from endocal.report.adapters import RegimeBreakdown, axis_data, error_by_regime, predict_extrapolated
 from endocal.report.stats import Comparison, Units, compare_models, make_units, unit_rmse
 from endocal.runs.aligned import AlignedData, load_aligned
 from endocal.runs.format import sha256_of
@@ -132,7 +132,7 @@ class Evaluation:
     predicted_deg : (n,) array
         The prediction (for figures; not serialised).
     notes : list of str
-        What the reader should know (e.g. commands clamped to the fitted range).
+        What the reader should know (e.g. commands beyond the fitted range).
     """
 
     model: str
@@ -447,16 +447,16 @@ def evaluate(
                                                 "does not excite this axis"))
                     continue
                 try:
-                    # as `endocal validate` does: commands beyond the fitted range are clamped and counted
-                    pred, clamped = predict_clamped(m.model, hd)
+                    # as `endocal validate` does: beyond the fitted range the model continues, counted
+                    pred, beyond = predict_extrapolated(m.model, hd)
                 except EndocalError as exc:
                     skipped.append(NotEvaluated(m.label, d.label, axis, str(exc)))
                     continue
                 notes = []
-                if clamped:
+                if beyond:
                     lo, hi = m.model.cmd_range_deg_
-                    notes.append(f"{clamped} samples of {d.label} command beyond {m.label}'s fitted range "
-                                 f"[{lo:.3g}, {hi:.3g}] deg and were clamped (the model extrapolates flat there)")
+                    notes.append(f"{beyond} samples of {d.label} command beyond {m.label}'s fitted range "
+                                 f"[{lo:.3g}, {hi:.3g}] deg: predicted by continuing the model there (an extrapolation)")
                 preds[m.label] = (np.asarray(pred, float), notes)
             if not preds:
                 continue

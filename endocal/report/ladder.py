@@ -38,7 +38,7 @@ import numpy as np
 
 from endocal.errors import EndocalError
 from endocal.models import HysteresisData, HysteresisModel
-from endocal.report.adapters import predict_clamped
+from endocal.report.adapters import predict_extrapolated
 from endocal.report.evaluate import Group, ModelEntry
 from endocal.report.stats import holm
 from endocal.validation.metrics import ErrorMetrics, error_metrics
@@ -150,7 +150,7 @@ def cross_validate(model: HysteresisModel, data: HysteresisData, *, folds: int =
     with one_blas_thread():
         err, fitted = heldout_errors(model, effect_labels(model), d, bounds)
     trains = [fold_split(d, bd)[0] for bd in bounds]
-    train_sq = [np.square(predict_clamped(m, tr)[0] - tr.meas_deg) for m, tr in zip(fitted, trains)]
+    train_sq = [np.square(predict_extrapolated(m, tr)[0] - tr.meas_deg) for m, tr in zip(fitted, trains)]
     meas = d.meas_deg[bounds[0][0]:bounds[-1][1]]
     return HeldOut(metrics=error_metrics(meas, meas + err, n_boot=n_boot, seed=seed),
                    train_rmse_deg=float(np.sqrt(np.mean(np.concatenate(train_sq)))), errors_deg=err,

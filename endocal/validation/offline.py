@@ -6,8 +6,6 @@
 
 from __future__ import annotations
 
-import copy
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -15,7 +13,7 @@ import numpy as np
 
 from endocal.errors import ModelError
 from endocal.models import HysteresisData
-from endocal.models.base import HysteresisModel, OutOfRangeWarning
+from endocal.models.base import HysteresisModel
 from endocal.runs.aligned import AlignedData
 from endocal.validation.data import axis_data, check_columns, load_candidates
 from endocal.validation.metrics import ErrorMetrics, error_metrics
@@ -29,6 +27,7 @@ from endocal.validation.suspects import (
     fold_bounds,
     heldout_errors,
     one_blas_thread,
+    predict_extrapolated,
     scan_effects,
     scan_split,
     split_errors,
@@ -92,7 +91,7 @@ class ValidationResult:
     scan : ScanResult
         The effects tested on held-out data; ``scan.suspects`` is what is missing.
     notes : tuple of str
-        Everything the user should know in words (clamped samples, ambiguities,
+        Everything the user should know in words (samples beyond the fitted range, ambiguities,
         effects the data cannot reveal).
     compare : Comparison or None
         A previous model's error beside this one.
@@ -171,32 +170,6 @@ def _resolve_axis(model: HysteresisModel, datas: list[AlignedData]) -> str:
         return next(iter(common))
     raise ModelError(f"the model names no axis and the data has several ({', '.join(sorted(common))}); "
                      "refit the model with --axis")
-
-
-def predict_clamped(model: HysteresisModel, data: HysteresisData) -> tuple[np.ndarray, int]:
-    """Predicted angle (deg), commands beyond the fitted range clamped to it, as ``validate`` scores a model.
-
-    Parameters
-    ----------
-    model : HysteresisModel
-        A fitted model (left unchanged: a shallow copy is switched to clamping).
-    data : HysteresisData
-        Commands (deg) and whatever else the model's effects read.
-
-    Returns
-    -------
-    predicted_deg : (n,) array
-        Predicted bending angle, deg.
-    n_clamped : int
-        Samples whose command lies beyond the model's fitted range ``cmd_range_deg_``.
-    """
-    m = copy.copy(model)
-    m.out_of_range = "clamp"
-    lo, hi = model.cmd_range_deg_
-    clamped = int(np.sum((data.cmd_deg < lo) | (data.cmd_deg > hi)))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", OutOfRangeWarning)
-        return m.predict(data), clamped
 
 
 def _axis_of(datas, model: HysteresisModel, axis: str | None, planes, bending_axes):
@@ -310,7 +283,7 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     if est is not None:
         check_columns(est, own, what="the estimation data")
 
-    pred, clamped = predict_clamped(model, data)
+    pred, beyond = predict_extrapolated(model, data)
     metrics = error_metrics(data.meas_deg, pred, n_boot=n_boot, seed=seed)
     regimes = error_by_regime(data, pred, seed=seed)
     load_cols = list(dict.fromkeys([*(load_columns or []), *load_candidates(data, axes_all)[0]]))
@@ -338,10 +311,10 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
                                 load_columns=load_columns, bending_axes=axes_all, max_samples=max_scan_samples,
                                 data_paths=paths, model_path=model_path, refit_args=refit_args,
                                 scheme_reason=reason)
-    if clamped:
+    if beyond:
         lo, hi = model.cmd_range_deg_
-        notes.append(f"{clamped} samples command beyond the model's fitted range [{lo:.3g}, {hi:.3g}] deg and were "
-                     "clamped: refit on data that covers them")
+        notes.append(f"{beyond} samples command beyond the model's fitted range [{lo:.3g}, {hi:.3g}] deg: predicted by "
+                     "continuing the model there (an extrapolation); refit on data that covers them")
     pointers = residual_pointers(model, data, resid, regimes, scan)
     shift = None
     if scan.scheme == "estimation/validation":
@@ -352,7 +325,7 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     comp = None
     if compare is not None and scan.scheme != "none":
         compare._require_fitted()
-        old_pred, _ = predict_clamped(compare, data)
+        old_pred, _ = predict_extrapolated(compare, data)
         stride = scan.stride
         with one_blas_thread():
             if scan.scheme == "estimation/validation":

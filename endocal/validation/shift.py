@@ -39,6 +39,7 @@ from scipy.optimize import minimize_scalar
 from endocal.models import HysteresisData
 from endocal.models.base import HysteresisModel
 from endocal.validation.regimes import turning_points
+from endocal.validation.suspects import predict_extrapolated
 
 #: Largest loop change searched, as a fraction of the validation command's span per side.
 MAX_WIDTH_FRAC = 0.2
@@ -88,17 +89,15 @@ def direction_of_motion(data: HysteresisData, tol_frac: float = 0.02) -> np.ndar
 
 def record_shift(model: HysteresisModel, data: HysteresisData) -> RecordShift:
     """Fit a zero shift and a friction change of ``model`` on the validation ``data`` (module docstring)."""
-    from endocal.validation.offline import predict_clamped  # offline imports this module
-
     y = np.asarray(data.meas_deg, dtype=float)
-    p = predict_clamped(model, data)[0]
+    p = predict_extrapolated(model, data)[0]
     rmse = _rms(p - y)
     c = float(np.mean(y - p))
     span = float(np.ptp(data.cmd_deg))
     d = direction_of_motion(data)
 
     def friction(w: float):
-        q = predict_clamped(model, data.with_cmd(data.cmd_deg - w * d))[0]
+        q = predict_extrapolated(model, data.with_cmd(data.cmd_deg - w * d))[0]
         A = np.column_stack([np.ones_like(q), q])
         coef = np.linalg.lstsq(A, y, rcond=None)[0]
         return _rms(A @ coef - y), coef
