@@ -290,3 +290,28 @@ def test_a_load_that_varies_only_in_the_validation_data_is_pointed_at():
     ptr = {p.effect: p for p in res.pointers}
     assert ptr["load:sheath_wrap_deg"].status == "untested" and not res.clean, res.pointers
     assert "varies here but not in the data the candidates are fitted on" in ptr["load:sheath_wrap_deg"].why
+
+
+def test_a_validation_sweep_wider_than_the_estimation_sweep_is_scored_on_the_model_continued(sine_sweeps):
+    """A sweep to 70 deg validates a model fitted to 60 deg: beyond 60 the model's branches go on (the
+    B-spline along its end tangents), as the tip does; a clamped prediction would stand still for
+    10 deg of knob (about 8 deg of bend) and bury every physical effect under that artefact."""
+    import numpy as np
+
+    from endocal.models import load_model
+    from endocal.runs.aligned import load_aligned
+    from endocal.validation.data import axis_data
+
+    tmp = sine_sweeps
+    _run("excite", "sine", "--set", "cycles=1", "--set", "frequency_hz=0.04", "--amplitude", "70", "--out",
+         tmp / "wide", "--seed", "3", "--quiet")
+    _run("fit", "hysteresis", tmp / "est", "--axis", "ap", "--model", "bspline", "--out", tmp / "bs.json", "--force")
+    d = _validate_json(tmp, tmp / "bs.json", tmp / "wide")
+    assert any("beyond the model's fitted range [-60, 60] deg" in n for n in d["notes"]), d["notes"]
+    model = load_model(tmp / "bs.json")
+    model.out_of_range = "clamp"
+    v = axis_data([load_aligned(tmp / "wide")], "ap")
+    with pytest.warns(UserWarning):
+        clamped = float(np.sqrt(np.mean((model.predict(v) - v.meas_deg) ** 2)))
+    # measured 0.80 deg continued against 3.35 clamped (the tracker noise is 0.33)
+    assert d["metrics"]["rmse_deg"] <= 0.4 * clamped, (d["metrics"]["rmse_deg"], clamped)
