@@ -10,10 +10,10 @@ input at every lag. Tested here:
 - **cross-correlation** ``r(tau) = corr(e(t), x(t - tau))`` with the command, its signed
   speed, its speed magnitude, the other knob, time, and each load candidate column times
   the direction of motion. Positive ``tau``: the residual follows the signal's past (lagged
-  input: a delay). Both series are autocorrelated, so
-  the null band uses Bartlett's variance ``var r(tau) ~ (1/n) sum_k rho_e(k) rho_x(k)``
-  and a Bonferroni correction over the lags searched; white-noise bands (``1.96/sqrt(n)``)
-  would flag almost anything on 100 Hz data.
+  input: a delay). Both series are autocorrelated, so the null band uses Bartlett's
+  variance ``var r(tau) ~ (1/n) sum_k rho_e(k) rho_x(k)`` and a Bonferroni correction over
+  the lags searched; white-noise bands (``1.96/sqrt(n)``) would flag almost anything on
+  100 Hz data.
 """
 
 from __future__ import annotations
