@@ -193,10 +193,11 @@ def shift_pointers(shift, scan, covariates: list[str] = ()) -> list[Pointer]:
             f"{fitted}; shifting the prediction by {shift.zero_deg:+.3g} deg, fitted on this record alone, brings it "
             f"to {zr:.3g} deg (-{100 * (1 - zr / base):.0f} %){seen}",
             "untested",
-            "the zero moved between the records (a sensor re-mounted, a knob re-homed, the probe re-seated): a "
-            "drift fitted within the estimation record cannot know it",
-            "home the knobs and keep the base sensor fixed the same way before every record, or record estimation "
-            "and validation data in one session")]
+            "the zero moved between the records (slow drift or creep in the time between them, a sensor re-mounted, "
+            "a knob re-homed, the probe re-seated): a drift fitted within the estimation record cannot know it",
+            "home the knobs and keep the base sensor fixed the same way before every record, and record estimation "
+            "and validation data back to back; a drift that goes on across records shows in one long record with "
+            "drift fitted on its first part")]
     wider = "wider" if shift.width_deg > 0 else "narrower"
     column = covariates[0].split("'")[1] if covariates else "COLUMN"
     return [Pointer(
