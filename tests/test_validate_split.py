@@ -315,3 +315,15 @@ def test_a_validation_sweep_wider_than_the_estimation_sweep_is_scored_on_the_mod
         clamped = float(np.sqrt(np.mean((model.predict(v) - v.meas_deg) ** 2)))
     # measured 0.80 deg continued against 3.35 clamped (the tracker noise is 0.33)
     assert d["metrics"]["rmse_deg"] <= 0.4 * clamped, (d["metrics"]["rmse_deg"], clamped)
+
+
+def test_the_refit_folds_the_validation_data_in_only_when_asked(sine_sweeps):
+    tmp = sine_sweeps
+    default = _validate_json(tmp, tmp / "pe.json", tmp / "val")["suspects"][0]["command"].split()
+    assert str(tmp / "val") not in default
+    out = tmp / "all.json"
+    _run("validate", tmp / "pe.json", tmp / "val", "--refit-on", "all", "--json-out", out)
+    cmd = json.loads(out.read_text())["suspects"][0]["command"].split()
+    assert cmd[3:5] == [str(tmp / "est"), str(tmp / "val")], cmd
+    _one_line_exit_2(_run("validate", tmp / "pe.json", tmp / "val", "--refit-on", "both", ok=False),
+                     "--refit-on must be one of")

@@ -149,6 +149,7 @@ def validate(
     compare: list[Path] = typer.Option([], "--compare", help="A previous model: show its error beside this one's. With --trajectory: other models to walk the path with, one per axis per set (repeatable), compared with paired tests."),
     train: list[Path] = typer.Option([], "--train", help="Estimation data (repeatable): candidate effects are fitted on it and scored on DATA. Default: the records the model file names, when found and unchanged."),
     cv: str = typer.Option("auto", "--cv", help="How effects are tested: `auto` (estimation/validation split when there is estimation data, else rolling origin), `rolling` (rolling-origin cross-validation on DATA alone), `split` (require estimation data)."),
+    refit_on: str = typer.Option("estimation", "--refit-on", help="What the printed refit commands fit on: `estimation` (the estimation data only, as the candidates were scored; default) or `all` (the estimation and the validation data: a final model, whose error must then be measured on a third record)."),
     out_of_range: Optional[str] = typer.Option(None, "--out-of-range", help="With --protocol: " + OUT_OF_RANGE_HELP),
     load_column: list[str] = typer.Option([], "--load-column", help="Try load:COLUMN on this column (repeatable; default: every varying extra column)."),
     protocol: Optional[str] = typer.Option(None, "--protocol", help="Play this desired-angle protocol through the inverse model on a backend instead."),
@@ -207,6 +208,8 @@ def validate(
         raise ModelError("--out-of-range applies to a playback (--protocol): offline validation predicts the recorded commands as they are")
     if not data:
         raise ModelError("nothing to validate on: give run folders or aligned tables, or --protocol P")
+    if refit_on not in ("estimation", "all"):
+        raise ModelError(f"--refit-on must be one of estimation, all, got {refit_on!r}")
     from endocal.runs.aligned import load_aligned
     from endocal.validation.estimation import plan_estimation
     from endocal.validation.offline import validate_offline
@@ -216,7 +219,10 @@ def validate(
     effects = [e.label for e in model.effects_]
     old_path = compare_path if compare_path is not None else previous_model_path(model_path, effects)
     old = load_model(old_path) if old_path is not None else None
-    result = validate_offline(model, tables, train=plan.train, train_paths=plan.train_paths, planes=plan.planes,
+    refit_paths = plan.train_paths
+    if refit_on == "all" and plan.train is not None:  # asked for: the validation data folded into the refits
+        refit_paths = list(dict.fromkeys([*plan.train_paths, *(str(p) for p in data)]))
+    result = validate_offline(model, tables, train=plan.train, train_paths=refit_paths, planes=plan.planes,
                               refit_args=plan.refit_args, scheme_reason=plan.reason, folds=folds, seed=seed,
                               compare=old, model_path=str(model_path), data_paths=[str(p) for p in data],
                               load_columns=load_column or None)
