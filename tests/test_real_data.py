@@ -1,5 +1,6 @@
 """Real measured hysteresis nobody here generated: the piezo slice in data_samples/piezo."""
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -65,3 +66,28 @@ def test_one_cycle_to_fit_one_to_validate_every_pair_the_first_suggestion_pays(e
         assert after == pytest.approx(first.rmse_heldout_deg, rel=1e-6)  # the suggestion's number is the refit's
         assert after <= 0.7 * res.metrics.rmse_deg, (est, val_k, first.effect, res.metrics.rmse_deg, after)
         assert not res.clean
+
+
+def test_a_lab_table_with_text_and_gappy_columns_fits_and_validates(tmp_path):
+    """Lab tables carry more than numbers: a fixture's name, a sensor column with empty cells.
+
+    Neither can be a load, so both are left out of the data the models see; fit and validate
+    run, and naming the gappy column as a load is one line saying why it is not read.
+    """
+    from tests._cli import endocal, one_line_exit_2
+
+    data = load_aligned(PIEZO)
+    for name, k, fixture in (("est", 7, "clamp A"), ("val", 4, "clamp B")):
+        part = _cycle(data, k).table.assign(fixture=fixture, temp_c=21.0)
+        part.loc[17, "temp_c"] = np.nan  # a thermometer that missed a reading
+        part.to_csv(tmp_path / f"{name}.csv", index=False)
+    fit = endocal("fit", "hysteresis", tmp_path / "est.csv", "--axis", "piezo", "--model", "linear",
+                  "--out", tmp_path / "m.json")
+    assert fit.returncode == 0, fit.stderr
+    val = endocal("validate", tmp_path / "m.json", tmp_path / "val.csv", "--json-out", tmp_path / "v.json")
+    assert val.returncode == 0, val.stderr
+    assert json.loads((tmp_path / "v.json").read_text())["scheme"]["name"] == "estimation/validation"
+    one_line_exit_2(endocal("fit", "hysteresis", tmp_path / "est.csv", "--axis", "piezo", "--model", "linear",
+                            "--effects", "load:temp_c", "--out", tmp_path / "l.json"),
+                    "no column 'temp_c'", "empty cells are not read")
+    assert not (tmp_path / "l.json").exists()

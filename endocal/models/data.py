@@ -175,7 +175,8 @@ class HysteresisData:
             return self.extras[name]
         except KeyError:
             have = ", ".join(sorted(self.extras)) or "none"
-            raise ModelError(f"the data has no column '{name}' (extra columns present: {have})") from None
+            raise ModelError(f"the data has no column '{name}' (extra columns read: {have}; columns of text or with "
+                             "empty cells are not read)") from None
 
     def require_time(self, who: str) -> np.ndarray:
         """``t_s``, or a ModelError naming the effect ``who`` that needs it."""

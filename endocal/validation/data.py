@@ -7,7 +7,9 @@ hands each model the columns its effect terms may ask for:
     the other bending axis's knob command and measured angle (``coupling``), when the
     data has a second axis (also under their own names, ``ml_cmd_deg``, ``ml_meas_deg``);
 every other numeric column
-    kept under its own name (``sheath_wrap_deg``, knob currents, ...) for ``load:COLUMN``.
+    kept under its own name (``sheath_wrap_deg``, knob currents, ...) for ``load:COLUMN``
+    (columns of text, a fixture's name say, and columns with empty or infinite cells are
+    left out).
 
 Several tables become several runs of one :class:`HysteresisData` (operator states restart
 at each); only the extra columns every table has are kept.
@@ -19,6 +21,7 @@ from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
+import pandas as pd
 
 from endocal.errors import ModelError
 from endocal.models.data import OTHER_CMD, HysteresisData
@@ -81,10 +84,11 @@ def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str, planes=No
     # The other axis is used only when every table has the same single one (coupling needs a
     # consistent meaning of "the other knob").
     other = others[0][0] if all(len(o) == 1 and o[0] == others[0][0] for o in others) and others[0] else None
+    numeric = [c for c in sorted(common) if all(_is_number_column(a.table[c]) for a in tables)]
+    numeric = [c for c in numeric if all(np.isfinite(a.table[c].to_numpy(float)).all() for a in tables)]
     runs = []
     for a in tables:
-        extras = {c: a.table[c].to_numpy(float) for c in sorted(common)
-                  if np.issubdtype(a.table[c].dtype, np.number) and not np.issubdtype(a.table[c].dtype, np.bool_)}
+        extras = {c: a.table[c].to_numpy(float) for c in numeric}
         if other is not None:
             extras[OTHER_CMD] = a.cmd_deg(other)
             extras[OTHER_MEAS] = a.meas_deg(other)
@@ -93,6 +97,10 @@ def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str, planes=No
             extras[f"{other}_meas_deg"] = extras[OTHER_MEAS]
         runs.append(HysteresisData(cmd_deg=a.cmd_deg(axis), meas_deg=a.meas_deg(axis), t_s=a.t_s, extras=extras))
     return runs[0] if len(runs) == 1 else HysteresisData.from_runs(runs)
+
+
+def _is_number_column(col: pd.Series) -> bool:
+    return pd.api.types.is_numeric_dtype(col) and not pd.api.types.is_bool_dtype(col)
 
 
 def _through_planes(data: AlignedData, axis: str, planes) -> AlignedData:
@@ -171,7 +179,8 @@ def check_columns(data: HysteresisData, columns: Sequence[str], vary: bool = Tru
     have = ", ".join(sorted(data.extras)) or "none"
     for c in columns:
         if c not in data.extras:
-            raise ModelError(f"load:{c}: {what} has no column '{c}' (extra columns present: {have})")
+            raise ModelError(f"load:{c}: {what} has no column '{c}' (extra columns read: {have}; columns of text or "
+                             "with empty cells are not read)")
         if vary and is_constant(data.extras[c]):
             raise ModelError(f"load:{c}: column '{c}' is constant in {what}, so a load on it cannot be "
                              "identified; log a covariate that varies, or drop the term")
