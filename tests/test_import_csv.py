@@ -69,6 +69,21 @@ def test_round_trip_gives_the_same_aligned_table(sim_log):
     assert meta["backend"]["command_source"] == "goal columns"
 
 
+def test_a_log_saved_by_a_european_spreadsheet_imports_the_same(sim_log, tmp_path):
+    # ';' between columns, ',' as the decimal mark, a space after each delimiter in the header
+    tmp = sim_log
+    log = pd.read_csv(tmp / "log.csv")
+    text = log.to_csv(index=False, sep=";", decimal=",")
+    header, body = text.split("\n", 1)
+    (tmp_path / "eu.csv").write_text(header.replace(";", "; ") + "\n" + body)
+    proc = endocal("import", "csv", tmp_path / "eu.csv", "--map", MAP, "--out", tmp_path / "eu")
+    assert proc.returncode == 0, proc.stderr
+    a, b = load_aligned(tmp / "run").table, load_aligned(tmp_path / "eu").table
+    assert len(a) == len(b)
+    for axis in ("ap", "ml"):
+        np.testing.assert_allclose(b[f"{axis}_meas_deg"], a[f"{axis}_meas_deg"], atol=1e-9)
+
+
 def test_duplicated_stamps_are_refused_or_dropped(sim_log, tmp_path):
     log = pd.read_csv(sim_log / "log.csv")
     # a bridge writing one row three times: data row 100 is on line 102, its repeats on 103 and 104

@@ -220,3 +220,20 @@ def test_force_never_deletes_a_folder_that_is_not_a_run(tmp_path, tee):
     with pytest.raises(OutputPathError, match="not an endocal run"):
         excite(tmp_path, tee, force=True)
     assert (precious / "thesis.tex").read_text() == "years of work"
+
+
+@pytest.mark.parametrize("write", [
+    lambda df, p: df.to_csv(p.with_suffix(".csv"), index=False, sep=";", decimal=","),  # European spreadsheet
+    lambda df, p: df.to_csv(p.with_suffix(".tsv"), index=False, sep="\t"),  # a data logger
+    lambda df, p: p.with_suffix(".csv").write_text(df.to_csv(index=False).replace(",", ", ")),  # hand-edited
+    lambda df, p: p.with_suffix(".csv").write_text(df.to_csv(index=False), encoding="utf-8-sig"),  # with a BOM
+])
+def test_an_aligned_table_reads_the_same_however_the_csv_was_written(tmp_path, write):
+    t = np.arange(50) / 100.0
+    df = pd.DataFrame({"t_s": t, "ap_cmd_deg": 30 * np.sin(t), "ap_meas_deg": 25 * np.sin(t - 0.1), "fixture": "clamp A"})
+    write(df, tmp_path / "table")
+    data = load_aligned(next(tmp_path.iterdir()))
+    assert data.axes == ["ap"] and list(data.table.columns) == list(df.columns)
+    for col in ("t_s", "ap_cmd_deg", "ap_meas_deg"):
+        np.testing.assert_allclose(data.table[col], df[col], rtol=1e-12, atol=1e-12)
+    assert (data.table["fixture"] == "clamp A").all()

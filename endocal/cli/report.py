@@ -11,8 +11,9 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from endocal.cli._common import cli_errors, err, out
+from endocal.runs.aligned import CSV_SUFFIXES
 
-_DATA_SUFFIXES = (".parquet", ".csv", ".txt")
+_DATA_SUFFIXES = (".parquet", *CSV_SUFFIXES)
 
 
 def split_paths(paths: list[Path], data: list[Path]) -> tuple[list[Path], list[Path]]:

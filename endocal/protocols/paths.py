@@ -405,12 +405,12 @@ def read_path_file(path: str | Path, overrides: dict | None = None) -> TipPath:
 
 
 def _read_points_csv(raw: bytes, where: str) -> np.ndarray:
-    import io
-
     import pandas as pd
 
+    from endocal.runs.textable import read_csv_table
+
     try:
-        df = pd.read_csv(io.BytesIO(raw))
+        df = read_csv_table(raw)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise ProtocolError(f"{where}: not a CSV table of waypoints ({str(exc).splitlines()[0]})") from None
     cols = ("x_mm", "y_mm", "z_mm")

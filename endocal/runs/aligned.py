@@ -26,6 +26,10 @@ from endocal.errors import RunFormatError
 from endocal.kinematics.bending import bending_angles_deg, tip_in_base_mm
 from endocal.probe import ProbeConfig
 from endocal.runs.format import ALIGNED, MOTOR, RUN_JSON, TRACKER, read_run_json, sha256_of
+from endocal.runs.textable import read_csv_table
+
+#: file suffixes read as CSV text tables (delimiter sniffed: endocal.runs.textable)
+CSV_SUFFIXES = (".csv", ".txt", ".tsv")
 
 CMD, MEAS = "_cmd_deg", "_meas_deg"
 
@@ -199,13 +203,13 @@ def _read_table(path: Path) -> pd.DataFrame:
     try:
         if suffix == ".parquet":
             return read_parquet(path)
-        if suffix in (".csv", ".txt"):
-            return pd.read_csv(path)
+        if suffix in CSV_SUFFIXES:
+            return read_csv_table(path.read_bytes())
     except FileNotFoundError:
         raise RunFormatError(f"{path} does not exist") from None
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError) as exc:
         raise RunFormatError(f"{path} cannot be read as {suffix[1:].upper()}: {str(exc).splitlines()[0]}") from None
-    raise RunFormatError(f"{path}: expected a run folder, a .parquet or a .csv aligned table")
+    raise RunFormatError(f"{path}: expected a run folder, a .parquet or a .csv aligned table (.txt and .tsv read as CSV)")
 
 
 def check_aligned(df: pd.DataFrame, where: str) -> list[str]:

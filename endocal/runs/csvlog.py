@@ -22,7 +22,6 @@ says how many, and still refuses a stamp shared by rows that differ.
 from __future__ import annotations
 
 import hashlib
-import io
 import time
 import tomllib
 from dataclasses import dataclass
@@ -35,6 +34,7 @@ from endocal.errors import RunFormatError
 from endocal.probe import TRANSLATION, ProbeConfig, load_probe
 from endocal.runs.format import prepare_output
 from endocal.runs.imported import tracker_stream, write_imported_run
+from endocal.runs.textable import read_csv_table
 
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 ANGLE_UNITS = ("deg", "rad", "ticks")
@@ -228,7 +228,7 @@ def read_map(path: str | Path) -> CsvMap:
 
 def _read_csv(raw: bytes, where: str) -> pd.DataFrame:
     try:
-        df = pd.read_csv(io.BytesIO(raw))
+        df = read_csv_table(raw)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise RunFormatError(f"{where}: not a CSV table ({str(exc).splitlines()[0]})") from None
     if df.shape[1] < 2 or df.empty:

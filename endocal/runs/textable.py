@@ -1,0 +1,51 @@
+"""CSV tables as labs write them: the delimiter, spaces and decimal mark read off the file.
+
+Spreadsheets in much of Europe write ``;`` between columns and ``,`` as the decimal mark;
+data loggers write tabs; hand-edited files put a space after each comma. Every CSV endocal
+reads (aligned tables, lab logs, waypoint lists) goes through :func:`read_csv_table`, so a
+table that opens correctly in a spreadsheet reads the same here, with its column names as
+written (stripped of spaces).
+"""
+
+from __future__ import annotations
+
+import io
+import re
+
+import pandas as pd
+
+#: delimiters recognised in the header line, most common first (ties go to the earlier one)
+DELIMITERS = (",", ";", "\t", "|")
+_DECIMAL_COMMA = re.compile(r"^\s*[-+]?\d+,\d+(?:[eE][-+]?\d+)?\s*$")
+
+
+def sniff_delimiter(raw: bytes) -> str:
+    """The delimiter of a CSV file: the candidate that occurs most often in its header line."""
+    header = raw.lstrip(b"\xef\xbb\xbf").split(b"\n", 1)[0].decode("utf-8", errors="replace")
+    counts = [header.count(d) for d in DELIMITERS]
+    return DELIMITERS[counts.index(max(counts))] if max(counts) > 0 else ","
+
+
+def read_csv_table(raw: bytes) -> pd.DataFrame:
+    """Read a CSV file's bytes into a table (header row required).
+
+    The delimiter is sniffed from the header (:func:`sniff_delimiter`); column names are
+    stripped of surrounding spaces; with a delimiter other than ``,``, a file whose text
+    columns include one that reads ``12,5`` throughout is re-read with ``,`` as the decimal mark.
+
+    Raises
+    ------
+    pandas.errors.ParserError, pandas.errors.EmptyDataError, UnicodeDecodeError
+        As :func:`pandas.read_csv`; callers turn them into one-line messages.
+    """
+    sep = sniff_delimiter(raw)
+    df = pd.read_csv(io.BytesIO(raw), sep=sep, skipinitialspace=True)
+    if sep != ",":
+        text = [c for c in df.columns if df[c].dtype == object or pd.api.types.is_string_dtype(df[c])]
+        if any(len(df[c].dropna()) and df[c].dropna().astype(str).str.match(_DECIMAL_COMMA).all() for c in text):
+            df = pd.read_csv(io.BytesIO(raw), sep=sep, skipinitialspace=True, decimal=",")
+    df.columns = [c.strip() if isinstance(c, str) else c for c in df.columns]
+    return df
+
+
+__all__ = ["DELIMITERS", "read_csv_table", "sniff_delimiter"]
