@@ -227,13 +227,14 @@ def test_force_never_deletes_a_folder_that_is_not_a_run(tmp_path, tee):
     lambda df, p: df.to_csv(p.with_suffix(".tsv"), index=False, sep="\t"),  # a data logger
     lambda df, p: p.with_suffix(".csv").write_text(df.to_csv(index=False).replace(",", ", ")),  # hand-edited
     lambda df, p: p.with_suffix(".csv").write_text(df.to_csv(index=False), encoding="utf-8-sig"),  # with a BOM
+    lambda df, p: p.with_suffix(".dat").write_text(df.to_string(index=False, float_format="{:.17g}".format)),  # lined up
 ])
 def test_an_aligned_table_reads_the_same_however_the_csv_was_written(tmp_path, write):
     t = np.arange(50) / 100.0
-    df = pd.DataFrame({"t_s": t, "ap_cmd_deg": 30 * np.sin(t), "ap_meas_deg": 25 * np.sin(t - 0.1), "fixture": "clamp A"})
+    df = pd.DataFrame({"t_s": t, "ap_cmd_deg": 30 * np.sin(t), "ap_meas_deg": 25 * np.sin(t - 0.1), "fixture": "clampA"})
     write(df, tmp_path / "table")
     data = load_aligned(next(tmp_path.iterdir()))
     assert data.axes == ["ap"] and list(data.table.columns) == list(df.columns)
     for col in ("t_s", "ap_cmd_deg", "ap_meas_deg"):
         np.testing.assert_allclose(data.table[col], df[col], rtol=1e-12, atol=1e-12)
-    assert (data.table["fixture"] == "clamp A").all()
+    assert (data.table["fixture"] == "clampA").all()

@@ -29,7 +29,7 @@ from endocal.runs.format import ALIGNED, MOTOR, RUN_JSON, TRACKER, read_run_json
 from endocal.runs.textable import read_csv_table
 
 #: file suffixes read as CSV text tables (delimiter sniffed: endocal.runs.textable)
-CSV_SUFFIXES = (".csv", ".txt", ".tsv")
+CSV_SUFFIXES = (".csv", ".txt", ".tsv", ".dat")
 
 CMD, MEAS = "_cmd_deg", "_meas_deg"
 
@@ -209,7 +209,7 @@ def _read_table(path: Path) -> pd.DataFrame:
         raise RunFormatError(f"{path} does not exist") from None
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError) as exc:
         raise RunFormatError(f"{path} cannot be read as {suffix[1:].upper()}: {str(exc).splitlines()[0]}") from None
-    raise RunFormatError(f"{path}: expected a run folder, a .parquet or a .csv aligned table (.txt and .tsv read as CSV)")
+    raise RunFormatError(f"{path}: expected a run folder, a .parquet or a .csv aligned table (.txt, .tsv and .dat read as CSV)")
 
 
 def check_aligned(df: pd.DataFrame, where: str) -> list[str]:

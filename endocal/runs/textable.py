@@ -1,7 +1,8 @@
 """CSV tables as labs write them: the delimiter, spaces and decimal mark read off the file.
 
 Spreadsheets in much of Europe write ``;`` between columns and ``,`` as the decimal mark;
-data loggers write tabs; hand-edited files put a space after each comma. Every CSV endocal
+data loggers write tabs, or columns lined up with spaces; hand-edited files put a space after
+each comma. Every CSV endocal
 reads (aligned tables, lab logs, waypoint lists) goes through :func:`read_csv_table`, so a
 table that opens correctly in a spreadsheet reads the same here, with its column names as
 written (stripped of spaces).
@@ -20,10 +21,15 @@ _DECIMAL_COMMA = re.compile(r"^\s*[-+]?\d+,\d+(?:[eE][-+]?\d+)?\s*$")
 
 
 def sniff_delimiter(raw: bytes) -> str:
-    """The delimiter of a CSV file: the candidate that occurs most often in its header line."""
+    """The delimiter of a CSV file: the candidate that occurs most often in its header line.
+
+    A header with none of them but spaces between names is whitespace-separated (``\\s+``).
+    """
     header = raw.lstrip(b"\xef\xbb\xbf").split(b"\n", 1)[0].decode("utf-8", errors="replace")
     counts = [header.count(d) for d in DELIMITERS]
-    return DELIMITERS[counts.index(max(counts))] if max(counts) > 0 else ","
+    if max(counts) > 0:
+        return DELIMITERS[counts.index(max(counts))]
+    return r"\s+" if len(header.split()) > 1 else ","
 
 
 def read_csv_table(raw: bytes) -> pd.DataFrame:
@@ -39,8 +45,8 @@ def read_csv_table(raw: bytes) -> pd.DataFrame:
         As :func:`pandas.read_csv`; callers turn them into one-line messages.
     """
     sep = sniff_delimiter(raw)
-    df = pd.read_csv(io.BytesIO(raw), sep=sep, skipinitialspace=True)
-    if sep != ",":
+    df = pd.read_csv(io.BytesIO(raw), sep=sep, skipinitialspace=sep != r"\s+")
+    if sep not in (",", r"\s+"):
         text = [c for c in df.columns if df[c].dtype == object or pd.api.types.is_string_dtype(df[c])]
         if any(len(df[c].dropna()) and df[c].dropna().astype(str).str.match(_DECIMAL_COMMA).all() for c in text):
             df = pd.read_csv(io.BytesIO(raw), sep=sep, skipinitialspace=True, decimal=",")

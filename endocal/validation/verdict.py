@@ -37,6 +37,11 @@ from endocal.models.data import HysteresisData
 #: samples a correlation of 0.05 is "significant" yet explains 0.25 % of the residual's
 #: variance; 0.3 explains about a tenth of it, what the scan's 10 % gain bar asks of a term.
 MIN_CORR = 0.3
+#: On a record too short for the test to detect MIN_CORR (its bound lies above it: a cycle or
+#: two of slow motion, whose residual and signals each hold a handful of independent values),
+#: a correlation this strong still points, and says it could not be tested: it accounts for a
+#: quarter of the residual's variance, which no verdict of "nothing missing" may ignore.
+MIN_CORR_SHORT = 0.5
 #: Smallest regime error relative to the whole record's that counts as pointing at an effect.
 MIN_RATIO = 1.5
 
@@ -80,8 +85,12 @@ class Pointer:
 
 def _evidence(resid, regimes) -> dict[str, list[str]]:
     out: dict[str, list[str]] = {}
-    for x in resid.significant():
-        if x.max_abs_corr < MIN_CORR:
+    for x in resid.cross:
+        if x.significant and x.max_abs_corr >= MIN_CORR:
+            untested = ""
+        elif not x.significant and x.bound >= MIN_CORR and x.max_abs_corr >= MIN_CORR_SHORT:
+            untested = f", a record too short to test that for significance (bound {x.bound:.2g})"
+        else:
             continue
         if x.signal.startswith("load:"):
             effects, words = (x.signal,), f"'{x.signal.partition(':')[2]}' times the direction of motion"
@@ -91,7 +100,7 @@ def _evidence(resid, regimes) -> dict[str, list[str]]:
             continue
         for e in effects:
             out.setdefault(e, []).append(f"the residual follows {words} (|r| = {x.max_abs_corr:.2f} at lag "
-                                         f"{x.lag_s:+.3g} s)")
+                                         f"{x.lag_s:+.3g} s{untested})")
     for r in regimes.regimes:
         key = r.group if r.group in _BY_REGIME else ("hold" if r.name.startswith("hold") else None)
         if key is None or r.ratio < MIN_RATIO:
@@ -147,9 +156,17 @@ def residual_pointers(model: HysteresisModel, data: HysteresisData, resid, regim
             s = tested[effect]
             status = "unconfirmed"
             why = (f"fitted and tested, it changed the held-out RMSE by {-s.gain_pct:+.0f} % "
-                   f"({s.base_rmse_heldout_deg:.3g} -> {s.rmse_heldout_deg:.3g} deg, p = {s.p_value:.2g}): the "
-                   "catalog term does not capture what the residual shows here, or the held-out data does not "
-                   "exercise it")
+                   f"({s.base_rmse_heldout_deg:.3g} -> {s.rmse_heldout_deg:.3g} deg, p = {s.p_value:.2g}): ")
+            if s.gain_pct < 0 and scan.scheme == "estimation/validation":
+                # a term that makes unseen data worse was fitted to something else in the estimation data
+                why += ("the estimation data does not pin it down"
+                        + (" (at one speed a lag or speed-dependent friction looks like a wider loop)"
+                           if name in ("delay", "rate") else "")
+                        + ", or the catalog term does not capture what the residual shows here")
+                experiment = f"record estimation data with {EFFECTS[name].protocol}"
+            else:
+                why += ("the catalog term does not capture what the residual shows here, or the held-out data "
+                        "does not exercise it")
         else:
             continue
         out.append(Pointer(effect, "; ".join(dict.fromkeys(ev)), status, why, experiment))
