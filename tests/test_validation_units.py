@@ -176,3 +176,26 @@ def test_folds_of_several_runs_take_the_same_share_of_every_run():
                          run_starts=np.array([0, 300]))
     tr, ev, h = fold_split(two, (300, 375))
     assert tr.n_samples == 300 and list(tr.run_starts) == [0] and np.array_equal(h, np.arange(300, 375))
+
+
+@pytest.mark.parametrize("width_deg, speeds, covariates, named", [
+    (0.85, (10.0, 28.0), [], {"delay", "rate"}),  # wider and 2.8x as fast: speed, not a changed condition
+    (0.85, (10.0, 11.0), [], {"load"}),  # wider at the same speed: the friction changed between the records
+    (-0.85, (10.0, 28.0), [], {"load"}),  # narrower though faster: no lag or speed friction does that
+    (0.85, (10.0, 28.0), ["'wrap' is 180 in the estimation data and 360 here"], {"delay", "rate", "load"}),
+])
+def test_a_loop_that_changed_between_records_is_put_down_to_speed_only_when_the_speed_changed_alike(
+        width_deg, speeds, covariates, named):
+    from types import SimpleNamespace
+
+    from endocal.validation.shift import RecordShift
+    from endocal.validation.verdict import shift_pointers
+
+    shift = RecordShift(rmse_deg=1.7, zero_deg=0.1, zero_rmse_deg=1.69, width_deg=width_deg, gain=0.96,
+                        offset_deg=0.1, friction_rmse_deg=1.0)
+    scan = SimpleNamespace(scheme="estimation/validation", baseline_rmse_heldout_deg=1.7, tested=[])
+    ptrs = shift_pointers(shift, scan, covariates, speeds)
+    assert {p.effect for p in ptrs} == named
+    assert all(p.status == "untested" for p in ptrs)
+    if "delay" in named:
+        assert "2.8 times as fast" in next(p for p in ptrs if p.effect == "delay").evidence

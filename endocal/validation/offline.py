@@ -32,7 +32,7 @@ from endocal.validation.suspects import (
     scan_split,
     split_errors,
 )
-from endocal.validation.shift import RecordShift, covariate_changes, record_shift
+from endocal.validation.shift import RecordShift, covariate_changes, moving_speed_dps, record_shift
 from endocal.validation.verdict import Pointer, residual_pointers, shift_pointers
 
 
@@ -320,7 +320,9 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     if scan.scheme == "estimation/validation":
         shift = record_shift(model, data)
         named = {p.effect for p in pointers}
-        pointers += [p for p in shift_pointers(shift, scan, covariate_changes(est, data)) if p.effect not in named]
+        speeds = (moving_speed_dps(est), moving_speed_dps(data))
+        pointers += [p for p in shift_pointers(shift, scan, covariate_changes(est, data), speeds)
+                     if p.effect not in named]
     notes += list(scan.notes)
     comp = None
     if compare is not None and scan.scheme != "none":

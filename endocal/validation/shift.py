@@ -26,7 +26,9 @@ Where one of them explains much more of the validation error than any catalog ef
 friction) with the experiment that would model it: log the condition as a column of every
 record and fit ``load:COLUMN`` on records of different conditions. Extra columns whose
 validation values lie outside the estimation record's range (:func:`covariate_changes`) are
-the condition, when the lab logged it.
+the condition, when the lab logged it. A loop that is wider where the knob moves faster than in
+the estimation record (:func:`moving_speed_dps`) may instead be a lag or a friction that grows
+with speed, which a record at one speed cannot pin down; the verdict then names those too.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from scipy.optimize import minimize_scalar
 
 from endocal.models import HysteresisData
 from endocal.models.base import HysteresisModel
+from endocal.validation.data import speed_dps
 from endocal.validation.regimes import turning_points
 from endocal.validation.suspects import predict_extrapolated
 
@@ -112,6 +115,14 @@ def record_shift(model: HysteresisModel, data: HysteresisData) -> RecordShift:
         w, r, a, g = 0.0, rmse, 0.0, 1.0
     return RecordShift(rmse_deg=rmse, zero_deg=c, zero_rmse_deg=_rms(p + c - y), width_deg=w, gain=float(g),
                        offset_deg=float(a), friction_rmse_deg=r)
+
+
+def moving_speed_dps(data: HysteresisData) -> float:
+    """Typical knob speed while the knob moves (deg/s): the median |speed| above 10 % of its 95th percentile."""
+    v = np.abs(speed_dps(data))
+    top = float(np.percentile(v, 95)) if v.size else 0.0
+    moving = v[v > 0.1 * top]
+    return float(np.median(moving)) if top > 0 and moving.size else 0.0
 
 
 def covariate_changes(train: HysteresisData, data: HysteresisData) -> list[str]:

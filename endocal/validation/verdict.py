@@ -39,8 +39,9 @@ from endocal.models.data import HysteresisData
 MIN_CORR = 0.3
 #: On a record too short for the test to detect MIN_CORR (its bound lies above it: a cycle or
 #: two of slow motion, whose residual and signals each hold a handful of independent values),
-#: a correlation this strong still points, and says it could not be tested: it accounts for a
-#: quarter of the residual's variance, which no verdict of "nothing missing" may ignore.
+#: a correlation this strong at lag 0 still points, and says it could not be tested: it
+#: accounts for a quarter of the residual's variance, which no verdict of "nothing missing"
+#: may ignore.
 MIN_CORR_SHORT = 0.5
 #: Smallest regime error relative to the whole record's that counts as pointing at an effect.
 MIN_RATIO = 1.5
@@ -87,9 +88,13 @@ def _evidence(resid, regimes) -> dict[str, list[str]]:
     out: dict[str, list[str]] = {}
     for x in resid.cross:
         if x.significant and x.max_abs_corr >= MIN_CORR:
-            untested = ""
-        elif not x.significant and x.bound >= MIN_CORR and x.max_abs_corr >= MIN_CORR_SHORT:
-            untested = f", a record too short to test that for significance (bound {x.bound:.2g})"
+            r, lag, untested = x.max_abs_corr, x.lag_s, ""
+        elif (not x.significant and x.bound >= MIN_CORR and abs(x.corr_at_zero) >= MIN_CORR_SHORT
+              and x.signal != "time"):
+            # at lag 0 only, where each signature lies: on a cycle or two, the best of all lags
+            # lines up any slow residual with any slow signal. Not time: over a cycle or two any
+            # residual that differs between the record's start and end follows the clock.
+            r, lag, untested = abs(x.corr_at_zero), 0.0, f", a record too short to test that for significance (bound {x.bound:.2g})"
         else:
             continue
         if x.signal.startswith("load:"):
@@ -99,8 +104,7 @@ def _evidence(resid, regimes) -> dict[str, list[str]]:
         else:
             continue
         for e in effects:
-            out.setdefault(e, []).append(f"the residual follows {words} (|r| = {x.max_abs_corr:.2f} at lag "
-                                         f"{x.lag_s:+.3g} s{untested})")
+            out.setdefault(e, []).append(f"the residual follows {words} (|r| = {r:.2f} at lag {lag:+.3g} s{untested})")
     for r in regimes.regimes:
         key = r.group if r.group in _BY_REGIME else ("hold" if r.name.startswith("hold") else None)
         if key is None or r.ratio < MIN_RATIO:
@@ -177,9 +181,14 @@ def residual_pointers(model: HysteresisModel, data: HysteresisData, resid, regim
 #: error by this fraction (the issue's bar for an effect worth a term, 30 %) and leaves it this
 #: far below every catalog effect fitted on the estimation record.
 SHIFT_CUT = 0.7
+#: A validation record this many times as fast as the estimation record (typical knob speed
+#: while moving) can owe a wider loop to speed (a lag, friction growing with speed) rather
+#: than to a condition that changed: a lag of 80 ms widens the loop by 0.08 s x the speed.
+SPEED_RATIO = 1.5
 
 
-def shift_pointers(shift, scan, covariates: list[str] = ()) -> list[Pointer]:
+def shift_pointers(shift, scan, covariates: list[str] = (), speeds_dps: tuple[float, float] | None = None
+                   ) -> list[Pointer]:
     """A condition that changed between the estimation and validation records, as a pointer.
 
     Parameters
@@ -190,11 +199,16 @@ def shift_pointers(shift, scan, covariates: list[str] = ()) -> list[Pointer]:
         The estimation/validation scan (its best candidate is the bar to beat).
     covariates : list of str
         :func:`~endocal.validation.shift.covariate_changes`, in words.
+    speeds_dps : (float, float), optional
+        Typical knob speed while moving in the estimation and the validation record
+        (:func:`~endocal.validation.shift.moving_speed_dps`).
 
     Returns
     -------
     list of Pointer
-        ``load`` (friction changed) or ``drift`` (the zero moved), or nothing.
+        ``load`` (friction changed) or ``drift`` (the zero moved), or nothing; ``delay`` and
+        ``rate`` instead of (or, when a logged condition changed too, beside) ``load`` when
+        the loop changed the way the speed did.
     """
     if shift is None or scan.scheme != "estimation/validation" or not shift.rmse_deg > 0:
         return []
@@ -216,11 +230,31 @@ def shift_pointers(shift, scan, covariates: list[str] = ()) -> list[Pointer]:
             "and validation data back to back; a drift that goes on across records shows in one long record with "
             "drift fitted on its first part")]
     wider = "wider" if shift.width_deg > 0 else "narrower"
+    evidence = (f"{fitted}; a loop {abs(shift.width_deg):.3g} knob deg per side {wider} with "
+                f"{100 * (shift.gain - 1):+.0f} % slope, fitted on this record alone, brings it to {fr:.3g} deg "
+                f"(-{100 * (1 - fr / base):.0f} %)")
+    out = []
+    if speeds_dps is not None and min(speeds_dps) > 0:
+        ratio = speeds_dps[1] / speeds_dps[0]
+        if (shift.width_deg > 0 and ratio >= SPEED_RATIO) or (shift.width_deg < 0 and ratio <= 1 / SPEED_RATIO):
+            pace = f"{ratio:.2g} times as fast" if ratio > 1 else f"{1 / ratio:.2g} times slower"
+            for effect in ("delay", "rate"):
+                out.append(Pointer(
+                    effect,
+                    f"{evidence}; the knob moves {pace} here ({speeds_dps[1]:.3g} vs {speeds_dps[0]:.3g} deg/s while "
+                    f"moving)",
+                    "untested",
+                    "a lag or a friction that grows with speed makes the loop wider the faster the knob moves, and the "
+                    "estimation record does not move at this record's speeds: candidates fitted there cannot tell "
+                    "them from the loop's width",
+                    f"record estimation data at several speeds, spanning this record's ({EFFECTS[effect].protocol}), "
+                    "and validate again"))
+            if not covariates:
+                return out
     column = covariates[0].split("'")[1] if covariates else "COLUMN"
-    return [Pointer(
+    return out + [Pointer(
         "load",
-        f"{fitted}; a loop {abs(shift.width_deg):.3g} knob deg per side {wider} with {100 * (shift.gain - 1):+.0f} % "
-        f"slope, fitted on this record alone, brings it to {fr:.3g} deg (-{100 * (1 - fr / base):.0f} %){seen}",
+        f"{evidence}{seen}",
         "untested",
         "the friction changed between the records (insertion-tube curvature, tendon tension, lubrication): every "
         "candidate is fitted on the estimation record, which holds one condition",
