@@ -58,6 +58,10 @@ def test_bad_input(run, tmp_path):
     one_line_error(endocal("fit", "hysteresis", tmp_path / "ramp.csv", "--axis", "ap", "--out", tmp_path / "c.json"), "never reverses")
     pd.DataFrame({"t_s": t[:5], "ap_cmd_deg": [0, 1, 0, 1, 0], "ap_meas_deg": [0, 1, 0, 1, 0]}).to_csv(tmp_path / "short.csv", index=False)
     one_line_error(endocal("fit", "hysteresis", tmp_path / "short.csv", "--axis", "ap", "--out", tmp_path / "d.json"), "samples")
+    # a tracker that lost the tip sensor and repeats its last reading
+    pd.DataFrame({"t_s": t, "ap_cmd_deg": 40 * np.sin(t), "ap_meas_deg": 12.0}).to_csv(tmp_path / "frozen.csv", index=False)
+    one_line_error(endocal("fit", "hysteresis", tmp_path / "frozen.csv", "--axis", "ap", "--out", tmp_path / "f.json"),
+                   "never changes (12 deg throughout)")
     (tmp_path / "e.json").write_text("{}")
     one_line_error(endocal("fit", "hysteresis", run, "--axis", "ap", "--out", tmp_path / "e.json"), "already exists")
-    assert not any((tmp_path / f"{n}.json").exists() for n in "abcd")
+    assert not any((tmp_path / f"{n}.json").exists() for n in "abcdf")

@@ -313,6 +313,9 @@ class HysteresisModel(ABC):
         for e in effects:
             e.check(d)
             e.check_fit(d)
+        if np.ptp(d.meas_deg) <= 1e-9 * max(1.0, float(np.max(np.abs(d.meas_deg)))):
+            raise ModelError(f"the measured angle never changes ({float(d.meas_deg[0]):.6g} deg throughout): nothing to "
+                             "fit; check that the tracker saw the tip sensor and that this is the axis the knob bends")
         if d.n_reversals() == 0:
             raise ModelError("backlash cannot be identified: the command never reverses; "
                              "fit on data that moves the knob back and forth (e.g. a damped sine)")
