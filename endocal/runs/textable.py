@@ -2,10 +2,9 @@
 
 Spreadsheets in much of Europe write ``;`` between columns and ``,`` as the decimal mark;
 data loggers write tabs, or columns lined up with spaces; hand-edited files put a space after
-each comma. Every CSV endocal
-reads (aligned tables, lab logs, waypoint lists) goes through :func:`read_csv_table`, so a
-table that opens correctly in a spreadsheet reads the same here, with its column names as
-written (stripped of spaces).
+each comma. Every CSV endocal reads (aligned tables, lab logs, waypoint lists) goes through
+:func:`read_csv_table`, so a table that opens correctly in a spreadsheet reads the same here,
+with its column names as written (stripped of spaces).
 """
 
 from __future__ import annotations
@@ -36,8 +35,8 @@ def read_csv_table(raw: bytes) -> pd.DataFrame:
     """Read a CSV file's bytes into a table (header row required).
 
     The delimiter is sniffed from the header (:func:`sniff_delimiter`); column names are
-    stripped of surrounding spaces; with a delimiter other than ``,``, a file whose text
-    columns include one that reads ``12,5`` throughout is re-read with ``,`` as the decimal mark.
+    stripped of surrounding spaces; with a delimiter other than ``,``, a file with a text
+    column that reads ``12,5`` throughout is re-read with ``,`` as the decimal mark.
 
     Raises
     ------

@@ -22,7 +22,8 @@ a load column times the direction         ``load:COLUMN``
 ========================================  ===================
 
 and the error of a regime well above the whole record's: the other knob's low or high
-band (``coupling``), holds (``creep``).
+band (``coupling``), holds (``creep``). On a record too short for the correlation test (a
+cycle or two), a strong correlation at lag 0 points all the same (``MIN_CORR_SHORT``).
 """
 
 from __future__ import annotations
@@ -94,7 +95,8 @@ def _evidence(resid, regimes) -> dict[str, list[str]]:
             # at lag 0 only, where each signature lies: on a cycle or two, the best of all lags
             # lines up any slow residual with any slow signal. Not time: over a cycle or two any
             # residual that differs between the record's start and end follows the clock.
-            r, lag, untested = abs(x.corr_at_zero), 0.0, f", a record too short to test that for significance (bound {x.bound:.2g})"
+            r, lag = abs(x.corr_at_zero), 0.0
+            untested = f", a record too short to test that for significance (bound {x.bound:.2g})"
         else:
             continue
         if x.signal.startswith("load:"):
