@@ -133,3 +133,58 @@ def test_not_a_table_and_existing_output(sim_log, tmp_path):
     shutil.copytree(sim_log / "run", tmp_path / "exists")
     one_line_exit_2(endocal("import", "csv", sim_log / "log.csv", "--map", MAP, "--out", tmp_path / "exists"),
                     "already exists", "--force")
+
+
+ANGLES_MAP = ROOT / "configs" / "csv-map.angles.example.toml"
+
+
+@pytest.fixture(scope="module")
+def bench_log(sim_log):
+    """The simulated run as a bench that reads its joint angle itself would log it (the angles
+    example map's columns): motor in rad, the angle in deg from an encoder zeroed at 5 deg, a
+    sheath configuration column, angle readings at every other motor sample."""
+    a = load_aligned(sim_log / "run").table
+    log = pd.DataFrame({"time_ms": 1000.0 * a["t_s"] + 250.0, "motor_rad": np.deg2rad(a["ap_cmd_deg"]),
+                        "joint_deg": a["ap_meas_deg"] + 5.0, "sheath_deg": 180.0})
+    log.loc[1::2, "joint_deg"] = np.nan  # the encoder is read at half the motor rate
+    log.to_csv(sim_log / "bench.csv", index=False)
+    return sim_log / "bench.csv", a
+
+
+def test_a_bench_measuring_its_angle_imports_as_an_aligned_table(bench_log, tmp_path):
+    log, a = bench_log
+    text = ANGLES_MAP.read_text().replace("zero = 0.0 ", "zero = 5.0 ")
+    (tmp_path / "map.toml").write_text(text)
+    proc = endocal("import", "csv", log, "--map", tmp_path / "map.toml", "--out", tmp_path / "bench.parquet")
+    assert proc.returncode == 0, proc.stderr
+    assert "angle readings" in proc.stdout and "ap_meas_deg <- joint_deg" in proc.stdout
+    b = load_aligned(tmp_path / "bench.parquet").table
+    # every motor sample from the first reading to the last, the encoder's zero taken off, the
+    # motor's radians back in degrees; between readings the angle is interpolated linearly
+    n = len(b)
+    assert n == len(a) - (len(a) + 1) % 2
+    t = a["t_s"].to_numpy()[:n]
+    np.testing.assert_allclose(b["t_s"], t, atol=1e-9)
+    np.testing.assert_allclose(b["ap_cmd_deg"], a["ap_cmd_deg"][:n], atol=1e-9)
+    np.testing.assert_allclose(b["ap_meas_deg"], np.interp(t, t[::2], a["ap_meas_deg"].to_numpy()[:n:2]), atol=1e-9)
+    assert (b["sheath_deg"] == 180.0).all() and "ml_meas_deg" not in b
+    # the table is a model's input like any run
+    fit = endocal("fit", "hysteresis", tmp_path / "bench.parquet", "--axis", "ap", "--model", "linear",
+                  "--out", tmp_path / "m.json")
+    assert fit.returncode == 0, fit.stderr
+
+
+@pytest.mark.parametrize("edit, out, fragments", [
+    (lambda t: t + '\n[tip]\nposition = ["x", "y", "z"]\n', "t.parquet", ("either [tip] and [base]", "not both")),
+    (lambda t: t.replace('column = "joint_deg"', 'column = "joint"'), "t.parquet", ("names column 'joint'",)),
+    (lambda t: t.replace('unit = "deg"                  # ...in deg or rad', 'unit = "grad"'), "t.parquet",
+     ("unknown angle unit 'grad'",)),
+    (lambda t: t.replace("[angles.ap]", "[angles.lr]"), "t.parquet", ("no bending axis 'lr'",)),
+    (lambda t: t.replace('"sheath_deg"]', '"sheath_deg", "x_meas_deg"]'), "t.parquet", ("'x_meas_deg'", "rename")),
+    (lambda t: t, "folder", ("give --out a .parquet or .csv file name",)),
+])
+def test_bad_angle_maps_and_outputs_are_one_line(bench_log, tmp_path, edit, out, fragments):
+    (tmp_path / "map.toml").write_text(edit(ANGLES_MAP.read_text()))
+    one_line_exit_2(endocal("import", "csv", bench_log[0], "--map", tmp_path / "map.toml", "--out", tmp_path / out),
+                    *fragments)
+    assert not (tmp_path / out).exists()

@@ -90,6 +90,22 @@ def read_stream(run_dir: Path, name: str) -> pd.DataFrame:
     return df.sort_values("t_s", kind="stable").reset_index(drop=True)
 
 
+def measured_at(t_frames: np.ndarray, t: np.ndarray, max_gap_s: float) -> np.ndarray:
+    """Which instants ``t`` a measurement sampled at ``t_frames`` covers (bool mask).
+
+    An instant is covered inside the measured span and between two samples at most
+    ``max_gap_s`` apart, where linear interpolation of the measurement is trusted.
+    """
+    ok = np.zeros(t.size, bool)
+    if t_frames.size >= 2:
+        idx = np.searchsorted(t_frames, t, side="right")
+        inside = (idx > 0) & (idx < t_frames.size)
+        lo = np.clip(idx - 1, 0, t_frames.size - 1)
+        hi = np.clip(idx, 0, t_frames.size - 1)
+        ok = (inside & (t_frames[hi] - t_frames[lo] <= max_gap_s)) | (t == t_frames[-1])
+    return ok
+
+
 def align(motor: pd.DataFrame, tracker: pd.DataFrame, probe: ProbeConfig, max_gap_s: float = 0.2) -> Alignment:
     """Put tracker-measured bending angles on the motor clock.
 
@@ -131,14 +147,7 @@ def align(motor: pd.DataFrame, tracker: pd.DataFrame, probe: ProbeConfig, max_ga
     t_frames = pairs["t_s"].to_numpy(float)
 
     t = motor["t_s"].to_numpy(float)
-    ok = np.zeros(t.size, bool)
-    if t_frames.size >= 2:
-        idx = np.searchsorted(t_frames, t, side="right")
-        inside = (idx > 0) & (idx < t_frames.size)
-        lo = np.clip(idx - 1, 0, t_frames.size - 1)
-        hi = np.clip(idx, 0, t_frames.size - 1)
-        gap = t_frames[hi] - t_frames[lo]
-        ok = (inside & (gap <= max_gap_s)) | (t == t_frames[-1])
+    ok = measured_at(t_frames, t, max_gap_s)
     out = {"t_s": t[ok]}
     first, second = probe.bending_axes
     for axis, theta in ((first, theta_first), (second, theta_second)):

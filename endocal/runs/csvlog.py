@@ -14,6 +14,15 @@ is a tracker frame (both at the row's time). A log with one row per motor tick a
 pose repeated is read as it is; a log with separate motor and tracker rows (empty cells where
 a device did not report) is read exactly.
 
+Measured angles instead of poses
+--------------------------------
+A rig that measures the bending angle itself (a joint encoder, a camera, a protractor on a
+tendon-sheath bench) maps ``[angles.AXIS]`` columns instead of ``[tip]`` and ``[base]``. There
+is no tracker stream to keep, so the import is an aligned table (``.parquet`` or ``.csv``): the
+angles interpolated onto the motor samples as :func:`endocal.runs.aligned.align` does with
+eq. 1's. ``extras`` names further numeric columns (a sheath configuration, a load) carried
+into the aligned table, where models take them as covariates (``load:COLUMN``).
+
 Duplicated time stamps (ROS bridges often write them) are refused by default, with their
 count and the first line; ``dedupe=True`` drops rows that repeat an earlier row exactly and
 says how many, and still refuses a stamp shared by rows that differ.
@@ -22,6 +31,8 @@ says how many, and still refuses a stamp shared by rows that differ.
 from __future__ import annotations
 
 import hashlib
+import io
+import json
 import time
 import tomllib
 from dataclasses import dataclass
@@ -29,10 +40,13 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
 
-from endocal.errors import RunFormatError
+from endocal.errors import OutputExistsError, OutputPathError, RunFormatError
 from endocal.probe import TRANSLATION, ProbeConfig, load_probe
-from endocal.runs.format import prepare_output
+from endocal.runs.aligned import CMD, MEAS, check_aligned, measured_at
+from endocal.runs.format import atomic_write_bytes, prepare_output, software_versions
 from endocal.runs.imported import tracker_stream, write_imported_run
 from endocal.runs.textable import read_csv_table
 
@@ -42,7 +56,10 @@ _SCALE = {"deg": 1.0, "rad": 180.0 / np.pi, "mm": 1.0, "m": 1000.0}  # to the ru
 LENGTH_UNITS = {"mm": 1.0, "m": 1000.0}
 CURRENT_UNITS = {"mA": 1.0, "A": 1000.0}
 QUAT_ORDERS = ("xyzw", "wxyz")
-_MAP_KEYS = {"probe", "time", "knobs", "tip", "base"}
+_MAP_KEYS = {"probe", "time", "knobs", "tip", "base", "angles", "extras"}
+_ANGLE_KEYS = {"column", "unit", "direction", "zero"}
+TABLE_SUFFIXES = (".parquet", ".csv")
+MAX_GAP_S = 0.2  # longest gap between angle readings to interpolate across, as align() for tracker frames
 _TIME_KEYS = {"column", "unit", "sample_rate_hz"}
 _KNOB_KEYS = {"position", "goal", "current", "unit", "zero_ticks", "ticks_per_rev", "direction", "current_unit"}
 _POSE_KEYS = {"position", "unit", "quaternion", "order", "valid"}
@@ -54,6 +71,7 @@ class CsvImportResult:
 
     run_dir: Path
     rows: int
+    angles_measured: bool
     motor_rows: int
     tracker_frames: int
     aligned_rows: int
@@ -83,6 +101,18 @@ class _Knob:
 
 
 @dataclass(frozen=True)
+class _Angle:
+    column: str
+    factor: float
+    direction: float
+    zero: float
+
+    def convert(self, v: np.ndarray) -> np.ndarray:
+        """Raw readings as the bending angle in degrees."""
+        return (v - self.zero) * self.factor * self.direction
+
+
+@dataclass(frozen=True)
 class _Pose:
     position: list[str]
     factor: float
@@ -103,7 +133,12 @@ class CsvMap:
     sample_rate_hz : float or None
     knobs : dict
         Degree of freedom -> knob columns and unit.
-    tip, base : pose columns and units
+    tip, base : pose columns and units, or None
+        None when ``angles`` gives the bending angles directly.
+    angles : dict
+        Bending axis -> the column measuring its angle, and its unit (empty with poses).
+    extras : tuple of str
+        Further numeric columns carried into the aligned table.
     source : str
         The map file (for messages and run.json).
     raw : dict
@@ -115,8 +150,10 @@ class CsvMap:
     time_factor: float
     sample_rate_hz: float | None
     knobs: dict
-    tip: _Pose
-    base: _Pose
+    tip: _Pose | None
+    base: _Pose | None
+    angles: dict
+    extras: tuple[str, ...]
     source: str
     raw: dict
 
@@ -126,8 +163,9 @@ class CsvMap:
         for k in self.knobs.values():
             cols += [c for c in (k.position, k.goal, k.current) if c]
         for p in (self.tip, self.base):
-            cols += p.position + p.quaternion + ([p.valid] if p.valid else [])
-        return cols
+            if p is not None:
+                cols += p.position + p.quaternion + ([p.valid] if p.valid else [])
+        return cols + [a.column for a in self.angles.values()] + list(self.extras)
 
 
 def _table(d, key: str, where: str, known: set[str]) -> dict:
@@ -162,6 +200,52 @@ def _pose(d: dict, key: str, where: str) -> _Pose:
         raise RunFormatError(f"{w}: valid must name a column")
     return _Pose(_names(t.get("position"), 3, "position", w), LENGTH_UNITS[unit],
                  _names(t.get("quaternion"), 4, "quaternion", w), order, valid)
+
+
+def _direction(t: dict, w: str) -> float:
+    direction = t.get("direction", 1)
+    if direction not in (1, -1):
+        raise RunFormatError(f"{w}: direction must be 1 or -1, got {direction!r}")
+    return float(direction)
+
+
+def _angles(d: dict, probe: ProbeConfig, where: str) -> dict[str, _Angle]:
+    """The ``[angles.AXIS]`` tables: bending angles measured directly, in deg or rad."""
+    angles_d = d.get("angles")
+    if angles_d is None:
+        return {}
+    if "tip" in d or "base" in d:
+        raise RunFormatError(f"{where}: give either [tip] and [base] EM poses or [angles.AXIS] columns of measured "
+                             "bending angles, not both")
+    if not isinstance(angles_d, dict) or not angles_d:
+        raise RunFormatError(f"{where}: [angles] needs one [angles.AXIS] table per measured bending axis "
+                             f"({', '.join(probe.bending_axes)})")
+    out = {}
+    for axis, a in angles_d.items():
+        w = f"{where} [angles.{axis}]"
+        if axis not in probe.bending_axes:
+            raise RunFormatError(f"{w}: probe '{probe.name}' has no bending axis '{axis}' "
+                                 f"(it has {', '.join(probe.bending_axes)})")
+        a = _table(angles_d, axis, f"{where} [angles]", _ANGLE_KEYS)
+        if not isinstance(a.get("column"), str) or not a["column"]:
+            raise RunFormatError(f"{w}: column must name the column of the measured angle")
+        unit = _choice(a.get("unit", "deg"), ("deg", "rad"), "angle unit", w)
+        zero = a.get("zero", 0.0)
+        if not isinstance(zero, (int, float)):
+            raise RunFormatError(f"{w}: zero must be a number (the reading when the section is straight), got {zero!r}")
+        out[axis] = _Angle(a["column"], _SCALE[unit], _direction(a, w), float(zero))
+    return out
+
+
+def _extras(d: dict, where: str) -> tuple[str, ...]:
+    extras = d.get("extras", [])
+    if not (isinstance(extras, list) and all(isinstance(c, str) and c for c in extras)):
+        raise RunFormatError(f"{where}: extras must list column names, e.g. extras = [\"sheath_wrap_deg\"]")
+    clash = [c for c in extras if c == "t_s" or c.endswith((CMD, MEAS))]
+    if clash:
+        raise RunFormatError(f"{where}: extra column '{clash[0]}' would pass for an aligned table's own column; "
+                             "rename it in the log")
+    return tuple(extras)
 
 
 def read_map(path: str | Path) -> CsvMap:
@@ -210,20 +294,21 @@ def read_map(path: str | Path) -> CsvMap:
         unit = _choice(k.get("unit", "deg"), ANGLE_UNITS if dof != TRANSLATION else ("mm", "m"), "unit", w)
         if unit == "ticks" and ("zero_ticks" not in k or "ticks_per_rev" not in k):
             raise RunFormatError(f"{w}: unit 'ticks' needs zero_ticks and ticks_per_rev (e.g. 2048 and 4096)")
-        direction = k.get("direction", 1)
-        if direction not in (1, -1):
-            raise RunFormatError(f"{w}: direction must be 1 or -1, got {direction!r}")
+        direction = _direction(k, w)
         if not isinstance(k.get("position"), str):
             raise RunFormatError(f"{w}: position must name a column")
         cur_unit = _choice(k.get("current_unit", "mA"), CURRENT_UNITS, "current unit", w)
         knobs[dof] = _Knob(k["position"], unit, k.get("goal"), k.get("current"), float(k.get("zero_ticks", 0)),
                            float(k.get("ticks_per_rev", 4096)), float(direction), CURRENT_UNITS[cur_unit])
-    missing = [a for a in probe.bending_axes if a not in knobs]
+    angles = _angles(d, probe, where)
+    missing = [a for a in (angles or probe.bending_axes) if a not in knobs]
     if missing:
-        raise RunFormatError(f"{where}: no [knobs.{missing[0]}] table: every bending axis of probe '{probe.name}' "
-                             f"({', '.join(probe.bending_axes)}) needs its knob column")
-    return CsvMap(probe, column, factor, float(rate) if rate is not None else None, knobs, _pose(d, "tip", where),
-                  _pose(d, "base", where), where, d)
+        whose = "every measured angle" if angles else f"every bending axis of probe '{probe.name}'"
+        raise RunFormatError(f"{where}: no [knobs.{missing[0]}] table: {whose} "
+                             f"({', '.join(angles or probe.bending_axes)}) needs its knob column")
+    tip, base = (None, None) if angles else (_pose(d, "tip", where), _pose(d, "base", where))
+    return CsvMap(probe, column, factor, float(rate) if rate is not None else None, knobs, tip, base, angles,
+                  _extras(d, where), where, d)
 
 
 def _read_csv(raw: bytes, where: str) -> pd.DataFrame:
@@ -276,11 +361,12 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
     mapping : path or CsvMap
         The column map (:func:`read_map`).
     out : path
-        Run folder to create.
+        Run folder to create; with a map of measured ``angles``, the aligned table to write
+        (``.parquet`` or ``.csv``).
     dedupe : bool
         Drop rows that repeat an earlier row exactly (else duplicated time stamps are refused).
     force : bool
-        Replace an existing run folder.
+        Replace an existing run folder (or table).
 
     Raises
     ------
@@ -302,7 +388,10 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
     if missing:
         raise RunFormatError(f"{cmap.source} names column '{missing[0]}', which {log.name} does not have; its columns: "
                              f"{', '.join(map(str, df.columns))}")
-    prepare_output(out, force)
+    if cmap.angles:
+        _prepare_table(out, force, cmap.source)
+    else:
+        prepare_output(out, force)
     n_rows = len(df)
     lines = np.arange(len(df)) + 2  # line numbers in the file (line 1 is the header)
     if cmap.time_column:
@@ -344,6 +433,26 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
         cur = (_numeric(df, k.current, where)[is_motor] * k.current_factor if k is not None and k.current
                else np.zeros_like(p))
         motor[f"{dof}_current_ma"] = np.nan_to_num(cur)
+    for col in cmap.extras:
+        motor[col] = _numeric(df, col, where)[is_motor]
+
+    sha = hashlib.sha256(raw).hexdigest()
+    map_text = Path(cmap.source).read_bytes() if Path(cmap.source).is_file() else b""
+    source = {"name": "csv-import", "source": str(log), "sha256": sha, "map": cmap.source,
+              "map_sha256": hashlib.sha256(map_text).hexdigest() if map_text else None}
+    backend = {"name": "csv-import", "map": cmap.raw, "rows": n_rows, "duplicates_dropped": dropped,
+               "command_source": ("goal columns" if all(k.goal for k in cmap.knobs.values()) else
+                                  "knob position where no goal column is mapped (the servo's lag is not in the data)")}
+    dt = np.diff(motor["t_s"])
+    rate = float(1.0 / np.median(dt)) if dt.size and np.median(dt) > 0 else None
+    columns = {"time": cmap.time_column or f"{cmap.sample_rate_hz:g} Hz", **{d: k.position for d, k in cmap.knobs.items()},
+               **{f"{a}{MEAS}": ang.column for a, ang in cmap.angles.items()}}
+    if cmap.angles:
+        n_read, table = _angles_table(df, t, motor, cmap, where)
+        _write_table(out, table, {"source": source, "backend": backend, "command": command,
+                                  "software": software_versions()})
+        return CsvImportResult(out, n_rows, True, len(motor["t_s"]), n_read, len(table), dropped,
+                               float(motor["t_s"][-1]), rate, columns, None)
 
     def pose_rows(pc: _Pose) -> np.ndarray:
         xyz = np.column_stack([_numeric(df, c, where) for c in pc.position]) * pc.factor
@@ -360,22 +469,74 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
     if not is_frame.any():
         raise RunFormatError(f"{where}: no row has both the tip and the base pose")
     tracker = tracker_stream(tip[is_frame], base[is_frame], valid[is_frame])
-
-    sha = hashlib.sha256(raw).hexdigest()
-    map_text = Path(cmap.source).read_bytes() if Path(cmap.source).is_file() else b""
-    source = {"name": "csv-import", "source": str(log), "sha256": sha, "map": cmap.source,
-              "map_sha256": hashlib.sha256(map_text).hexdigest() if map_text else None}
-    backend = {"name": "csv-import", "map": cmap.raw, "rows": n_rows, "duplicates_dropped": dropped,
-               "command_source": ("goal columns" if all(k.goal for k in cmap.knobs.values()) else
-                                  "knob position where no goal column is mapped (the servo's lag is not in the data)")}
     meta = write_imported_run(out, motor, tracker, probe, source=source, backend=backend, command=command, wall0=wall0)
-    dt = np.diff(motor["t_s"])
-    rate = float(1.0 / np.median(dt)) if dt.size and np.median(dt) > 0 else None
-    return CsvImportResult(out, n_rows, meta["motor_rows"], int(is_frame.sum()), meta["counts"].get("aligned_rows", 0),
-                           dropped, float(motor["t_s"][-1]), rate,
-                           {"time": cmap.time_column or f"{cmap.sample_rate_hz:g} Hz",
-                            **{d: k.position for d, k in cmap.knobs.items()}},
+    return CsvImportResult(out, n_rows, False, meta["motor_rows"], int(is_frame.sum()),
+                           meta["counts"].get("aligned_rows", 0), dropped, float(motor["t_s"][-1]), rate, columns,
                            meta.get("alignment_error"))
+
+
+def _prepare_table(out: Path, force: bool, map_source: str) -> None:
+    """Check that ``out`` can become an aligned table file (without creating it)."""
+    if out.suffix.lower() not in TABLE_SUFFIXES:
+        raise OutputPathError(f"{map_source} maps measured angles, not EM poses, so the import is an aligned table: "
+                              f"give --out a .parquet or .csv file name (got {out})")
+    if out.is_dir():
+        raise OutputPathError(f"output {out} is a folder: choose a .parquet or .csv file name for --out")
+    if out.exists() and not force:
+        raise OutputExistsError(f"output {out} already exists: choose a new --out or pass --force to replace it")
+    probe_dir = out.parent
+    while not probe_dir.exists():
+        probe_dir = probe_dir.parent
+    if not probe_dir.is_dir():
+        raise OutputPathError(f"cannot create {out}: {probe_dir} is not a folder")
+
+
+def _angles_table(df: pd.DataFrame, t: np.ndarray, motor: dict, cmap: CsvMap, where: str) -> tuple[int, pd.DataFrame]:
+    """The aligned table of a log with measured angles, and how many rows held a reading.
+
+    The readings are interpolated onto the motor samples inside their span, across gaps of
+    at most :data:`MAX_GAP_S` (as tracker frames are in :func:`endocal.runs.aligned.align`).
+    """
+    meas = {a: ang.convert(_numeric(df, ang.column, where)) for a, ang in cmap.angles.items()}
+    is_read = np.logical_and.reduce([np.isfinite(v) for v in meas.values()])
+    if not is_read.any():
+        raise RunFormatError(f"{where}: no row has every measured angle "
+                             f"({', '.join(a.column for a in cmap.angles.values())})")
+    t_read, t_motor = t[is_read], motor["t_s"]
+    ok = measured_at(t_read, t_motor, MAX_GAP_S)
+    if not ok.any():
+        raise RunFormatError(f"{where}: no motor sample lies within {MAX_GAP_S:g} s of an angle reading")
+    probe = cmap.probe
+    table = {"t_s": t_motor[ok]}
+    for axis in cmap.angles:
+        table[axis + CMD] = motor[f"{axis}_goal_deg"][ok]
+        table[axis + MEAS] = np.interp(t_motor[ok], t_read, meas[axis][is_read])
+    for dof, k in cmap.knobs.items():
+        u = probe.unit(dof)
+        if k.goal or dof not in cmap.angles:
+            table[f"{dof}_pos_{u}"] = motor[f"{dof}_pos_{u}"][ok]
+        if k.current:
+            table[f"{dof}_current_ma"] = motor[f"{dof}_current_ma"][ok]
+    for col in cmap.extras:
+        table[col] = motor[col][ok]
+    out = pd.DataFrame(table)
+    check_aligned(out, where)
+    return int(is_read.sum()), out
+
+
+def _write_table(out: Path, table: pd.DataFrame, provenance: dict) -> None:
+    """Write the aligned table whole or not at all; Parquet carries the provenance as metadata."""
+    if out.suffix.lower() == ".csv":
+        data = table.to_csv(index=False).encode()
+    else:
+        arrow = pa.Table.from_pandas(table, preserve_index=False)
+        arrow = arrow.replace_schema_metadata({**(arrow.schema.metadata or {}),
+                                               b"endocal": json.dumps(provenance, default=str).encode()})
+        buf = io.BytesIO()
+        pq.write_table(arrow, buf)
+        data = buf.getvalue()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(out, data)
 
 
 __all__ = ["CsvImportResult", "CsvMap", "import_csv", "read_map"]
