@@ -100,7 +100,30 @@ def test_duplicated_stamps_are_refused_or_dropped(sim_log, tmp_path):
     clash.loc[101, "stamp_ms"] = clash.loc[100, "stamp_ms"]  # the same stamp on rows that differ
     clash.to_csv(tmp_path / "clash.csv", index=False)
     one_line_exit_2(endocal("import", "csv", tmp_path / "clash.csv", "--map", MAP, "--out", tmp_path / "r3",
-                            "--dedupe"), "differ share a time stamp", "line 103")
+                            "--dedupe"), "lines 102 and 103 share a time stamp", "differ in column 'ap_present_ticks'")
+
+
+def test_a_motor_tick_and_a_frame_logged_in_one_millisecond_on_two_rows_are_merged(sim_log, tmp_path):
+    # a logger writing one row per message: where a tick and a frame share a stamp, the motor
+    # cells and the pose cells come on two rows, the other's cells empty
+    log = pd.read_csv(sim_log / "log.csv")
+    pose = [c for c in log.columns if c.startswith(("tip_", "base_"))]
+    both = log[pose].notna().all(axis=1) & log["ap_present_ticks"].notna()
+    motor_part, pose_part = log[both].copy(), log[both].copy()
+    motor_part[pose] = np.nan
+    pose_part[[c for c in log.columns if c not in pose and c != "stamp_ms"]] = np.nan
+    split = pd.concat([log[~both], motor_part, pose_part]).sort_values("stamp_ms", kind="stable")
+    split.to_csv(tmp_path / "split.csv", index=False)
+    n = int(both.sum())
+    assert n > 100  # every frame of the 40 Hz tracker shares its instant with a 100 Hz motor tick
+    one_line_exit_2(endocal("import", "csv", tmp_path / "split.csv", "--map", MAP, "--out", tmp_path / "r1"),
+                    f"{n} row(s) repeat a time stamp", "--dedupe")
+    ok = endocal("import", "csv", tmp_path / "split.csv", "--map", MAP, "--out", tmp_path / "r2", "--dedupe")
+    assert ok.returncode == 0 and f"merged {n} row(s)" in ok.stderr, ok.stderr
+    a, b = load_aligned(sim_log / "run").table, load_aligned(tmp_path / "r2").table
+    assert len(a) == len(b)
+    for axis in ("ap", "ml"):
+        np.testing.assert_allclose(b[f"{axis}_meas_deg"], a[f"{axis}_meas_deg"], atol=1e-9)
 
 
 def _map(tmp_path: Path, old: str, new: str) -> Path:

@@ -20,7 +20,7 @@ def import_csv_cmd(
     log: Path = typer.Argument(..., help="The CSV log (one header row; a row per sample)."),
     map_path: Path = typer.Option(..., "--map", help="TOML map naming its columns and units; see configs/csv-map.example.toml."),
     out_dir: Path = typer.Option(..., "--out", "-o", help="Run folder to create; a .parquet or .csv aligned table when the map gives measured [angles] instead of poses."),
-    dedupe: bool = typer.Option(False, "--dedupe", help="Drop rows that repeat an earlier row exactly (ROS bridges write them); without it duplicated time stamps are refused."),
+    dedupe: bool = typer.Option(False, "--dedupe", help="Drop rows that repeat an earlier row exactly (ROS bridges write them) and merge rows of one time stamp that fill different columns (a motor tick and a tracker frame in the same millisecond); without it duplicated time stamps are refused."),
     force: bool = typer.Option(False, "--force", help="Replace --out if it is a run folder."),
 ) -> None:
     """Convert a lab's CSV log into a run folder: knob positions (deg, rad or servo ticks),
@@ -41,5 +41,8 @@ def import_csv_cmd(
     out.print("columns: " + ", ".join(f"{k} <- {v}" for k, v in res.columns.items()), markup=False)
     if res.duplicates_dropped:
         err.print(f"note: --dedupe dropped {res.duplicates_dropped} row(s) repeating an earlier row exactly")
+    if res.rows_merged:
+        err.print(f"note: --dedupe merged {res.rows_merged} row(s) into an earlier row of the same time stamp "
+                  "(different columns filled)")
     if res.alignment_error:
         err.print(f"warning: no aligned table: {res.alignment_error}")

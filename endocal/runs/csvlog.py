@@ -24,8 +24,10 @@ eq. 1's. ``extras`` names further numeric columns (a sheath configuration, a loa
 into the aligned table, where models take them as covariates (``load:COLUMN``).
 
 Duplicated time stamps (ROS bridges often write them) are refused by default, with their
-count and the first line; ``dedupe=True`` drops rows that repeat an earlier row exactly and
-says how many, and still refuses a stamp shared by rows that differ.
+count and the first line; ``dedupe=True`` drops rows that repeat an earlier row exactly,
+merges rows of one stamp that fill different columns (a motor tick and a tracker frame logged
+in the same millisecond) and says how many, and still refuses a stamp shared by rows with
+different values in one column.
 """
 
 from __future__ import annotations
@@ -76,6 +78,7 @@ class CsvImportResult:
     tracker_frames: int
     aligned_rows: int
     duplicates_dropped: int
+    rows_merged: int
     duration_s: float
     rate_hz: float | None
     columns: dict
@@ -331,23 +334,47 @@ def _numeric(df: pd.DataFrame, col: str, where: str) -> np.ndarray:
 
 
 def _dedupe(df: pd.DataFrame, t: np.ndarray, lines: np.ndarray, dedupe: bool,
-            where: str) -> tuple[pd.DataFrame, np.ndarray, np.ndarray, int]:
-    """Drop exact duplicate rows (with ``dedupe``), then refuse any time stamp still shared.
+            where: str) -> tuple[pd.DataFrame, np.ndarray, np.ndarray, int, int]:
+    """Drop exact duplicate rows and merge rows of one stamp (with ``dedupe``), then refuse any
+    time stamp still shared.
 
-    ``lines`` are the rows' line numbers in the file (for messages); returned filtered alike.
+    A logger writing one row per message puts a motor tick and a tracker frame that arrive in
+    the same millisecond on two rows with one stamp, each with the other device's cells empty:
+    ``dedupe`` merges such rows into one. Rows of one stamp with different values in the same
+    column are a conflict no merge can settle, and are refused.
+
+    ``lines`` are the rows' line numbers in the file (for messages); returned filtered alike,
+    with the number of exact repeats dropped and of rows merged into an earlier one.
     """
-    dropped = 0
+    dropped = merged = 0
     if dedupe:
         exact = df.duplicated(keep="first").to_numpy()
         dropped = int(exact.sum())
         df, t, lines = df[~exact].reset_index(drop=True), t[~exact], lines[~exact]
+        shared = np.concatenate([[False], np.diff(t) == 0])
+        if shared.any():
+            group = np.cumsum(~shared)  # t does not decrease here, or the log is refused next
+            dup = pd.Series(shared | np.concatenate([shared[1:], [False]]))
+            sub = df[dup.to_numpy()]
+            conflict = sub.groupby(group[dup.to_numpy()], sort=False).nunique(dropna=True).max(axis=1) > 1
+            if conflict.any():
+                g = int(conflict.index[np.argmax(conflict.to_numpy())])
+                rows = np.flatnonzero(group == g)
+                col = next(c for c in df.columns if df.iloc[rows][c].dropna().nunique() > 1)
+                raise RunFormatError(f"{where}: rows at lines {lines[rows[0]]} and {lines[rows[1]]} share a time stamp "
+                                     f"(t = {t[rows[0]]:g}) but differ in column '{col}'; no merge can settle which "
+                                     "is right: fix the log's clock")
+            merged = int(shared.sum())
+            df = df.groupby(group, sort=False).first().reset_index(drop=True)
+            keep = ~shared
+            t, lines = t[keep], lines[keep]
     same = np.concatenate([[False], np.diff(t) == 0])
     if same.any():
         first = int(np.flatnonzero(same)[0])
-        what = ("row(s) that differ share a time stamp even after dropping exact repeats" if dedupe else
-                "row(s) repeat a time stamp (pass --dedupe to drop rows that repeat an earlier row exactly)")
-        raise RunFormatError(f"{where}: {int(same.sum())} {what}; the first at line {lines[first]} (t = {t[first]:g})")
-    return df, t, lines, dropped
+        raise RunFormatError(f"{where}: {int(same.sum())} row(s) repeat a time stamp (pass --dedupe to drop rows that "
+                             "repeat an earlier row exactly and merge rows of one stamp that fill different columns); "
+                             f"the first at line {lines[first]} (t = {t[first]:g})")
+    return df, t, lines, dropped, merged
 
 
 def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *, dedupe: bool = False,
@@ -364,7 +391,8 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
         Run folder to create; with a map of measured ``angles``, the aligned table to write
         (``.parquet`` or ``.csv``).
     dedupe : bool
-        Drop rows that repeat an earlier row exactly (else duplicated time stamps are refused).
+        Drop rows that repeat an earlier row exactly and merge rows of one stamp that fill
+        different columns (else duplicated time stamps are refused).
     force : bool
         Replace an existing run folder (or table).
 
@@ -399,7 +427,7 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
         if not np.isfinite(t).all():
             line = int(lines[np.flatnonzero(~np.isfinite(t))[0]])
             raise RunFormatError(f"{where}: time column '{cmap.time_column}' is empty or not a number at line {line}")
-        df, t, lines, dropped = _dedupe(df, t, lines, dedupe, where)
+        df, t, lines, dropped, merged = _dedupe(df, t, lines, dedupe, where)
         back = np.flatnonzero(np.diff(t) < 0)
         if back.size:
             k = int(back[0])
@@ -407,7 +435,7 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
                                  "sort the log by time")
     else:
         exact = df.duplicated(keep="first").to_numpy() if dedupe else np.zeros(len(df), bool)
-        dropped = int(exact.sum())
+        dropped, merged = int(exact.sum()), 0
         df = df[~exact].reset_index(drop=True)
         t = np.arange(len(df)) / cmap.sample_rate_hz
     t0 = float(t[0])
@@ -441,6 +469,7 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
     source = {"name": "csv-import", "source": str(log), "sha256": sha, "map": cmap.source,
               "map_sha256": hashlib.sha256(map_text).hexdigest() if map_text else None}
     backend = {"name": "csv-import", "map": cmap.raw, "rows": n_rows, "duplicates_dropped": dropped,
+               "rows_merged": merged,
                "command_source": ("goal columns" if all(k.goal for k in cmap.knobs.values()) else
                                   "knob position where no goal column is mapped (the servo's lag is not in the data)")}
     dt = np.diff(motor["t_s"])
@@ -451,7 +480,7 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
         n_read, table = _angles_table(df, t, motor, cmap, where)
         _write_table(out, table, {"source": source, "backend": backend, "command": command,
                                   "software": software_versions()})
-        return CsvImportResult(out, n_rows, True, len(motor["t_s"]), n_read, len(table), dropped,
+        return CsvImportResult(out, n_rows, True, len(motor["t_s"]), n_read, len(table), dropped, merged,
                                float(motor["t_s"][-1]), rate, columns, None)
 
     def pose_rows(pc: _Pose) -> np.ndarray:
@@ -471,7 +500,7 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
     tracker = tracker_stream(tip[is_frame], base[is_frame], valid[is_frame])
     meta = write_imported_run(out, motor, tracker, probe, source=source, backend=backend, command=command, wall0=wall0)
     return CsvImportResult(out, n_rows, False, meta["motor_rows"], int(is_frame.sum()),
-                           meta["counts"].get("aligned_rows", 0), dropped, float(motor["t_s"][-1]), rate, columns,
+                           meta["counts"].get("aligned_rows", 0), dropped, merged, float(motor["t_s"][-1]), rate, columns,
                            meta.get("alignment_error"))
 
 
