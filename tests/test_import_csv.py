@@ -211,3 +211,24 @@ def test_bad_angle_maps_and_outputs_are_one_line(bench_log, tmp_path, edit, out,
     one_line_exit_2(endocal("import", "csv", bench_log[0], "--map", tmp_path / "map.toml", "--out", tmp_path / out),
                     *fragments)
     assert not (tmp_path / out).exists()
+
+
+def test_a_clock_written_as_date_and_time_text(sim_log, tmp_path):
+    # LabVIEW and spreadsheet exports stamp rows with date-time text, here to the microsecond
+    log = pd.read_csv(sim_log / "log.csv")
+    start = pd.Timestamp("2026-11-24 15:09:47")
+    log.insert(0, "stamp", (start + pd.to_timedelta(log.pop("stamp_ms"), unit="ms")).dt.strftime("%Y-%m-%d %H:%M:%S.%f"))
+    log.to_csv(tmp_path / "dated.csv", index=False)
+    text = MAP.read_text().replace('column = "stamp_ms"', 'column = "stamp"').replace('unit = "ms"', 'unit = "datetime"')
+    (tmp_path / "map.toml").write_text(text)
+    ok = endocal("import", "csv", tmp_path / "dated.csv", "--map", tmp_path / "map.toml", "--out", tmp_path / "r")
+    assert ok.returncode == 0, ok.stderr
+    a, b = load_aligned(sim_log / "run").table, load_aligned(tmp_path / "r").table
+    assert len(a) == len(b)
+    np.testing.assert_allclose(b["t_s"], a["t_s"], atol=1.5e-6)  # stamps rounded to the microsecond
+    # a microsecond of shift moves the interpolated angle by < 1e-4 deg (bends < 100 deg/s)
+    np.testing.assert_allclose(b["ap_meas_deg"], a["ap_meas_deg"], atol=1e-3)
+    log.loc[5, "stamp"] = "24/11/2026 quarter past three"
+    log.to_csv(tmp_path / "bad.csv", index=False)
+    one_line_exit_2(endocal("import", "csv", tmp_path / "bad.csv", "--map", tmp_path / "map.toml", "--out",
+                            tmp_path / "r2"), "time column 'stamp' is not a date and time at line 7", "quarter past")

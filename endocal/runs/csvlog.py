@@ -52,7 +52,7 @@ from endocal.runs.format import atomic_write_bytes, prepare_output, software_ver
 from endocal.runs.imported import tracker_stream, write_imported_run
 from endocal.runs.textable import read_csv_table
 
-TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "datetime": None}  # s per unit; datetime: text stamps
 ANGLE_UNITS = ("deg", "rad", "ticks")
 _SCALE = {"deg": 1.0, "rad": 180.0 / np.pi, "mm": 1.0, "m": 1000.0}  # to the run's deg or mm
 LENGTH_UNITS = {"mm": 1.0, "m": 1000.0}
@@ -132,7 +132,8 @@ class CsvMap:
     ----------
     probe : ProbeConfig
     time_column : str or None
-        With ``time_factor`` (s per unit); None when ``sample_rate_hz`` gives the clock.
+        With ``time_factor`` (s per unit, None for date-time text such as
+        ``2026-11-24 15:09:47.123``); None when ``sample_rate_hz`` gives the clock.
     sample_rate_hz : float or None
     knobs : dict
         Degree of freedom -> knob columns and unit.
@@ -150,7 +151,7 @@ class CsvMap:
 
     probe: ProbeConfig
     time_column: str | None
-    time_factor: float
+    time_factor: float | None
     sample_rate_hz: float | None
     knobs: dict
     tip: _Pose | None
@@ -276,7 +277,7 @@ def read_map(path: str | Path) -> CsvMap:
     t = _table(d, "time", where, _TIME_KEYS)
     column, rate = t.get("column"), t.get("sample_rate_hz")
     if (column is None) == (rate is None):
-        raise RunFormatError(f"{where} [time]: give either column (with unit s, ms, us or ns) or sample_rate_hz "
+        raise RunFormatError(f"{where} [time]: give either column (with unit s, ms, us, ns or datetime) or sample_rate_hz "
                              "(a log without a clock)")
     factor = TIME_UNITS[_choice(t.get("unit", "s"), TIME_UNITS, "time unit", f"{where} [time]")]
     if rate is not None and not (isinstance(rate, (int, float)) and rate > 0):
@@ -331,6 +332,18 @@ def _numeric(df: pd.DataFrame, col: str, where: str) -> np.ndarray:
         bad = pd.to_numeric(df[col], errors="coerce").isna() & df[col].notna()
         line = int(np.flatnonzero(bad.to_numpy())[0]) + 2
         raise RunFormatError(f"{where}: column '{col}' is not numeric (line {line}: {df[col].iloc[line - 2]!r})") from None
+
+
+def _datetime_s(df: pd.DataFrame, col: str, where: str) -> np.ndarray:
+    """Date-time text (ISO 8601 as loggers and spreadsheets write it) as seconds since the epoch."""
+    raw = df[col]
+    stamps = pd.to_datetime(raw, errors="coerce", format="ISO8601", utc=True)
+    bad = stamps.isna().to_numpy() & raw.notna().to_numpy()
+    if bad.any():
+        line = int(np.flatnonzero(bad)[0])
+        raise RunFormatError(f"{where}: time column '{col}' is not a date and time at line {line + 2} "
+                             f"({raw.iloc[line]!r}); write it as 2026-11-24 15:09:47.123, or give its unit (s, ms, us, ns)")
+    return (stamps - stamps.min()).dt.total_seconds().to_numpy(float)  # the origin is dropped later anyway
 
 
 def _dedupe(df: pd.DataFrame, t: np.ndarray, lines: np.ndarray, dedupe: bool,
@@ -423,7 +436,8 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
     n_rows = len(df)
     lines = np.arange(len(df)) + 2  # line numbers in the file (line 1 is the header)
     if cmap.time_column:
-        t = _numeric(df, cmap.time_column, where) * cmap.time_factor
+        t = (_datetime_s(df, cmap.time_column, where) if cmap.time_factor is None else
+             _numeric(df, cmap.time_column, where) * cmap.time_factor)
         if not np.isfinite(t).all():
             line = int(lines[np.flatnonzero(~np.isfinite(t))[0]])
             raise RunFormatError(f"{where}: time column '{cmap.time_column}' is empty or not a number at line {line}")
