@@ -10,6 +10,9 @@ flushed, and ``run.json`` records how the run ended.
 
 from __future__ import annotations
 
+import functools
+import signal
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -60,6 +63,31 @@ class ExciteResult:
         return self.logged_s / self.wall_s if self.wall_s > 0 else float("inf")
 
 
+def _ctrl_c_stops_the_run(func):
+    """Make SIGINT (Ctrl-C, ``kill -INT``) stop the run even in a process started with it ignored.
+
+    A shell script's background job (``endocal excite ... &``), and some launchers, start the
+    process with SIGINT ignored, and Python then leaves it ignored: the robot would keep moving
+    on Ctrl-C. For the run, SIGINT raises ``KeyboardInterrupt`` as usual (torque off, the run
+    kept, status ``interrupted``); the ignored disposition is restored afterwards.
+    """
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        ignored = (threading.current_thread() is threading.main_thread()
+                   and signal.getsignal(signal.SIGINT) is signal.SIG_IGN)
+        if not ignored:
+            return func(*args, **kwargs)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        try:
+            return func(*args, **kwargs)
+        finally:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+    return wrapper
+
+
+@_ctrl_c_stops_the_run
 def run_excitation(
     trajectory: Trajectory,
     backend: Backend,

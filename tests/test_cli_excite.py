@@ -147,7 +147,18 @@ def test_kill_9_loses_at_most_two_seconds(tmp_path):
     assert data.t_s[-1] >= reached_t_s - 2.0 - 0.1
 
 
-def test_ctrl_c_stops_cleanly_and_leaves_a_valid_run(tmp_path):
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)  # whatever the test runner's own disposition
+
+
+def _ignore_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+# started as a shell script's background job (`endocal excite ... &`) the process begins with
+# SIGINT ignored, and Python leaves it so: the run must still stop on it
+@pytest.mark.parametrize("started", ["from a terminal", "with SIGINT ignored"])
+def test_ctrl_c_stops_cleanly_and_leaves_a_valid_run(tmp_path, started):
     run = tmp_path / "stopped"
     proc = subprocess.Popen(
         [sys.executable, "-m", "endocal", "excite", "sine-set", "--out", str(run), "--realtime", "--quiet"],
@@ -155,6 +166,7 @@ def test_ctrl_c_stops_cleanly_and_leaves_a_valid_run(tmp_path):
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=_ignore_sigint if started == "with SIGINT ignored" else _default_sigint,
     )
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and not list((run / "motor").glob("part-*.parquet")):
