@@ -117,3 +117,15 @@ def test_positional_records_after_data_are_split_from_models(files):
     models, records = split_paths([files / "linear.json", files / "b.csv", files], [files / "a.csv"])
     assert models == [files / "linear.json"]
     assert records == [files / "a.csv", files / "b.csv", files]
+
+
+def test_two_reports_share_a_folder(files):
+    # each page's JSON and metrics CSV are named after it, so a second report does not collide
+    for name in ("linear", "bspline"):
+        res = CliRunner().invoke(_app(), ["report", str(files / f"{name}.json"), "--data", str(files / "a.csv"),
+                                          "--out", str(files / "both" / f"{name}.html"), "--bootstrap", "50", "-q"])
+        assert res.exit_code == 0, res.output
+    for name in ("linear", "bspline"):
+        saved = json.loads((files / "both" / f"{name}.json").read_text())
+        assert [m["model"] for m in saved["metrics"]] == [name]
+        assert (files / "both" / f"{name}_metrics.csv").is_file()

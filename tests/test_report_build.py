@@ -263,5 +263,5 @@ def test_planes_without_their_runs_say_so(sim, tmp_path):
     assert fig.title.endswith("(fitted geometry only)")
     html = (tmp_path / "r.html").read_text()
     assert "were not found" in html and "(fitted geometry only)" in html
-    saved = json.loads((tmp_path / "report.json").read_text())["planes_sweeps"]
+    saved = json.loads((tmp_path / "r.json").read_text())["planes_sweeps"]
     assert saved["before"] is None and saved["after"] is None

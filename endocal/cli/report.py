@@ -34,8 +34,8 @@ def report(
     paths: list[Path] = typer.Argument(..., help="Model files (MODEL.json from `endocal fit hysteresis`)."),
     data: list[Path] = typer.Option(..., "--data", "-d", help="Run folders or aligned tables (.parquet/.csv) to "
                                     "evaluate on: `--data A B` or `--data A --data B`."),
-    out_path: Path = typer.Option(..., "--out", "-o", help="HTML file to write; report.json and report_metrics.csv "
-                                  "are written beside it."),
+    out_path: Path = typer.Option(..., "--out", "-o", help="HTML file to write; NAME.json and NAME_metrics.csv "
+                                  "are written beside it (report.json, report_metrics.csv for report.html)."),
     planes: Optional[Path] = typer.Option(None, "--planes", help="planes.json from `endocal fit planes`: adds the "
                                           "bending-plane figure before/after orthogonal compensation."),
     bootstrap: int = typer.Option(400, "--bootstrap", help="Block-bootstrap replicates for the 95 % intervals "
@@ -54,6 +54,7 @@ def report(
     that is significant. A model that cannot be evaluated on a record is listed with the reason.
     """
     from endocal.report import build_report
+    from endocal.report.result import side_files
 
     models, records = split_paths(paths, data)
     show = not quiet and not as_json and err.is_terminal
@@ -69,11 +70,11 @@ def report(
     if as_json:
         d = json.loads(rep.to_json())
         out.print_json(json.dumps({k: d[k] for k in ("summary", "not_evaluated", "metrics", "ladder", "notes")} |
-                                  {"files": {"html": str(out_path), "json": str(out_path.parent / "report.json"),
-                                             "csv": str(out_path.parent / "report_metrics.csv")}}))
+                                  {"files": {k: str(v) for k, v in side_files(out_path).items()}}))
         return
     for line in rep.summary_lines():
         out.print(line, markup=False)
     for note in rep.notes:
         err.print(note, markup=False)
-    err.print(f"wrote {out_path} (+ report.json, report_metrics.csv)", markup=False)
+    files = side_files(out_path)
+    err.print(f"wrote {out_path} (+ {files['json'].name}, {files['csv'].name})", markup=False)

@@ -18,8 +18,12 @@ from endocal.report.planes import PlanesView
 from endocal.runs.format import atomic_write_bytes
 from endocal.validation.metrics import METRIC_KEYS
 
-JSON_NAME = "report.json"
-CSV_NAME = "report_metrics.csv"
+def side_files(out_html: str | Path) -> dict[str, Path]:
+    """The report's files: the HTML page and, beside it, ``<name>.json`` and ``<name>_metrics.csv``
+    (``report.json`` and ``report_metrics.csv`` for ``report.html``), so that several reports
+    can share a folder."""
+    out = Path(out_html)
+    return {"html": out, "json": out.with_suffix(".json"), "csv": out.with_name(f"{out.stem}_metrics.csv")}
 FORMAT = "endocal-report"
 VERSION = 1
 
@@ -188,7 +192,7 @@ class Report:
 
     # ------------------------------------------------------------------ files
     def write(self, out_html: str | Path, *, force: bool = False) -> dict[str, Path]:
-        """Write the HTML page and, beside it, ``report.json`` and ``report_metrics.csv``.
+        """Write the HTML page and, beside it, its JSON and metrics CSV (:func:`side_files`).
 
         Parameters
         ----------
@@ -231,7 +235,7 @@ def check_output(out_html: str | Path, *, force: bool = False) -> dict[str, Path
         One of the files exists and ``force`` is False.
     """
     out = Path(out_html)
-    paths = {"html": out, "json": out.parent / JSON_NAME, "csv": out.parent / CSV_NAME}
+    paths = side_files(out)
     if out.suffix.lower() not in (".html", ".htm"):
         raise OutputPathError(f"{out}: the report is an HTML file; give --out a name ending in .html")
     if not force:
