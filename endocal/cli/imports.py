@@ -21,7 +21,7 @@ def import_csv_cmd(
     map_path: Path = typer.Option(..., "--map", help="TOML map naming its columns and units; see configs/csv-map.example.toml."),
     out_dir: Path = typer.Option(..., "--out", "-o", help="Run folder to create; a .parquet or .csv aligned table when the map gives measured [angles] instead of poses."),
     dedupe: bool = typer.Option(False, "--dedupe", help="Drop rows that repeat an earlier row exactly (ROS bridges write them) and merge rows of one time stamp that fill different columns (a motor tick and a tracker frame in the same millisecond); without it duplicated time stamps are refused."),
-    force: bool = typer.Option(False, "--force", help="Replace --out if it is a run folder."),
+    force: bool = typer.Option(False, "--force", help="Replace --out if it is a run folder (or the table an angles map writes)."),
 ) -> None:
     """Convert a lab's CSV log into a run folder: knob positions (deg, rad or servo ticks),
     optional goals and currents, tip and base EM poses (mm or m, quaternions xyzw or wxyz).

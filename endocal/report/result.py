@@ -18,14 +18,16 @@ from endocal.report.planes import PlanesView
 from endocal.runs.format import atomic_write_bytes
 from endocal.validation.metrics import METRIC_KEYS
 
+FORMAT = "endocal-report"
+VERSION = 1
+
+
 def side_files(out_html: str | Path) -> dict[str, Path]:
     """The report's files: the HTML page and, beside it, ``<name>.json`` and ``<name>_metrics.csv``
     (``report.json`` and ``report_metrics.csv`` for ``report.html``), so that several reports
     can share a folder."""
     out = Path(out_html)
     return {"html": out, "json": out.with_suffix(".json"), "csv": out.with_name(f"{out.stem}_metrics.csv")}
-FORMAT = "endocal-report"
-VERSION = 1
 
 
 @dataclass
