@@ -232,3 +232,32 @@ def test_a_clock_written_as_date_and_time_text(sim_log, tmp_path):
     log.to_csv(tmp_path / "bad.csv", index=False)
     one_line_exit_2(endocal("import", "csv", tmp_path / "bad.csv", "--map", tmp_path / "map.toml", "--out",
                             tmp_path / "r2"), "time column 'stamp' is not a date and time at line 7", "quarter past")
+
+
+def test_a_clamped_base_given_as_one_fixed_pose(sim_log, tmp_path):
+    # the simulated probe's base does not move in this run: its pose, written once into the map,
+    # gives the same angles as the same pose logged on every row
+    log = pd.read_csv(sim_log / "log.csv")
+    cols = ["base_x_m", "base_y_m", "base_z_m", "base_qw", "base_qx", "base_qy", "base_qz"]
+    pose = log[cols].mean().to_numpy().copy()
+    pose[3:] /= np.linalg.norm(pose[3:])
+    frames = log["tip_x_m"].notna()
+    log.loc[frames, cols] = pose
+    log.to_csv(tmp_path / "logged.csv", index=False)
+    fixed = MAP.read_text().replace('# fixed_position = [0.012, -0.034, 0.151]', f"fixed_position = {pose[:3].tolist()}")
+    fixed = fixed.replace("# fixed_quaternion = [1.0, 0.0, 0.0, 0.0]", f"fixed_quaternion = {pose[3:].tolist()}")
+    fixed = fixed.replace('position = ["base_x_m", "base_y_m", "base_z_m"]\n', "").replace(
+        'quaternion = ["base_qw", "base_qx", "base_qy", "base_qz"]\n', "")
+    (tmp_path / "fixed.toml").write_text(fixed)
+    log.drop(columns=cols).to_csv(tmp_path / "tip_only.csv", index=False)
+    for name, m, out in (("logged.csv", MAP, "a"), ("tip_only.csv", tmp_path / "fixed.toml", "b")):
+        proc = endocal("import", "csv", tmp_path / name, "--map", m, "--out", tmp_path / out)
+        assert proc.returncode == 0, proc.stderr
+    a, b = load_aligned(tmp_path / "a").table, load_aligned(tmp_path / "b").table
+    assert len(a) == len(b)
+    for axis in ("ap", "ml"):
+        np.testing.assert_allclose(b[f"{axis}_meas_deg"], a[f"{axis}_meas_deg"], atol=1e-9)
+    (tmp_path / "bad.toml").write_text(fixed.replace(f"fixed_quaternion = {pose[3:].tolist()}",
+                                                     "fixed_quaternion = [1.0, 0.0, 0.0, 0.5]"))
+    one_line_exit_2(endocal("import", "csv", tmp_path / "tip_only.csv", "--map", tmp_path / "bad.toml", "--out",
+                            tmp_path / "c"), "fixed_quaternion a unit quaternion")

@@ -64,7 +64,7 @@ TABLE_SUFFIXES = (".parquet", ".csv")
 MAX_GAP_S = 0.2  # longest gap between angle readings to interpolate across, as align() for tracker frames
 _TIME_KEYS = {"column", "unit", "sample_rate_hz"}
 _KNOB_KEYS = {"position", "goal", "current", "unit", "zero_ticks", "ticks_per_rev", "direction", "current_unit"}
-_POSE_KEYS = {"position", "unit", "quaternion", "order", "valid"}
+_POSE_KEYS = {"position", "unit", "quaternion", "order", "valid", "fixed_position", "fixed_quaternion"}
 
 
 @dataclass(frozen=True)
@@ -117,11 +117,14 @@ class _Angle:
 
 @dataclass(frozen=True)
 class _Pose:
+    """A sensor's pose columns, or (``fixed``) one pose for a sensor that never moves."""
+
     position: list[str]
     factor: float
     quaternion: list[str]
     order: str
     valid: str | None
+    fixed: tuple[float, ...] | None = None  # x, y, z (the map's unit), quaternion (the map's order)
 
 
 @dataclass(frozen=True)
@@ -194,11 +197,26 @@ def _names(value, n: int, what: str, where: str) -> list[str]:
     return list(value)
 
 
+def _numbers(v, n: int) -> bool:
+    return isinstance(v, list) and len(v) == n and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+
+
 def _pose(d: dict, key: str, where: str) -> _Pose:
     t = _table(d, key, where, _POSE_KEYS)
     w = f"{where} [{key}]"
     unit = _choice(t.get("unit", "mm"), LENGTH_UNITS, "length unit", w)
     order = _choice(t.get("order", "xyzw"), QUAT_ORDERS, "quaternion order", w)
+    fixed = [k for k in ("fixed_position", "fixed_quaternion") if k in t]
+    if fixed:
+        # one sensor on a clamped base: its pose, recorded once, stands for every frame
+        if len(fixed) < 2 or any(k in t for k in ("position", "quaternion", "valid")):
+            raise RunFormatError(f"{w}: a fixed pose takes fixed_position (3 numbers) and fixed_quaternion (4), "
+                                 "instead of position and quaternion columns")
+        pos, quat = t["fixed_position"], t["fixed_quaternion"]
+        if not (_numbers(pos, 3) and _numbers(quat, 4)) or not np.isclose(np.linalg.norm(quat), 1.0, atol=1e-3):
+            raise RunFormatError(f"{w}: fixed_position must be 3 numbers and fixed_quaternion a unit quaternion of 4 "
+                                 f"(got {pos!r} and {quat!r})")
+        return _Pose([], LENGTH_UNITS[unit], [], order, None, tuple(float(v) for v in [*pos, *quat]))
     valid = t.get("valid")
     if valid is not None and not isinstance(valid, str):
         raise RunFormatError(f"{w}: valid must name a column")
@@ -498,8 +516,12 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
                                float(motor["t_s"][-1]), rate, columns, None)
 
     def pose_rows(pc: _Pose) -> np.ndarray:
-        xyz = np.column_stack([_numeric(df, c, where) for c in pc.position]) * pc.factor
-        q = np.column_stack([_numeric(df, c, where) for c in pc.quaternion])
+        if pc.fixed is not None:
+            xyz = np.tile(np.array(pc.fixed[:3]) * pc.factor, (len(df), 1))
+            q = np.tile(np.array(pc.fixed[3:]), (len(df), 1))
+        else:
+            xyz = np.column_stack([_numeric(df, c, where) for c in pc.position]) * pc.factor
+            q = np.column_stack([_numeric(df, c, where) for c in pc.quaternion])
         wxyz = q if pc.order == "wxyz" else q[:, [3, 0, 1, 2]]
         return np.column_stack([t, xyz, wxyz])
 
