@@ -199,3 +199,30 @@ def test_a_loop_that_changed_between_records_is_put_down_to_speed_only_when_the_
     assert all(p.status == "untested" for p in ptrs)
     if "delay" in named:
         assert "2.8 times as fast" in next(p for p in ptrs if p.effect == "delay").evidence
+
+
+def _play_record(wrap_deg: np.ndarray, name: str) -> AlignedData:
+    """A sine through a play whose half width grows with the wrap column (capstan friction)."""
+    t, u = _sine(duration_s=wrap_deg.size / FS)
+    y, p = np.empty_like(u), 0.0
+    for k, (uk, w) in enumerate(zip(u, 2.0 + 0.02 * (wrap_deg - 180.0))):
+        p = min(max(p, uk - w), uk + w)
+        y[k] = 0.8 * p
+    df = pd.DataFrame({"t_s": t, "ap_cmd_deg": u, "ap_meas_deg": y, "sheath_wrap_deg": wrap_deg})
+    return AlignedData(df, ["ap"], Path(name), name[0] * 64, {})
+
+
+@pytest.mark.parametrize("effects, note", [([], "no extra column varies in the estimation data (1 constant)"),
+                                           (["load:sheath_wrap_deg"], None)])
+def test_load_is_called_unidentifiable_only_when_no_covariate_varies_and_none_is_modelled(effects, note):
+    from endocal.models import make_model
+    from endocal.validation.offline import validate_offline
+
+    n = 3000
+    wrap = 180.0 + 90.0 * np.sin(2 * np.pi * np.arange(n) / n)
+    est, val = _play_record(wrap, "est"), _play_record(wrap[::-1].copy(), "val")
+    flat = _play_record(np.full(n, 180.0), "flat")
+    train = [est] if effects else [flat]
+    model = make_model("linear", effects, axis="ap").fit(axis_data(train, "ap"))
+    res = validate_offline(model, [val], train=train, model_path="m.json")
+    assert res.scan.untestable.get("load", "").startswith(note) if note else "load" not in res.scan.untestable

@@ -554,11 +554,14 @@ def candidate_effects(model: HysteresisModel, data: HysteresisData, candidates: 
                     cols, constant = load_candidates(data, bending_axes)
                 else:
                     cols = list(load_columns)
-                cols = [c for c in cols if f"{name}:{c}" not in have]
-                if not cols:
+                modelled = [c for c in cols if f"{name}:{c}" in have]
+                cols = [c for c in cols if c not in modelled]
+                if not cols and not modelled:
                     where = "the estimation data" if not rolling else "the data"
-                    untestable[name] = (f"no extra column varies in {where} ({len(constant)} constant): {name} cannot "
-                                        "be identified (log a covariate such as sheath_wrap_deg, at two or more values)")
+                    what = (f"no extra column varies in {where} ({len(constant)} constant)" if constant else
+                            f"{where} has no extra column")
+                    untestable[name] = (f"{what}: {name} cannot be identified (log a covariate such as "
+                                        "sheath_wrap_deg, at two or more values)")
                 cands += [f"{name}:{c}" for c in cols]
             elif name not in have_names:
                 cands.append(name)
