@@ -261,3 +261,34 @@ def test_a_clamped_base_given_as_one_fixed_pose(sim_log, tmp_path):
                                                      "fixed_quaternion = [1.0, 0.0, 0.0, 0.5]"))
     one_line_exit_2(endocal("import", "csv", tmp_path / "tip_only.csv", "--map", tmp_path / "bad.toml", "--out",
                             tmp_path / "c"), "fixed_quaternion a unit quaternion")
+
+
+def test_a_headerless_logger_file_imports_by_column_number(tmp_path):
+    # the real piezo recording's own format (data_samples/piezo/README.md): tab-separated, no
+    # header, no clock (200 Hz), drive in column 1 and sensor in column 5, the rest constant
+    real = pd.read_csv(ROOT / "data_samples" / "piezo" / "piezo_aligned.csv")
+    n = len(real)
+    cols = [real["piezo_cmd_deg"], *([np.zeros(n)] * 3), real["piezo_meas_deg"], *([np.full(n, -317.205767)] * 2)]
+    (tmp_path / "piezo.dat").write_text("\n".join("\t".join(f"{v:.6f}" for v in row) for row in zip(*cols)) + "\n")
+    (tmp_path / "map.toml").write_text('[time]\nsample_rate_hz = 200.0\n\n[knobs.ap]\nposition = "1"\n\n'
+                                       '[angles.ap]\ncolumn = "5"\n')
+    proc = endocal("import", "csv", tmp_path / "piezo.dat", "--map", tmp_path / "map.toml", "--out",
+                   tmp_path / "piezo.parquet")
+    assert proc.returncode == 0, proc.stderr
+    b = load_aligned(tmp_path / "piezo.parquet").table
+    np.testing.assert_allclose(b["t_s"], real["t_s"], atol=1e-9)
+    np.testing.assert_allclose(b["ap_cmd_deg"], real["piezo_cmd_deg"], atol=1e-6)  # 6 decimals, as the file
+    np.testing.assert_allclose(b["ap_meas_deg"], real["piezo_meas_deg"], atol=1e-6)
+    # read as an aligned table it has no names: one line saying how to map it
+    one_line_exit_2(endocal("info", tmp_path / "piezo.dat"), "no header line", "endocal import csv --map")
+    bad = (tmp_path / "piezo.dat").read_text().splitlines()
+    fields = bad[9].split("\t")
+    for cell, expect in (("n/a", "3999 angle readings, 4000 aligned rows"), ("ERR", None)):
+        bad[9] = "\t".join(fields[:4] + [cell] + fields[5:])  # the sensor's reading on line 10
+        (tmp_path / "bad.dat").write_text("\n".join(bad) + "\n")
+        proc = endocal("import", "csv", tmp_path / "bad.dat", "--map", tmp_path / "map.toml", "--out",
+                       tmp_path / "bad.parquet", "--force")
+        if expect:  # a reading the logger marked missing is left out and interpolated across
+            assert proc.returncode == 0 and expect in proc.stdout, proc.stderr
+        else:
+            one_line_exit_2(proc, "column '5' is not numeric (line 10: 'ERR')")

@@ -66,9 +66,10 @@ def test_joint_goals_put_the_tip_on_the_desired_path(name):
     assert all(abs(g[0]) < 1e-12 and abs(g[-1]) < 1e-12 for g in traj.goal.values())
 
 
-def test_points_csv_with_z_off_the_dome_is_reached_by_translation(tmp_path):
+@pytest.mark.parametrize("header", ["x_mm,y_mm,z_mm\n", ""])  # a bare list of points is x, y, z in mm
+def test_points_csv_with_z_off_the_dome_is_reached_by_translation(tmp_path, header):
     f = tmp_path / "pts.csv"
-    f.write_text("x_mm,y_mm,z_mm\n0,0,60\n0,0,40\n10,0,40\n")
+    f.write_text(header + "0,0,60\n0,0,40\n10,0,40\n")
     path = load_path(f)
     traj = path_trajectory(path, TEE)
     assert traj.goal[TRANSLATION].min() == pytest.approx(-20.0, abs=0.05)  # 60 -> 40 mm: probe pulled back 20 mm

@@ -414,6 +414,9 @@ def _read_points_csv(raw: bytes, where: str) -> np.ndarray:
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise ProtocolError(f"{where}: not a CSV table of waypoints ({str(exc).splitlines()[0]})") from None
     cols = ("x_mm", "y_mm", "z_mm")
+    headerless = df.attrs.get("headerless", False)
+    if headerless and df.shape[1] == 3:  # a bare list of points: x, y, z in mm
+        df.columns = list(cols)
     missing = [c for c in cols if c not in df.columns]
     if missing:
         raise ProtocolError(f"{where}: a point list needs columns {', '.join(cols)} (mm, base_home frame); missing "
@@ -424,7 +427,8 @@ def _read_points_csv(raw: bytes, where: str) -> np.ndarray:
         raise ProtocolError(f"{where}: x_mm, y_mm and z_mm must be numbers") from None
     bad = ~np.isfinite(pts).all(axis=1)
     if bad.any():
-        raise ProtocolError(f"{where}: waypoint on line {int(np.flatnonzero(bad)[0]) + 2} is not three finite numbers")
+        line = int(np.flatnonzero(bad)[0]) + (1 if headerless else 2)
+        raise ProtocolError(f"{where}: waypoint on line {line} is not three finite numbers")
     if len(pts) < 2:
         raise ProtocolError(f"{where}: a point list needs at least 2 waypoints, it has {len(pts)}")
     return pts

@@ -231,6 +231,10 @@ def check_aligned(df: pd.DataFrame, where: str) -> list[str]:
         infinite values in time/commands/measurements, or time that does not increase.
     """
     if "t_s" not in df.columns:
+        if df.attrs.get("headerless"):
+            raise RunFormatError(f"{where}: no header line (the first line is numbers): an aligned table names its "
+                                 "columns t_s, <axis>_cmd_deg, <axis>_meas_deg; add that line, or map the numbered "
+                                 "columns (\"1\", \"2\", ...) with `endocal import csv --map`")
         raise RunFormatError(f"{where}: no 't_s' column (an aligned table needs t_s, <axis>_cmd_deg, <axis>_meas_deg)")
     cmd_axes = [c[: -len(CMD)] for c in df.columns if c.endswith(CMD)]
     axes = [a for a in cmd_axes if a + MEAS in df.columns]

@@ -340,6 +340,8 @@ def _read_csv(raw: bytes, where: str) -> pd.DataFrame:
         raise RunFormatError(f"{where}: not a CSV table ({str(exc).splitlines()[0]})") from None
     if df.shape[1] < 2 or df.empty:
         raise RunFormatError(f"{where}: not a CSV table of a log (found {df.shape[1]} column(s), {len(df)} row(s))")
+    # rows keep their line numbers in the file as the index, for messages (line 1 is the header)
+    df.index = np.arange(len(df)) + (1 if df.attrs.get("headerless") else 2)
     return df
 
 
@@ -348,8 +350,8 @@ def _numeric(df: pd.DataFrame, col: str, where: str) -> np.ndarray:
         return pd.to_numeric(df[col], errors="raise").to_numpy(float)
     except (ValueError, TypeError):
         bad = pd.to_numeric(df[col], errors="coerce").isna() & df[col].notna()
-        line = int(np.flatnonzero(bad.to_numpy())[0]) + 2
-        raise RunFormatError(f"{where}: column '{col}' is not numeric (line {line}: {df[col].iloc[line - 2]!r})") from None
+        k = int(np.flatnonzero(bad.to_numpy())[0])
+        raise RunFormatError(f"{where}: column '{col}' is not numeric (line {df.index[k]}: {df[col].iloc[k]!r})") from None
 
 
 def _datetime_s(df: pd.DataFrame, col: str, where: str) -> np.ndarray:
@@ -358,9 +360,9 @@ def _datetime_s(df: pd.DataFrame, col: str, where: str) -> np.ndarray:
     stamps = pd.to_datetime(raw, errors="coerce", format="ISO8601", utc=True)
     bad = stamps.isna().to_numpy() & raw.notna().to_numpy()
     if bad.any():
-        line = int(np.flatnonzero(bad)[0])
-        raise RunFormatError(f"{where}: time column '{col}' is not a date and time at line {line + 2} "
-                             f"({raw.iloc[line]!r}); write it as 2026-11-24 15:09:47.123, or give its unit (s, ms, us, ns)")
+        k = int(np.flatnonzero(bad)[0])
+        raise RunFormatError(f"{where}: time column '{col}' is not a date and time at line {df.index[k]} "
+                             f"({raw.iloc[k]!r}); write it as 2026-11-24 15:09:47.123, or give its unit (s, ms, us, ns)")
     return (stamps - stamps.min()).dt.total_seconds().to_numpy(float)  # the origin is dropped later anyway
 
 
@@ -381,7 +383,7 @@ def _dedupe(df: pd.DataFrame, t: np.ndarray, lines: np.ndarray, dedupe: bool,
     if dedupe:
         exact = df.duplicated(keep="first").to_numpy()
         dropped = int(exact.sum())
-        df, t, lines = df[~exact].reset_index(drop=True), t[~exact], lines[~exact]
+        df, t, lines = df[~exact], t[~exact], lines[~exact]
         shared = np.concatenate([[False], np.diff(t) == 0])
         if shared.any():
             group = np.cumsum(~shared)  # t does not decrease here, or the log is refused next
@@ -396,9 +398,8 @@ def _dedupe(df: pd.DataFrame, t: np.ndarray, lines: np.ndarray, dedupe: bool,
                                      f"(t = {t[rows[0]]:g}) but differ in column '{col}'; no merge can settle which "
                                      "is right: fix the log's clock")
             merged = int(shared.sum())
-            df = df.groupby(group, sort=False).first().reset_index(drop=True)
-            keep = ~shared
-            t, lines = t[keep], lines[keep]
+            t, lines = t[~shared], lines[~shared]
+            df = df.groupby(group, sort=False).first().set_axis(lines)
     same = np.concatenate([[False], np.diff(t) == 0])
     if same.any():
         first = int(np.flatnonzero(same)[0])
@@ -452,7 +453,7 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
     else:
         prepare_output(out, force)
     n_rows = len(df)
-    lines = np.arange(len(df)) + 2  # line numbers in the file (line 1 is the header)
+    lines = df.index.to_numpy()  # line numbers in the file
     if cmap.time_column:
         t = (_datetime_s(df, cmap.time_column, where) if cmap.time_factor is None else
              _numeric(df, cmap.time_column, where) * cmap.time_factor)
@@ -468,7 +469,7 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
     else:
         exact = df.duplicated(keep="first").to_numpy() if dedupe else np.zeros(len(df), bool)
         dropped, merged = int(exact.sum()), 0
-        df = df[~exact].reset_index(drop=True)
+        df = df[~exact]
         t = np.arange(len(df)) / cmap.sample_rate_hz
     t0 = float(t[0])
     t = t - t0

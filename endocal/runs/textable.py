@@ -2,9 +2,10 @@
 
 Spreadsheets in much of Europe write ``;`` between columns and ``,`` as the decimal mark;
 data loggers write tabs, or columns lined up with spaces; hand-edited files put a space after
-each comma. Every CSV endocal reads (aligned tables, lab logs, waypoint lists) goes through
-:func:`read_csv_table`, so a table that opens correctly in a spreadsheet reads the same here,
-with its column names as written (stripped of spaces).
+each comma; loggers often write no header at all. Every CSV endocal reads (aligned tables,
+lab logs, waypoint lists) goes through :func:`read_csv_table`, so a table that opens correctly
+in a spreadsheet reads the same here, with its column names as written (stripped of spaces), or
+numbered ``1``, ``2``, ... when its first line is all numbers.
 """
 
 from __future__ import annotations
@@ -25,18 +26,34 @@ def sniff_delimiter(raw: bytes) -> str:
     A header with none of them but spaces between names is whitespace-separated (``\\s+``).
     """
     header = raw.lstrip(b"\xef\xbb\xbf").split(b"\n", 1)[0].decode("utf-8", errors="replace")
+    for d in DELIMITERS[1:]:
+        # a first line of numbers with decimal commas (no header): the commas are not the delimiter
+        if d in header and "," in header and all(_DECIMAL_COMMA.match(f) or _is_number(f, ",")
+                                                 for f in header.strip().split(d)):
+            return d
     counts = [header.count(d) for d in DELIMITERS]
     if max(counts) > 0:
         return DELIMITERS[counts.index(max(counts))]
     return r"\s+" if len(header.split()) > 1 else ","
 
 
-def read_csv_table(raw: bytes) -> pd.DataFrame:
-    """Read a CSV file's bytes into a table (header row required).
+def _is_number(field: str, sep: str) -> bool:
+    text = field.strip().replace(",", ".") if sep != "," else field.strip()
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
-    The delimiter is sniffed from the header (:func:`sniff_delimiter`); column names are
-    stripped of surrounding spaces; with a delimiter other than ``,``, a file with a text
-    column that reads ``12,5`` throughout is re-read with ``,`` as the decimal mark.
+
+def read_csv_table(raw: bytes) -> pd.DataFrame:
+    """Read a CSV file's bytes into a table.
+
+    The delimiter is sniffed from the first line (:func:`sniff_delimiter`); column names are
+    stripped of surrounding spaces; a first line of numbers only is data, not a header, and
+    the columns are numbered ``"1"``, ``"2"``, ... (``df.attrs["headerless"]`` is then True);
+    with a delimiter other than ``,``, a file with a text column that reads ``12,5``
+    throughout is re-read with ``,`` as the decimal mark.
 
     Raises
     ------
@@ -44,12 +61,19 @@ def read_csv_table(raw: bytes) -> pd.DataFrame:
         As :func:`pandas.read_csv`; callers turn them into one-line messages.
     """
     sep = sniff_delimiter(raw)
-    df = pd.read_csv(io.BytesIO(raw), sep=sep, skipinitialspace=sep != r"\s+")
+    first = raw.lstrip(b"\xef\xbb\xbf").split(b"\n", 1)[0].decode("utf-8", errors="replace").strip()
+    fields = first.split() if sep == r"\s+" else first.split(sep)
+    headerless = bool(first) and all(_is_number(f, sep) for f in fields)
+    header = None if headerless else "infer"
+    df = pd.read_csv(io.BytesIO(raw), sep=sep, skipinitialspace=sep != r"\s+", header=header)
     if sep not in (",", r"\s+"):
         text = [c for c in df.columns if df[c].dtype == object or pd.api.types.is_string_dtype(df[c])]
         if any(len(df[c].dropna()) and df[c].dropna().astype(str).str.match(_DECIMAL_COMMA).all() for c in text):
-            df = pd.read_csv(io.BytesIO(raw), sep=sep, skipinitialspace=True, decimal=",")
+            df = pd.read_csv(io.BytesIO(raw), sep=sep, skipinitialspace=True, decimal=",", header=header)
+    if headerless:
+        df.columns = [str(i + 1) for i in range(df.shape[1])]
     df.columns = [c.strip() if isinstance(c, str) else c for c in df.columns]
+    df.attrs["headerless"] = headerless
     return df
 
 
