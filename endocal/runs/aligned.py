@@ -235,7 +235,8 @@ def check_aligned(df: pd.DataFrame, where: str) -> list[str]:
             raise RunFormatError(f"{where}: no header line (the first line is numbers): an aligned table names its "
                                  "columns t_s, <axis>_cmd_deg, <axis>_meas_deg; add that line, or map the numbered "
                                  "columns (\"1\", \"2\", ...) with `endocal import csv --map`")
-        raise RunFormatError(f"{where}: no 't_s' column (an aligned table needs t_s, <axis>_cmd_deg, <axis>_meas_deg)")
+        raise RunFormatError(f"{where}: no 't_s' column (an aligned table needs t_s, <axis>_cmd_deg, <axis>_meas_deg; "
+                             "a log with its own column names goes through `endocal import csv LOG --map MAP`)")
     cmd_axes = [c[: -len(CMD)] for c in df.columns if c.endswith(CMD)]
     axes = [a for a in cmd_axes if a + MEAS in df.columns]
     if not axes:
