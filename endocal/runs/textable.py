@@ -20,16 +20,20 @@ DELIMITERS = (",", ";", "\t", "|")
 _DECIMAL_COMMA = re.compile(r"^\s*[-+]?\d+,\d+(?:[eE][-+]?\d+)?\s*$")
 
 
+def _first_line(raw: bytes) -> str:
+    return raw.lstrip(b"\xef\xbb\xbf").split(b"\n", 1)[0].decode("utf-8", errors="replace").strip()
+
+
 def sniff_delimiter(raw: bytes) -> str:
     """The delimiter of a CSV file: the candidate that occurs most often in its header line.
 
     A header with none of them but spaces between names is whitespace-separated (``\\s+``).
     """
-    header = raw.lstrip(b"\xef\xbb\xbf").split(b"\n", 1)[0].decode("utf-8", errors="replace")
+    header = _first_line(raw)
     for d in DELIMITERS[1:]:
         # a first line of numbers with decimal commas (no header): the commas are not the delimiter
         if d in header and "," in header and all(_DECIMAL_COMMA.match(f) or _is_number(f, ",")
-                                                 for f in header.strip().split(d)):
+                                                 for f in header.split(d)):
             return d
     counts = [header.count(d) for d in DELIMITERS]
     if max(counts) > 0:
@@ -61,7 +65,7 @@ def read_csv_table(raw: bytes) -> pd.DataFrame:
         As :func:`pandas.read_csv`; callers turn them into one-line messages.
     """
     sep = sniff_delimiter(raw)
-    first = raw.lstrip(b"\xef\xbb\xbf").split(b"\n", 1)[0].decode("utf-8", errors="replace").strip()
+    first = _first_line(raw)
     fields = first.split() if sep == r"\s+" else first.split(sep)
     headerless = bool(first) and all(_is_number(f, sep) for f in fields)
     header = None if headerless else "infer"
