@@ -292,3 +292,9 @@ def test_a_headerless_logger_file_imports_by_column_number(tmp_path):
             assert proc.returncode == 0 and expect in proc.stdout, proc.stderr
         else:
             one_line_exit_2(proc, "column '5' is not numeric (line 10: 'ERR')")
+
+
+def test_help_shows_the_map_tables_as_written():
+    # help text is Markdown: Rich markup would swallow "[angles.AXIS]" as a style tag
+    proc = endocal("import", "csv", "--help")
+    assert proc.returncode == 0 and "[angles.AXIS]" in proc.stdout and "[angles]" in proc.stdout
