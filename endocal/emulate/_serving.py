@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import threading
+from abc import ABC, abstractmethod
 
 
-class Served:
+class Served(ABC):
     """Base of the emulators: :meth:`start` opens the endpoint (``_open``) and runs ``_serve``
     in a daemon thread until :meth:`close` (idempotent) sets ``_stop`` and releases it
-    (``_release``); usable as a context manager."""
+    (``_release``); usable as a context manager. Each emulator (servo bus, tracker, stage,
+    rig) implements the three hooks; the base cannot be instantiated."""
 
     thread_name = "emulator"
 
@@ -16,14 +18,17 @@ class Served:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
+    @abstractmethod
     def _open(self) -> None:
-        raise NotImplementedError
+        """Create the endpoint (a pseudo-terminal, a socket) the host will connect to."""
 
+    @abstractmethod
     def _serve(self) -> None:
-        raise NotImplementedError
+        """Answer the host until ``_stop`` is set (runs in the daemon thread)."""
 
+    @abstractmethod
     def _release(self) -> None:
-        raise NotImplementedError
+        """Close the endpoint; called once serving has stopped, possibly more than once."""
 
     def start(self):
         """Open the endpoint and serve it in the background; returns self."""
