@@ -33,8 +33,6 @@ different values in one column.
 from __future__ import annotations
 
 import hashlib
-import io
-import json
 import time
 import tomllib
 from dataclasses import dataclass
@@ -42,13 +40,11 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import pyarrow as pa
-import pyarrow.parquet as pq
 
 from endocal.errors import OutputExistsError, OutputPathError, RunFormatError
 from endocal.probe import TRANSLATION, ProbeConfig, load_probe
 from endocal.runs.aligned import CMD, MEAS, check_aligned, measured_at
-from endocal.runs.format import atomic_write_bytes, prepare_output, software_versions
+from endocal.runs.format import atomic_write_bytes, check_parent, parquet_bytes, prepare_output, software_versions
 from endocal.runs.imported import tracker_stream, write_imported_run
 from endocal.runs.textable import read_csv_table
 
@@ -550,11 +546,7 @@ def _prepare_table(out: Path, force: bool, map_source: str) -> None:
         raise OutputPathError(f"output {out} is a folder: choose a .parquet or .csv file name for --out")
     if out.exists() and not force:
         raise OutputExistsError(f"output {out} already exists: choose a new --out or pass --force to replace it")
-    probe_dir = out.parent
-    while not probe_dir.exists():
-        probe_dir = probe_dir.parent
-    if not probe_dir.is_dir():
-        raise OutputPathError(f"cannot create {out}: {probe_dir} is not a folder")
+    check_parent(out)
 
 
 def _angles_table(df: pd.DataFrame, t: np.ndarray, motor: dict, cmap: CsvMap, where: str) -> tuple[int, pd.DataFrame]:
@@ -592,15 +584,7 @@ def _angles_table(df: pd.DataFrame, t: np.ndarray, motor: dict, cmap: CsvMap, wh
 
 def _write_table(out: Path, table: pd.DataFrame, provenance: dict) -> None:
     """Write the aligned table whole or not at all; Parquet carries the provenance as metadata."""
-    if out.suffix.lower() == ".csv":
-        data = table.to_csv(index=False).encode()
-    else:
-        arrow = pa.Table.from_pandas(table, preserve_index=False)
-        arrow = arrow.replace_schema_metadata({**(arrow.schema.metadata or {}),
-                                               b"endocal": json.dumps(provenance, default=str).encode()})
-        buf = io.BytesIO()
-        pq.write_table(arrow, buf)
-        data = buf.getvalue()
+    data = table.to_csv(index=False).encode() if out.suffix.lower() == ".csv" else parquet_bytes(table, provenance)
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(out, data)
 

@@ -22,6 +22,7 @@ the streams.
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import os
 import platform
@@ -105,6 +106,21 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
         raise
 
 
+def parquet_bytes(df, metadata: dict | None = None) -> bytes:
+    """A table as the bytes of a Parquet file (for :func:`atomic_write_bytes`), with ``metadata``
+    (JSON) under the schema key ``endocal`` when given."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = pa.Table.from_pandas(df, preserve_index=False)
+    if metadata is not None:
+        table = table.replace_schema_metadata({**(table.schema.metadata or {}),
+                                               b"endocal": json.dumps(metadata, default=_json_default).encode()})
+    buf = io.BytesIO()
+    pq.write_table(table, buf)
+    return buf.getvalue()
+
+
 def _json_default(obj):
     if isinstance(obj, (np.integer,)):
         return int(obj)
@@ -174,8 +190,19 @@ def prepare_output(out: Path, force: bool) -> None:
         if any(out.iterdir()) and not _is_run_folder(out):
             # --force replaces runs, never an arbitrary folder (think `--out . --force`).
             raise OutputPathError(f"output {out} is a non-empty folder that is not an endocal run: --force only replaces runs")
-    parent = out.parent if str(out.parent) else Path(".")
-    probe_dir = parent
+    check_parent(out)
+
+
+def check_parent(out: Path) -> None:
+    """Check that ``out`` (a folder or a file) can be created: its nearest existing ancestor is a
+    writable folder.
+
+    Raises
+    ------
+    OutputPathError
+    """
+    out = Path(out)
+    probe_dir = out.parent if str(out.parent) else Path(".")
     while not probe_dir.exists():
         probe_dir = probe_dir.parent
     if not probe_dir.is_dir():

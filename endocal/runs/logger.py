@@ -8,7 +8,6 @@ first and is renamed into place: readers never see half a part.
 
 from __future__ import annotations
 
-import io
 import os
 import time
 from pathlib import Path
@@ -20,7 +19,8 @@ import pyarrow.parquet as pq
 from endocal.streams import StreamChunk
 from endocal.errors import RunFormatError
 from endocal.runs.aligned import align, read_stream
-from endocal.runs.format import ALIGNED, MOTOR, RUN_JSON, STREAMS, TRACKER, atomic_write_bytes, utc_now, write_json
+from endocal.runs.format import (ALIGNED, MOTOR, RUN_JSON, STREAMS, TRACKER, atomic_write_bytes, parquet_bytes,
+                                 utc_now, write_json)
 
 
 class StreamLogger:
@@ -98,9 +98,7 @@ def finish_run(out: Path, meta: dict, logger: StreamLogger, status: str, error: 
             # The streams stay on disk; say why there is no aligned table rather than lose the run.
             meta["alignment_error"] = str(exc)
         else:
-            buf = io.BytesIO()
-            pq.write_table(pa.Table.from_pandas(alignment.table, preserve_index=False), buf)
-            atomic_write_bytes(out / ALIGNED, buf.getvalue())
+            atomic_write_bytes(out / ALIGNED, parquet_bytes(alignment.table))
             counts.update(alignment.counts())
     meta["counts"] = counts
     meta["logged_s"] = float(logger.last_t_s) if np.isfinite(logger.last_t_s) else 0.0
