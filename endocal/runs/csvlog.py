@@ -383,9 +383,8 @@ def _dedupe(df: pd.DataFrame, t: np.ndarray, lines: np.ndarray, dedupe: bool,
         shared = np.concatenate([[False], np.diff(t) == 0])
         if shared.any():
             group = np.cumsum(~shared)  # t does not decrease here, or the log is refused next
-            dup = pd.Series(shared | np.concatenate([shared[1:], [False]]))
-            sub = df[dup.to_numpy()]
-            conflict = sub.groupby(group[dup.to_numpy()], sort=False).nunique(dropna=True).max(axis=1) > 1
+            dup = shared | np.concatenate([shared[1:], [False]])  # every row of a shared stamp
+            conflict = df[dup].groupby(group[dup], sort=False).nunique(dropna=True).max(axis=1) > 1
             if conflict.any():
                 g = int(conflict.index[np.argmax(conflict.to_numpy())])
                 rows = np.flatnonzero(group == g)
