@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from endocal.errors import ModelError
 from endocal.models import make_model
 from endocal.models.base import HysteresisModel
 from endocal.runs.aligned import load_aligned
@@ -22,7 +23,8 @@ class HysteresisFit:
 
 
 def fit_hysteresis(
-    paths: list[Path], axis: str, base: str, effects: list[str] | None = None, planes=None, **settings
+    paths: list[Path], axis: str, base: str, effects: list[str] | None = None, planes=None,
+    start_from: HysteresisModel | None = None, **settings
 ) -> HysteresisFit:
     """Fit ``base`` + ``effects`` to ``axis`` of every run folder or aligned table in ``paths``.
 
@@ -37,10 +39,28 @@ def fit_hysteresis(
         Effect names (see ``endocal effects``), e.g. ``["envelope"]`` for the paper's modified PI.
     planes : PlanesCalibration, optional
         Bending planes; measured angles are mapped into the twisted planes first.
+    start_from : HysteresisModel, optional
+        A fitted model of this axis and base whose parameters start the fit (every effect it
+        shares with the new model starts from its fitted values and skips its start search):
+        the refit ``validate`` prints starts from the model it validated, as its scan did, so
+        the refit is the fit the scan scored. Fitting from scratch instead can end in another
+        local minimum, even one worse than the model without the new effect.
     **settings
         Passed to the model (e.g. ``n_operators``, ``out_of_range``).
+
+    Raises
+    ------
+    ModelError
+        ``start_from`` of another axis or base model.
     """
+    warm = None
+    if start_from is not None:
+        if start_from.base_name != base or (start_from.axis and start_from.axis != axis):
+            raise ModelError(f"--start-from: that model is a {start_from.base_name} model of axis "
+                             f"{start_from.axis or '(none)'}, this fit a {base} model of axis {axis}; start from a "
+                             "model of the same axis and base model, or drop --start-from")
+        warm = dict(start_from.params_)
     datas = [load_aligned(p) for p in paths]
     data = axis_data(datas, axis, planes)
-    model = make_model(base, effects=effects or (), axis=axis, **settings).fit(data)
+    model = make_model(base, effects=effects or (), axis=axis, **settings).fit(data, warm_start=warm)
     return HysteresisFit(model, [d.source for d in datas], [d.sha256 for d in datas], len(data.cmd_deg))

@@ -6,7 +6,7 @@ export PATH="$PWD/.venv/bin:$PATH"  # the commands validate prints call `endocal
 E=endocal
 OUT=${1:-demo-out}
 mkdir -p "$OUT"
-step() { local t0=$SECONDS; printf '\n\033[1m== %s\033[0m\n$ %s\n' "$1" "${*:2}"; "${@:2}"; printf '(%d s)\n' $((SECONDS - t0)); }
+step() { local t0=$SECONDS; printf '\n\033[1m== %s\033[0m\n$' "$1"; printf ' %q' "${@:2}"; printf '\n'; "${@:2}"; printf '(%d s)\n' $((SECONDS - t0)); }
 
 step "bending planes: single-knob sweeps of the four half-planes" \
   $E excite planes --out "$OUT/planes" --seed 1 --force --quiet
@@ -38,8 +38,10 @@ for round in 1 2 3 4; do
     break
   fi
   [ "$round" = 4 ] && break
-  model=$(python -c "import sys; print(sys.argv[1].split('--out ')[1].split()[0])" "$refit")
-  step "add the suspected effect: the exact command validate printed" $refit --force
+  # the printed command is shell-quoted (a folder with a space stays one argument): split it as a shell would
+  mapfile -d '' -t argv < <(python -c "import shlex,sys; sys.stdout.write(''.join(a + '\0' for a in shlex.split(sys.argv[1])))" "$refit")
+  model=$(python -c "import sys; a=sys.argv[1:]; print(a[a.index('--out') + 1])" "${argv[@]}")
+  step "add the suspected effect: the exact command validate printed" "${argv[@]}" --force
   models+=("$model")
 done
 step "feedforward compensation on the simulator (desired vs reached angle)" \

@@ -65,3 +65,27 @@ def test_bad_input(run, tmp_path):
     (tmp_path / "e.json").write_text("{}")
     one_line_error(endocal("fit", "hysteresis", run, "--axis", "ap", "--out", tmp_path / "e.json"), "already exists")
     assert not any((tmp_path / f"{n}.json").exists() for n in "abcdf")
+
+
+def test_start_from_a_fitted_model_refits_from_its_values_and_records_it(run, tmp_path):
+    """`--start-from`: validate's refit commands start the candidate where the scan started it.
+
+    The new model nests the old one (the added effect at zero is the old model), so started
+    from the old model's values it fits the same data at least as well; the model file says
+    where it started. Another base or axis cannot start it: one line, exit 2, nothing written.
+    """
+    base = tmp_path / "bs.json"
+    assert endocal("fit", "hysteresis", run, "--axis", "ap", "--model", "bspline", "--effects", "delay",
+                   "--out", base).returncode == 0
+    out = tmp_path / "bs-dz.json"
+    proc = endocal("fit", "hysteresis", run, "--axis", "ap", "--model", "bspline", "--effects", "delay,deadzone",
+                   "--start-from", base, "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    old, new = load_model(base), load_model(out)
+    assert new.fit_report_.rmse_deg <= old.fit_report_.rmse_deg * (1 + 1e-9)
+    assert new.provenance_["start_from"]["path"] == str(base)
+    one_line_error(endocal("fit", "hysteresis", run, "--axis", "ap", "--model", "pi", "--effects", "deadzone",
+                           "--start-from", base, "--out", tmp_path / "x.json"), "--start-from: that model is a bspline")
+    one_line_error(endocal("fit", "hysteresis", run, "--axis", "ml", "--model", "bspline", "--effects", "deadzone",
+                           "--start-from", base, "--out", tmp_path / "y.json"), "of axis ap")
+    assert not (tmp_path / "x.json").exists() and not (tmp_path / "y.json").exists()

@@ -66,7 +66,7 @@ def test_json_names_the_missing_effect_and_the_command_to_refit(drifting):
     assert top["effect"] == "drift" and top["column"] is None
     assert top["gain_pct"] >= 50 and top["p_value"] < 0.05
     assert top["command"] == (f"endocal fit hysteresis {csv} --axis ap --model bspline --effects drift "
-                              f"--out {tmp / 'm-drift.json'}")
+                              f"--start-from {tmp / 'm.json'} --out {tmp / 'm-drift.json'}")
     assert any("rate cannot be identified" in n for n in d["notes"])
 
 

@@ -14,6 +14,7 @@ models must differ significantly in the paired test.
 from __future__ import annotations
 
 import json
+import shlex
 from pathlib import Path
 
 import numpy as np
@@ -105,7 +106,7 @@ def _loop(tmp: Path, model: Path, axis: str, rounds: int = 2) -> Path:
         d = json.loads(out.read_text())
         if not d["suspects"]:
             break
-        cmd = d["suspects"][0]["command"].split()
+        cmd = shlex.split(d["suspects"][0]["command"])
         assert cmd[:3] == ["endocal", "fit", "hysteresis"], cmd
         endocal(*cmd[1:])
         model = Path(cmd[cmd.index("--out") + 1])

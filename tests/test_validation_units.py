@@ -5,6 +5,7 @@ Signals are synthetic with known answers; tolerances are argued in comments.
 
 from __future__ import annotations
 
+import shlex
 from pathlib import Path
 
 import numpy as np
@@ -148,6 +149,10 @@ def test_refit_command_and_path():
     assert refit_path("models/m.json", "load:sheath_wrap_deg") == "models/m-load-sheath_wrap_deg.json"
     cmd = refit_command(["runs/a", "b.csv"], "ap", "bspline", ["delay"], "m-delay.json")
     assert cmd == "endocal fit hysteresis runs/a b.csv --axis ap --model bspline --effects delay --out m-delay.json"
+    # a path with a space stays one argument when the printed command is pasted into a shell
+    cmd = refit_command(["lab data/run 1.csv"], "ap", "pi", ["load:wrap"], "m.json", start_from="lab data/m 0.json")
+    assert shlex.split(cmd) == ["endocal", "fit", "hysteresis", "lab data/run 1.csv", "--axis", "ap", "--model", "pi",
+                                "--effects", "load:wrap", "--start-from", "lab data/m 0.json", "--out", "m.json"]
 
 
 def test_folds_of_several_runs_take_the_same_share_of_every_run():

@@ -63,6 +63,7 @@ def hysteresis(
     force: bool = typer.Option(False, "--force", help="Overwrite --out."),
     as_json: bool = typer.Option(False, "--json", help="Print the model file's content as JSON."),
     sets: list[str] = typer.Option([], "--set", help="A base-model setting, e.g. --set n_knots=3 (bspline: n_knots, degree; pi: n_operators, weights, offset); repeatable."),
+    start_from: Optional[Path] = typer.Option(None, "--start-from", help="A fitted model (same axis and base) to start from: the effects it has start at its values. validate's refit commands use it."),
 ) -> None:
     """Fit a hysteresis model (knob command -> bending angle) of one axis.
 
@@ -85,9 +86,14 @@ def hysteresis(
         from endocal.planes import load_planes
 
         planes = load_planes(planes_file)
+    start = None
+    if start_from is not None:
+        from endocal.models import load_model
+
+        start = load_model(start_from)
     effect_list = [e.strip() for e in effects.split(",") if e.strip()]
     settings = _settings(model, sets)
-    result = fit_hysteresis(data, axis, model, effect_list, planes=planes, **settings)
+    result = fit_hysteresis(data, axis, model, effect_list, planes=planes, start_from=start, **settings)
     provenance = {
         "software": software_versions(),
         "created_utc": utc_now(),
@@ -96,6 +102,8 @@ def hysteresis(
         "planes": None if planes_file is None else str(planes_file),
         "planes_sha256": None if planes_file is None else sha256_of(planes_file),
     }
+    if start_from is not None:
+        provenance["start_from"] = {"path": str(start_from), "sha256": sha256_of(start_from)}
     save_model(result.model, out_path, provenance=provenance)
     if as_json:
         d = model_to_dict(result.model)

@@ -35,6 +35,7 @@ from __future__ import annotations
 import contextlib
 import copy
 import math
+import shlex
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -481,8 +482,14 @@ def settings_args(model: HysteresisModel) -> list[str]:
 
 
 def refit_command(data_paths: Sequence[str], axis: str | None, base: str, effects: Sequence[str], out: str,
-                  extra_args: Sequence[str] = ()) -> str:
-    """``endocal fit hysteresis DATA... --axis AXIS --model BASE --effects E1,E2 [EXTRA...] --out OUT``."""
+                  extra_args: Sequence[str] = (), start_from: str | None = None) -> str:
+    """``endocal fit hysteresis DATA... --axis AXIS --model BASE --effects E1,E2 [EXTRA...] [--start-from MODEL] --out OUT``.
+
+    ``start_from`` is the model under validation: the scan fitted each candidate starting from
+    its parameters (:func:`split_fit`), and the refit does the same, so it is the fit the scan
+    scored rather than a fit from scratch that may stop in another local minimum. Arguments are
+    quoted for a POSIX shell where they need it (a lab folder with a space in its name).
+    """
     parts = ["endocal fit hysteresis", *[str(p) for p in data_paths]]
     if axis:
         parts += ["--axis", axis]
@@ -490,8 +497,10 @@ def refit_command(data_paths: Sequence[str], axis: str | None, base: str, effect
     if effects:
         parts += ["--effects", ",".join(effects)]
     parts += [str(a) for a in extra_args]
+    if start_from:
+        parts += ["--start-from", str(start_from)]
     parts += ["--out", out]
-    return " ".join(parts)
+    return "endocal fit hysteresis " + shlex.join(parts[1:])
 
 
 def refit_path(model_path: str | None, effect: str) -> str:
@@ -760,7 +769,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
         evidence = (f"not enough evidence ({units.n} units, {need} needed)" if thin else
                     "significant" if significant else f"not significant (p = {pa:.2g} over {units.n} {units.kind}s)")
         cmd = refit_command(data_paths, model.axis, model.base_name, have + [c], refit_path(model_path, c),
-                            [*refit_args, *settings_args(model)])
+                            [*refit_args, *settings_args(model)], start_from=model_path)
         tested.append(Suspect(effect=c, column=col or None, gain_pct=gain, p_value=float(pa), p_raw=float(p),
                               rmse_heldout_deg=rmse, base_rmse_heldout_deg=rmse_base, significant=significant,
                               command=cmd, cause=cls.cause, signature=cls.signature, protocol=cls.protocol,
@@ -907,7 +916,7 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
         cls = EFFECTS[name]
         gain = 100.0 * (1.0 - rmse / rmse_base) if rmse_base > 0 else 0.0
         cmd = refit_command(data_paths, model.axis, model.base_name, have + [c], refit_path(model_path, c),
-                            [*refit_args, *settings_args(model)])
+                            [*refit_args, *settings_args(model)], start_from=model_path)
         significant = bool(pa < alpha and gain >= min_gain_pct)
         tested.append(Suspect(effect=c, column=col or None, gain_pct=gain, p_value=float(pa), p_raw=p,
                               rmse_heldout_deg=rmse, base_rmse_heldout_deg=rmse_base,
