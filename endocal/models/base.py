@@ -363,6 +363,10 @@ class HysteresisModel(ABC):
                     best = (cost, trial, st, stru, own)
             if best is not None:
                 _, overrides, start, structure, owners = best
+                # the next effect's candidates start from this effect's refined values, not its raw
+                # candidate: a coarse candidate (a 0.4 s delay) that refines to the right value
+                # would otherwise be restarted raw and mislead every later effect's search
+                overrides.update({n: float(start[n].value) for n in e.full_names() if n in overrides})
 
         names = list(owners)
         free = [n for n in names if n not in fixed]
