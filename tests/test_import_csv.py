@@ -298,3 +298,66 @@ def test_help_shows_the_map_tables_as_written():
     # help text is Markdown: Rich markup would swallow "[angles.AXIS]" as a style tag
     proc = endocal("import", "csv", "--help")
     assert proc.returncode == 0 and "[angles.AXIS]" in proc.stdout and "[angles]" in proc.stdout
+
+
+def _draft(log: Path, tmp_path: Path, name: str = "draft.toml"):
+    proc = endocal("import", "csv", log, "--draft-map", tmp_path / name)
+    assert proc.returncode == 0, proc.stderr
+    return tmp_path / name, proc.stdout
+
+
+def test_a_drafted_map_imports_a_log_named_as_labs_name_columns(sim_log, tmp_path):
+    """--draft-map on the example map's log: every role and unit read off the names and numbers.
+
+    The clock says ms, the ticks and metres say so in their names; only the ticks' zero (a
+    servo's mid-turn, 2048) is a guess, marked CHECK. Imported through the draft, the log gives
+    the run's aligned table, as through the hand-written example map.
+    """
+    draft, stdout = _draft(sim_log / "log.csv", tmp_path)
+    assert "knob ap <- ap_present_ticks (goal ap_goal_ticks)" in stdout and "tip <- tip_x_m" in stdout
+    assert "CHECK [knobs.ap] zero_ticks" in stdout and "FILL IN" not in stdout
+    proc = endocal("import", "csv", sim_log / "log.csv", "--map", draft, "--out", tmp_path / "imported")
+    assert proc.returncode == 0, proc.stderr
+    a, b = load_aligned(sim_log / "run").table, load_aligned(tmp_path / "imported").table
+    for col in ("t_s", "ap_cmd_deg", "ml_cmd_deg", "ap_meas_deg", "ml_meas_deg", "ap_current_ma"):
+        np.testing.assert_allclose(b[col], a[col], atol=1e-9)
+
+
+def test_a_drafted_map_reads_units_off_the_numbers_when_names_do_not_say(bench_log, tmp_path):
+    """A bench log written by a European spreadsheet with bare names: Time, knob, TipAngle.
+
+    Its units come from the numbers (a 100 Hz step in seconds; the knob within +-2 pi is
+    radians, the angle beyond +-pi degrees), each marked CHECK; the extra numeric column is
+    carried as a covariate. Imported through the draft it is the bench's table.
+    """
+    log, a = bench_log
+    src = pd.read_csv(log)
+    bare = pd.DataFrame({"Time": (src["time_ms"] - 250.0) / 1000, "knob": src["motor_rad"],
+                         "TipAngle": src["joint_deg"] - 5.0, "sheath": src["sheath_deg"]})
+    bare.to_csv(tmp_path / "bench eu.csv", sep=";", decimal=",", index=False)
+    draft, stdout = _draft(tmp_path / "bench eu.csv", tmp_path)
+    for check in ("[time] unit: median step 0.01 s = 100 Hz", "[knobs.ap] unit: values within +-6.28",
+                  "[angles.ap] unit: values "):
+        assert f"CHECK {check}" in stdout, stdout
+    assert "extras <- sheath" in stdout
+    proc = endocal("import", "csv", tmp_path / "bench eu.csv", "--map", draft, "--out", tmp_path / "b.parquet")
+    assert proc.returncode == 0, proc.stderr
+    b = load_aligned(tmp_path / "b.parquet").table
+    n = len(b)
+    np.testing.assert_allclose(b["ap_cmd_deg"], a["ap_cmd_deg"][:n], atol=1e-9)
+    assert (b["sheath"] == 180.0).all()
+
+
+def test_a_draft_that_could_not_place_a_role_says_so_and_the_import_refuses_it(tmp_path):
+    t = np.arange(200) * 0.01
+    pd.DataFrame({"a": t, "b": np.sin(t), "c": np.cos(t)}).to_csv(tmp_path / "opaque.csv", index=False)
+    draft, stdout = _draft(tmp_path / "opaque.csv", tmp_path)
+    assert "FILL IN [knobs.ap] position" in stdout and "FILL IN [angles.ap] column" in stdout
+    one_line_exit_2(endocal("import", "csv", tmp_path / "opaque.csv", "--map", draft, "--out", tmp_path / "r.csv"),
+                    "names column 'FILL IN'")
+    # the options: a draft imports nothing, an import needs a map and an output, a draft is not overwritten
+    one_line_exit_2(endocal("import", "csv", tmp_path / "opaque.csv", "--draft-map", tmp_path / "x.toml", "--map",
+                            draft), "--draft-map writes a map and imports nothing")
+    one_line_exit_2(endocal("import", "csv", tmp_path / "opaque.csv"), "give --map MAP.toml and --out RUN")
+    one_line_exit_2(endocal("import", "csv", tmp_path / "opaque.csv", "--draft-map", draft), "already exists")
+    assert not (tmp_path / "x.toml").exists()

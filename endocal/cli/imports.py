@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import shlex
 import sys
 from pathlib import Path
+from typing import Optional
 
 import typer
 
@@ -18,8 +20,9 @@ app.command("ros")(import_ros)
 @cli_errors
 def import_csv_cmd(
     log: Path = typer.Argument(..., help="The CSV log (one header row; a row per sample)."),
-    map_path: Path = typer.Option(..., "--map", help="TOML map naming its columns and units; see configs/csv-map.example.toml."),
-    out_dir: Path = typer.Option(..., "--out", "-o", help="Run folder to create; a .parquet or .csv aligned table when the map gives measured [angles] instead of poses."),
+    map_path: Optional[Path] = typer.Option(None, "--map", help="TOML map naming its columns and units; see configs/csv-map.example.toml (or draft one with --draft-map)."),
+    out_dir: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder to create; a .parquet or .csv aligned table when the map gives measured [angles] instead of poses."),
+    draft: Optional[Path] = typer.Option(None, "--draft-map", help="Instead of importing, write a first map for this log, guessed from its column names and numbers; every guess is marked CHECK."),
     dedupe: bool = typer.Option(False, "--dedupe", help="Drop rows that repeat an earlier row exactly (ROS bridges write them) and merge rows of one time stamp that fill different columns (a motor tick and a tracker frame in the same millisecond); without it duplicated time stamps are refused."),
     force: bool = typer.Option(False, "--force", help="Replace --out if it is a run folder (or the table an angles map writes)."),
 ) -> None:
@@ -29,8 +32,22 @@ def import_csv_cmd(
     Bending angles come from the poses by thesis eq. 1, as for endocal's own runs; every later
     command reads the folder like a run of `endocal excite`. A rig that measures the angle
     itself (an encoder, a camera) maps [angles.AXIS] columns instead, and gets an aligned table.
+
+    No map yet? `--draft-map MAP.toml` writes one from the log's header and numbers (units
+    told by the names, or by the values and marked CHECK), to read over before the import.
     """
+    from endocal.errors import ConfigError
     from endocal.runs.csvlog import import_csv
+
+    if draft is not None:
+        if map_path is not None or out_dir is not None:
+            raise ConfigError("--draft-map writes a map and imports nothing: run it without --map and --out, then "
+                             "import with the map it wrote")
+        _draft(log, draft, force)
+        return
+    if map_path is None or out_dir is None:
+        raise ConfigError(f"give --map MAP.toml and --out RUN (or --draft-map MAP.toml to have a first map guessed "
+                         f"from {log.name})")
 
     res = import_csv(log, map_path, out_dir, dedupe=dedupe, force=force, command="endocal " + " ".join(sys.argv[1:]))
     rate = f"{res.rate_hz:.1f} Hz" if res.rate_hz else "one sample"
@@ -46,3 +63,17 @@ def import_csv_cmd(
                   "(different columns filled)")
     if res.alignment_error:
         err.print(f"warning: no aligned table: {res.alignment_error}")
+
+
+def _draft(log: Path, path: Path, force: bool) -> None:
+    from endocal.runs.mapdraft import write_draft
+
+    d = write_draft(log, path, force=force)
+    out.print(f"drafted {path} for {log}:", markup=False)
+    for role, cols in d.roles.items():
+        out.print(f"  {role} <- {cols}", markup=False)
+    for c in d.checks:
+        out.print(f"  CHECK {c}", markup=False)
+    for u in d.unmatched:
+        out.print(f"  FILL IN {u}: no column looked like it", markup=False)
+    out.print(f"then: endocal import csv {shlex.quote(str(log))} --map {shlex.quote(str(path))} --out RUN", markup=False)

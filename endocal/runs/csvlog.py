@@ -341,6 +341,21 @@ def _read_csv(raw: bytes, where: str) -> pd.DataFrame:
     return df
 
 
+def read_log_table(log: Path) -> tuple[pd.DataFrame, bytes]:
+    """The log as a table (its index the rows' line numbers in the file, for messages), and its bytes.
+
+    Raises
+    ------
+    RunFormatError
+        Unreadable, or not a table of at least two columns and one row.
+    """
+    try:
+        raw = Path(log).read_bytes()
+    except OSError as exc:
+        raise RunFormatError(f"{log}: cannot read the log ({exc.strerror or exc})") from None
+    return _read_csv(raw, str(log)), raw
+
+
 def _numeric(df: pd.DataFrame, col: str, where: str) -> np.ndarray:
     try:
         return pd.to_numeric(df[col], errors="raise").to_numpy(float)
@@ -434,11 +449,7 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
     cmap = mapping if isinstance(mapping, CsvMap) else read_map(mapping)
     where = str(log)
     wall0 = time.monotonic()
-    try:
-        raw = log.read_bytes()
-    except OSError as exc:
-        raise RunFormatError(f"{where}: cannot read the log ({exc.strerror or exc})") from None
-    df = _read_csv(raw, where)
+    df, raw = read_log_table(log)
     missing = [c for c in cmap.columns() if c not in df.columns]
     if missing:
         raise RunFormatError(f"{cmap.source} names column '{missing[0]}', which {log.name} does not have; its columns: "

@@ -1,0 +1,337 @@
+"""A first column map for a lab's CSV log, guessed from its header and its numbers.
+
+``endocal import csv LOG.csv --draft-map MAP.toml`` writes the map that
+:func:`endocal.runs.csvlog.read_map` reads, filled in from what the log shows, so a user edits
+a map rather than writing one from the documentation. Each role is matched by the words of
+the column names (``stamp_ms``, ``ap_present_ticks``, ``tip_qw``, ``joint_deg``: split at
+underscores, spaces, dots and case changes) and each unit by a word of the name when there is
+one, else by the numbers:
+
+- the clock: epoch-sized stamps tell their unit by magnitude (1.7e9 s, 1.7e12 ms, 1.7e15 us,
+  1.7e18 ns), others by their median step (a sample rate of 1 Hz to 10 kHz); text stamps are
+  date-times; no clock gives ``sample_rate_hz``;
+- knob positions: whole numbers within one servo turn are ticks (zero at mid-turn, 4096 per
+  turn, as the XM430 the thesis uses), values within +-2 pi are radians, else degrees;
+- EM positions: below 2 in magnitude are metres, else millimetres;
+- a measured angle within +-pi is radians, else degrees.
+
+Every line decided by the numbers, or by a default, is marked ``CHECK`` with the evidence,
+and a role nothing matched is left as ``"FILL IN"``, which the import refuses by name. The
+remaining numeric columns become ``extras`` (covariates for ``load:COLUMN``).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from endocal.probe import load_probe
+
+FILL = "FILL IN"
+_TIME = {"t", "time", "stamp", "timestamp", "ts", "clock", "datetime", "date", "sec", "secs", "seconds", "elapsed"}
+_TIME_UNIT = {"s": "s", "sec": "s", "secs": "s", "seconds": "s", "ms": "ms", "msec": "ms", "millis": "ms",
+              "milliseconds": "ms", "us": "us", "usec": "us", "micros": "us", "ns": "ns", "nsec": "ns",
+              "nanos": "ns", "nanoseconds": "ns"}
+_GOAL = {"goal", "cmd", "command", "commanded", "target", "setpoint", "sp", "desired", "demand"}
+_CURRENT = {"current", "cur", "ma", "amp", "amps"}
+#: words of a knob's position: those that name the driving side outright, then generic ones
+_DRIVE = {"knob", "motor", "pulley", "input", "drive", "actuator", "servo", "present", "in"}
+_POSITION = _DRIVE | {"pos", "position", "actual", "angle", "enc", "encoder"}
+_ANGLE_UNIT = {"deg": "deg", "degree": "deg", "degrees": "deg", "rad": "rad", "radian": "rad", "radians": "rad",
+               "tick": "ticks", "ticks": "ticks", "raw": "ticks", "counts": "ticks", "count": "ticks"}
+_MEASURED = {"joint", "bend", "bending", "theta", "meas", "measured", "output", "camera", "angle"}
+_SENSORS = {"tip": {"tip", "distal", "sensor1", "s1"}, "base": {"base", "proximal", "ref", "sensor0", "s0"}}
+_AXES = {"x", "y", "z", "px", "py", "pz"}
+_QUAT = {"qw": "w", "qx": "x", "qy": "y", "qz": "z", "q0": "w", "q1": "x", "q2": "y", "q3": "z"}
+_ROTATION = {"q", "quat", "quaternion", "orientation", "rotation", "rot"}
+_LENGTH_UNIT = {"mm": "mm", "m": "m"}
+_NOT_KNOB = _GOAL | _CURRENT | (_MEASURED - {"angle"}) | {"tip", "distal"}
+
+
+def words(name: str) -> list[str]:
+    """A column name's words, lower case: ``apPresentTicks`` and ``ap_present_ticks`` give ap, present, ticks."""
+    spaced = re.sub(r"(?<=[a-z0-9])(?=[A-Z])", " ", str(name))
+    return [w for w in re.split(r"[^A-Za-z0-9]+", spaced.lower()) if w]
+
+
+@dataclass
+class Draft:
+    """A drafted map: its TOML text, what was decided how, and what is left to check."""
+
+    text: str
+    roles: dict[str, str] = field(default_factory=dict)
+    checks: list[str] = field(default_factory=list)
+    unmatched: list[str] = field(default_factory=list)
+
+
+def _numbers(df: pd.DataFrame, col: str) -> np.ndarray:
+    v = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=float)
+    return v[np.isfinite(v)]
+
+
+def _toml(value) -> str:
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml(v) for v in value) + "]"
+    if isinstance(value, float):
+        return repr(value)
+    return str(value)
+
+
+class _Writer:
+    """TOML lines with a comment column; a guess is a ``CHECK`` comment and a line in the summary."""
+
+    def __init__(self):
+        self.lines: list[str] = []
+        self.checks: list[str] = []
+
+    def table(self, name: str, comment: str = "") -> None:
+        self.lines += ["", f"[{name}]" + (f"  # {comment}" if comment else "")]
+
+    def key(self, key: str, value, comment: str = "", check: str = "", where: str = "") -> None:
+        line = f"{key} = {_toml(value)}"
+        note = f"CHECK: {check}" if check else comment
+        if check:
+            self.checks.append(f"{where}{key}: {check}")
+        self.lines.append(f"{line:<44}# {note}" if note else line)
+
+
+def _time_unit(df: pd.DataFrame, col: str) -> tuple[str, str]:
+    """The clock's unit and, when the name does not say, the evidence for it (empty when it does)."""
+    for w in reversed(words(col)):
+        if w in _TIME_UNIT:
+            return _TIME_UNIT[w], ""
+    v = _numbers(df, col)
+    if v.size < 0.5 * len(df):
+        return "datetime", "the stamps are text: read as ISO 8601 date-times"
+    mag = float(np.median(np.abs(v))) if v.size else 0.0
+    for unit, epoch in (("ns", 1e17), ("us", 1e14), ("ms", 1e11), ("s", 1e8)):
+        if mag >= epoch:
+            return unit, f"epoch-sized stamps ({mag:.3g}) read as {unit} since 1970"
+    steps = np.diff(v)
+    step = float(np.median(steps[steps > 0])) if np.any(steps > 0) else 0.0
+    for unit, scale in (("s", 1.0), ("ms", 1e-3), ("us", 1e-6), ("ns", 1e-9)):
+        if step and 1e-4 <= step * scale <= 1.0:
+            return unit, f"median step {step:.3g} {unit} = {1.0 / (step * scale):.0f} Hz"
+    return "s", f"median step {step:.3g}: unit not recognised, seconds assumed"
+
+
+def _angle_unit(df: pd.DataFrame, col: str, ticks_ok: bool) -> tuple[str, str]:
+    for w in reversed(words(col)):
+        if w in _ANGLE_UNIT and (ticks_ok or _ANGLE_UNIT[w] != "ticks"):
+            return _ANGLE_UNIT[w], ""
+    v = _numbers(df, col)
+    if v.size == 0:
+        return "deg", "no numbers: degrees assumed"
+    if ticks_ok and np.all(v == np.round(v)) and v.min() >= 0 and v.max() <= 4095 and np.ptp(v) > 20:
+        return "ticks", f"whole numbers {v.min():.0f}..{v.max():.0f} read as servo ticks"
+    lim = 2 * np.pi if ticks_ok else np.pi
+    if np.max(np.abs(v)) <= lim:
+        return "rad", f"values within +-{lim:.3g} ({v.min():.3g}..{v.max():.3g}) read as radians"
+    return "deg", f"values {v.min():.3g}..{v.max():.3g} read as degrees"
+
+
+def _pick(cols: list[str], want: set[str], *, avoid: set[str] = frozenset(), need: set[str] = frozenset(),
+          taken: set[str]) -> str | None:
+    """The first free column with a word of ``want`` (and of ``need``, when given) and none of ``avoid``."""
+    for c in cols:
+        ws = set(words(c))
+        if c not in taken and ws & want and not ws & avoid and (not need or ws & need):
+            return c
+    return None
+
+
+def _pose_columns(cols: list[str], sensor: str, taken: set[str]) -> tuple[list[str] | None, list[str] | None]:
+    """x, y, z and w, x, y, z columns of one EM sensor, or None for each part not found."""
+    pos, quat = {}, {}
+    for c in cols:
+        ws = words(c)
+        if c in taken or not set(ws) & _SENSORS[sensor]:
+            continue
+        last = [w for w in ws if w not in _SENSORS[sensor] and w not in _LENGTH_UNIT]
+        tag = last[-1] if last else ""
+        if tag in _QUAT:  # tip_qw, tip_q0
+            quat.setdefault(_QUAT[tag], c)
+        elif set(ws) & _ROTATION and tag in ("w", "x", "y", "z"):  # tip.pose.orientation.w, tip_quat_x
+            quat.setdefault(tag, c)
+        elif tag in _AXES:  # tip_x_m, tip.pose.position.x, tip_px
+            pos.setdefault(tag[-1], c)
+    p = [pos[a] for a in "xyz"] if len(pos) == 3 else None
+    q = [quat[a] for a in "wxyz"] if len(quat) == 4 else None
+    return p, q
+
+
+def draft_map(df: pd.DataFrame, log_name: str = "LOG.csv") -> Draft:
+    """Guess a column map for the log ``df`` (as :func:`endocal.runs.textable.read_csv_table` reads it).
+
+    Returns
+    -------
+    Draft
+        The map's TOML text (every guess marked ``CHECK``), the roles found, the checks and
+        the roles left ``FILL IN``.
+    """
+    cols = [str(c) for c in df.columns]
+    all_words = {w for c in cols for w in words(c)}
+    probe = load_probe("duodenoscope" if {"ud", "lr"} & all_words and not {"ap", "ml"} & all_words else "tee")
+    w = _Writer()
+    roles: dict[str, str] = {}
+    unmatched: list[str] = []
+    taken: set[str] = set()
+    w.lines += [f"# Column map drafted by `endocal import csv {log_name} --draft-map`: read every line marked",
+                "# CHECK (guessed from the numbers, not the names) and every FILL IN, then import with",
+                f"# `endocal import csv {log_name} --map THIS.toml --out RUN`. Keys: configs/csv-map.example.toml.",
+                ""]
+    w.key("probe", probe.name, "names the bending axes: tee has ap and ml, duodenoscope ud and lr")
+
+    tip_p, tip_q = _pose_columns(cols, "tip", taken)
+    base_p, base_q = _pose_columns(cols, "base", taken)
+    poses = tip_p is not None and tip_q is not None
+
+    time_col = _pick(cols, _TIME, taken=taken)
+    rising = ""
+    if time_col is None:  # no name says clock: the first column whose numbers rise throughout
+        time_col = next((c for c in cols if (v := _numbers(df, c)).size == len(df) > 1 and np.all(np.diff(v) > 0)),
+                        None)
+        rising = f"column '{time_col}' rises throughout, read as the clock; " if time_col else ""
+    w.table("time")
+    if time_col is not None:
+        taken.add(time_col)
+        unit, why = _time_unit(df, time_col)
+        w.key("column", time_col, "the clock column", check=rising.rstrip("; "), where="[time] ")
+        w.key("unit", unit, "s, ms, us, ns or datetime", check=why, where="[time] ")
+        roles["time"] = f"{time_col} ({unit})"
+    else:
+        w.key("sample_rate_hz", 100.0, check="no clock column found: the rows are taken 1/rate apart; give "
+              "the logger's rate (or column = ... and unit = ...)", where="[time] ")
+        roles["time"] = "none (sample_rate_hz)"
+
+    axes = list(probe.bending_axes)
+    knobs: dict[str, str] = {}
+    for axis in axes:
+        goal = _pick(cols, _GOAL, need={axis}, taken=taken)
+        pos = _pick(cols, _POSITION | _ANGLE_UNIT.keys(), avoid=_NOT_KNOB, need={axis},
+                    taken=taken | ({goal} if goal else set()))
+        if pos is None and goal is not None:
+            pos, goal = goal, None
+        if pos is None:
+            continue
+        knobs[axis] = pos
+        taken |= {pos} | ({goal} if goal else set())
+        cur = _pick(cols, _CURRENT, need={axis}, taken=taken)
+        w.table(f"knobs.{axis}")
+        w.key("position", pos, "the knob's measured position (the command when there is no goal)")
+        _knob_unit(w, df, pos, axis)
+        if goal:
+            w.key("goal", goal, "the goal sent to the servo, same unit")
+        if cur:
+            taken.add(cur)
+            w.key("current", cur, "motor current")
+            w.key("current_unit", "A" if "a" in words(cur)[-1:] or "amp" in words(cur) else "mA",
+                  "mA or A")
+        roles[f"knob {axis}"] = pos + (f" (goal {goal})" if goal else "")
+    if not knobs:  # a bench: one motor, named for what it is rather than for a probe axis
+        goal = _pick(cols, _GOAL, avoid=_CURRENT | {"tip"}, taken=taken)
+        pos = _pick(cols, _DRIVE, avoid=_NOT_KNOB, taken=taken) or _pick(cols, _POSITION, avoid=_NOT_KNOB,
+                                                                         taken=taken) or goal
+        if pos == goal:
+            goal = None
+        w.table(f"knobs.{axes[0]}", "the one driven axis of a bench is the probe's first")
+        w.key("position", pos or FILL, "the driving knob or pulley, as its encoder reads it")
+        if pos:
+            knobs[axes[0]] = pos
+            taken |= {pos} | ({goal} if goal else set())
+            _knob_unit(w, df, pos, axes[0])
+            if goal:
+                w.key("goal", goal, "the goal sent to the motor, same unit")
+            roles[f"knob {axes[0]}"] = pos + (f" (goal {goal})" if goal else "")
+        else:
+            w.key("unit", "deg", "deg, rad or ticks")
+            unmatched.append(f"[knobs.{axes[0]}] position")
+
+    if poses:
+        for sensor, p, q in (("tip", tip_p, tip_q), ("base", base_p, base_q)):
+            w.table(sensor, f"the EM sensor at the {sensor} of the bending section")
+            if p is None or q is None:
+                w.key("position", [FILL] * 3, "x, y, z columns")
+                w.key("unit", "mm", "mm or m")
+                w.key("quaternion", [FILL] * 4, "w, x, y, z columns")
+                w.key("order", "wxyz", "the order of the columns above")
+                unmatched.append(f"[{sensor}] pose (or fixed_position/fixed_quaternion for a clamped base)")
+                continue
+            taken |= set(p) | set(q)
+            lu = next((_LENGTH_UNIT[x] for x in reversed(words(p[0])) if x in _LENGTH_UNIT), None)
+            why = ""
+            if lu is None:
+                v = np.concatenate([_numbers(df, c) for c in p])
+                mag = float(np.median(np.abs(v))) if v.size else 0.0
+                lu, why = ("m", f"positions of median size {mag:.3g} read as metres") if mag < 2.0 else \
+                          ("mm", f"positions of median size {mag:.3g} read as millimetres")
+            w.key("position", p, "x, y, z in the tracker frame")
+            w.key("unit", lu, "mm or m", check=why, where=f"[{sensor}] ")
+            scalar_first = words(q[0])[-1] in ("q0",)
+            w.key("quaternion", q, "scalar first, as listed", check="q0 read as the scalar part (NDI's convention)"
+                  if scalar_first else "", where=f"[{sensor}] ")
+            w.key("order", "wxyz", "the order of the columns above")
+            roles[sensor] = ", ".join(p + q)
+    else:
+        measured = [c for c in cols if c not in taken and set(words(c)) & _MEASURED and _numbers(df, c).size]
+        for i, axis in enumerate(list(knobs) or axes[:1]):
+            col = next((c for c in measured if axis in words(c)), None) or (measured[i] if i < len(measured) else None)
+            w.table(f"angles.{axis}", "the measured bending angle (an encoder, a camera)")
+            w.key("column", col or FILL, "")
+            if col is None:
+                unmatched.append(f"[angles.{axis}] column (or [tip] and [base] EM poses)")
+                continue
+            measured.remove(col)
+            taken.add(col)
+            unit, why = _angle_unit(df, col, ticks_ok=False)
+            w.key("unit", unit, "deg or rad", check=why, where=f"[angles.{axis}] ")
+            w.key("zero", 0.0, "the reading when the section is straight (same unit)")
+            w.key("direction", 1, "1, or -1 when the sensor counts the other way")
+            roles[f"angle {axis}"] = col
+
+    extras = [c for c in cols if c not in taken and _numbers(df, c).size == len(df) > 0]
+    if extras:
+        # top-level keys must come before the first table
+        w.lines[5:5] = ["# further numeric columns, carried into the table (covariates for load:COLUMN): drop what is "
+                        "not one", "extras = [" + "".join(f"\n    {_toml(c)}," for c in extras) + "\n]"]
+        roles["extras"] = ", ".join(extras)
+    return Draft("\n".join(w.lines) + "\n", roles, w.checks, unmatched)
+
+
+def _knob_unit(w: _Writer, df: pd.DataFrame, col: str, axis: str) -> None:
+    unit, why = _angle_unit(df, col, ticks_ok=True)
+    w.key("unit", unit, "deg, rad or ticks", check=why, where=f"[knobs.{axis}] ")
+    if unit == "ticks":
+        w.key("zero_ticks", 2048, check="the tick count with the knob at 0 deg (probe straight)", where=f"[knobs.{axis}] ")
+        w.key("ticks_per_rev", 4096, "XM430: 4096")
+    w.key("direction", 1, "1, or -1 when a positive count bends the tip towards -y")
+
+
+def write_draft(log: str | Path, out: str | Path, *, force: bool = False) -> Draft:
+    """Read ``log``, draft its map and write it to ``out`` (refused if it exists, unless ``force``).
+
+    Raises
+    ------
+    RunFormatError
+        ``log`` unreadable or not a table.
+    OutputExistsError
+        ``out`` exists and ``force`` is False.
+    """
+    from endocal.errors import OutputExistsError
+    from endocal.runs.csvlog import read_log_table
+    from endocal.runs.format import atomic_write_bytes, check_parent
+
+    log, out = Path(log), Path(out)
+    if out.exists() and not force:
+        raise OutputExistsError(f"{out} already exists: choose another --draft-map or pass --force")
+    check_parent(out)
+    draft = draft_map(read_log_table(log)[0], log.name)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(out, draft.text.encode())
+    return draft
