@@ -43,8 +43,8 @@ def fit_hysteresis(
         A fitted model of this axis and base whose parameters start the fit (every effect it
         shares with the new model starts from its fitted values and skips its start search):
         the refit ``validate`` prints starts from the model it validated, as its scan did, so
-        the refit is the fit the scan scored. Fitting from scratch instead can end in another
-        local minimum, even one worse than the model without the new effect.
+        the refit is the fit the scan scored (from scratch, a fit can end in another local
+        minimum).
     **settings
         Passed to the model (e.g. ``n_operators``, ``out_of_range``).
 
