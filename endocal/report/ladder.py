@@ -49,6 +49,7 @@ from endocal.validation.suspects import (
     check_cv_data,
     check_fit_data,
     effect_labels,
+    fitted_on,
     fold_bounds,
     fold_split,
     heldout_errors,
@@ -108,7 +109,7 @@ def split_validate(model: HysteresisModel, train: HysteresisData, val: Hysteresi
     check_fit_data(train, "estimation data")
     stride = max(1, math.ceil(train.n_samples / max_samples))
     with one_blas_thread():
-        fitted = split_fit(model, effect_labels(model), train, stride)
+        fitted = model if fitted_on(model, train) else split_fit(model, effect_labels(model), train, stride)
     err = predict_errors(fitted, val)
     dt = train.decimate(stride) if stride > 1 else train
     train_err = predict_errors(fitted, dt)

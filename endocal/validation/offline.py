@@ -24,9 +24,11 @@ from endocal.validation.suspects import (
     ScanResult,
     check_cv_data,
     effect_labels,
+    fitted_on,
     fold_bounds,
     heldout_errors,
     one_blas_thread,
+    predict_errors,
     predict_extrapolated,
     scan_effects,
     scan_split,
@@ -331,7 +333,8 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
         stride = scan.stride
         with one_blas_thread():
             if scan.scheme == "estimation/validation":
-                old_err = split_errors(compare, effect_labels(compare), est, data, stride)
+                old_err = (predict_errors(compare, data) if fitted_on(compare, est) else
+                           split_errors(compare, effect_labels(compare), est, data, stride))
             else:
                 d = data.decimate(stride) if stride > 1 else data
                 old_err, _ = heldout_errors(compare, effect_labels(compare), d, fold_bounds(d.n_samples, folds))
