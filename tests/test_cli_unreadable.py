@@ -98,3 +98,42 @@ def test_a_bad_planes_file_is_one_line(bad, planes, tmp_path):
                                  "--planes", str(src), "--out", str(model)])
     _one_line_exit_2(result, src.name)
     assert not model.exists()
+
+
+def test_no_command_writes_over_its_own_inputs(tmp_path):
+    """A slip of the shell must not replace a recording or a model with a command's result.
+
+    `--out` / `--json-out` naming one of the command's inputs (the data, the model, the
+    estimation data the model file names, the report's side file that is the model) is one
+    line and exit 2, with `--force` too, and every input keeps its bytes.
+    """
+    piezo = REPO / "data_samples" / "piezo" / "piezo_aligned.csv"
+    est, val, model = tmp_path / "est.csv", tmp_path / "val.csv", tmp_path / "m.json"
+    lines = piezo.read_text().splitlines(keepends=True)
+    est.write_text("".join(lines[:801]))
+    val.write_text("".join(lines[:1] + lines[801:1601]))
+    res = runner.invoke(app, ["fit", "hysteresis", str(est), "--axis", "piezo", "--model", "linear", "--out", str(model)])
+    assert res.exit_code == 0, res.output
+    before = {p: p.read_bytes() for p in (est, val, model)}
+    for args, name in [
+        (["fit", "hysteresis", str(est), "--axis", "piezo", "--out", str(est), "--force"], "est.csv"),
+        (["validate", str(model), str(val), "--json-out", str(val)], "val.csv"),
+        (["validate", str(model), str(val), "--json-out", str(model)], "m.json"),
+        (["validate", str(model), str(val), "--json-out", str(est)], "est.csv"),  # the model's recorded estimation data
+        (["report", str(model), "--data", str(val), "--out", str(tmp_path / "m.html"), "--force"], "m.json"),
+        (["import", "csv", str(val), "--map", str(tmp_path / "map.toml"), "--out", str(val), "--force"], "val.csv"),
+        (["import", "csv", str(val), "--draft-map", str(val), "--force"], "val.csv"),
+    ]:
+        res = runner.invoke(app, args)
+        _one_line_exit_2(res, name)
+        assert "is one of this command's inputs" in res.output, res.output
+    assert {p: p.read_bytes() for p in before} == before
+    # nor does --force replace a file of the lab's that is not a table endocal writes
+    notes = tmp_path / "notes.csv"
+    notes.write_text("date,remark\n2026-11-25,probe 2 re-taped\n")
+    (tmp_path / "map.toml").write_text('probe = "tee"\n[time]\ncolumn = "t_s"\n[knobs.ap]\nposition = "piezo_cmd_deg"\n'
+                                       '[angles.ap]\ncolumn = "piezo_meas_deg"\n')
+    res = runner.invoke(app, ["import", "csv", str(val), "--map", str(tmp_path / "map.toml"), "--out", str(notes),
+                              "--force"])
+    _one_line_exit_2(res, "notes.csv")
+    assert "is not an aligned table" in res.output and notes.read_text().startswith("date,remark")

@@ -55,6 +55,27 @@ def cli_errors(func: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
+def refuse_input_as_output(flag: str, output: Path | None, inputs) -> None:
+    """Refuse to write ``output`` over one of the command's own input files (with or without ``--force``).
+
+    A slip of the shell (``--json-out run.csv``, ``--out log.csv --force``) would otherwise
+    replace a recording or a model with the command's result, and nothing could bring it back.
+
+    Raises
+    ------
+    OutputPathError
+    """
+    from endocal.errors import OutputPathError
+
+    if output is None:
+        return
+    target = Path(output).resolve()
+    for p in inputs:
+        if p is not None and Path(p).resolve() == target:
+            raise OutputPathError(f"{flag} {output} is one of this command's inputs; writing there would replace it: "
+                                  "choose another path")
+
+
 def stdout_is_terminal() -> bool:
     return sys.stdout.isatty()
 

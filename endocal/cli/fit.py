@@ -8,7 +8,7 @@ from typing import Optional
 
 import typer
 
-from endocal.cli._common import cli_errors, err, out
+from endocal.cli._common import cli_errors, err, out, refuse_input_as_output
 from endocal.errors import OutputExistsError
 
 app = typer.Typer(help="Fit bending planes (`fit planes`), hysteresis models (`fit hysteresis`) and contact-force models (`fit force`).", no_args_is_help=True)
@@ -79,6 +79,7 @@ def hysteresis(
     from endocal.models import model_to_dict, save_model
     from endocal.runs.format import sha256_of, software_versions, utc_now
 
+    refuse_input_as_output("--out", out_path, [*data, planes_file, start_from])
     if out_path.exists() and not force:
         raise OutputExistsError(f"{out_path} already exists: choose another --out or pass --force")
     planes = None

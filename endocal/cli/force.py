@@ -9,7 +9,7 @@ from typing import Optional
 
 import typer
 
-from endocal.cli._common import cli_errors, err, out
+from endocal.cli._common import cli_errors, err, out, refuse_input_as_output
 from endocal.errors import OutputExistsError
 
 
@@ -33,6 +33,7 @@ def fit_force_cmd(
     from endocal.force.io import force_model_to_dict
     from endocal.runs.format import sha256_of, software_versions, utc_now
 
+    refuse_input_as_output("--out", out_path, runs)
     if out_path.exists() and not force:
         raise OutputExistsError(f"{out_path} already exists: choose another --out or pass --force")
     model = fit_force(runs, axis=axis, torque_constant_nm_per_a=torque_constant)

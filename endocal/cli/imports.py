@@ -9,7 +9,7 @@ from typing import Optional
 
 import typer
 
-from endocal.cli._common import cli_errors, err, out
+from endocal.cli._common import cli_errors, err, out, refuse_input_as_output
 from endocal.cli.ros import import_ros
 
 app = typer.Typer(help="Turn logs recorded elsewhere (a lab's CSV, a ROS bag) into run folders.", no_args_is_help=True)
@@ -39,6 +39,8 @@ def import_csv_cmd(
     from endocal.errors import ConfigError
     from endocal.runs.csvlog import import_csv
 
+    refuse_input_as_output("--out", out_dir, [log, map_path])
+    refuse_input_as_output("--draft-map", draft, [log])
     if draft is not None:
         if map_path is not None or out_dir is not None:
             raise ConfigError("--draft-map writes a map and imports nothing: run it without --map and --out, then "

@@ -10,7 +10,7 @@ from typing import Optional
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from endocal.cli._common import cli_errors, err, out
+from endocal.cli._common import cli_errors, err, out, refuse_input_as_output
 from endocal.runs.aligned import CSV_SUFFIXES
 
 _DATA_SUFFIXES = (".parquet", *CSV_SUFFIXES)
@@ -57,6 +57,9 @@ def report(
     from endocal.report.result import side_files
 
     models, records = split_paths(paths, data)
+    for kind, written in side_files(out_path).items():
+        refuse_input_as_output("--out" if kind == "html" else f"--out (its {kind} file)", written,
+                               [*paths, *data, planes])
     show = not quiet and not as_json and err.is_terminal
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   console=err, disable=not show, transient=True) as bar:

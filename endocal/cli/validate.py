@@ -18,6 +18,7 @@ from endocal.cli._common import (
     err,
     guard_factory,
     out,
+    refuse_input_as_output,
     warnings_as_lines,
 )
 from endocal.errors import ModelError
@@ -176,6 +177,8 @@ def validate(
     """
     from endocal.models import load_model
 
+    refuse_input_as_output("--json-out", json_out, [model_path, *(data or []), *train, *compare, planes, force_model,
+                                                    sim_config, hardware_config])
     if json_out is not None and not json_out.resolve().parent.is_dir():
         from endocal.errors import OutputPathError
 
@@ -216,6 +219,7 @@ def validate(
 
     tables = [load_aligned(p) for p in data]
     plan = plan_estimation(model, tables, model_path=model_path, train_paths=train, cv=cv, planes_path=planes)
+    refuse_input_as_output("--json-out", json_out, [*plan.train_paths, plan.planes_path])
     effects = [e.label for e in model.effects_]
     old_path = compare_path if compare_path is not None else previous_model_path(model_path, effects)
     old = load_model(old_path) if old_path is not None else None

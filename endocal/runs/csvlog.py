@@ -556,7 +556,26 @@ def _prepare_table(out: Path, force: bool, map_source: str) -> None:
         raise OutputPathError(f"output {out} is a folder: choose a .parquet or .csv file name for --out")
     if out.exists() and not force:
         raise OutputExistsError(f"output {out} already exists: choose a new --out or pass --force to replace it")
+    if out.exists() and not _is_aligned_table(out):
+        # --force replaces an aligned table, never a lab's own file that happens to end in .csv
+        raise OutputPathError(f"output {out} exists and is not an aligned table (t_s and <axis>_cmd_deg columns): "
+                              "--force only replaces tables; choose another --out")
     check_parent(out)
+
+
+def _is_aligned_table(path: Path) -> bool:
+    """Whether ``path`` holds an aligned table (its header has ``t_s`` and a ``<axis>_cmd_deg`` column)."""
+    try:
+        if path.suffix.lower() == ".parquet":
+            import pyarrow.parquet as pq
+
+            names = pq.read_schema(path).names
+        else:
+            with open(path, "rb") as fh:
+                names = list(read_csv_table(fh.readline()).columns)
+    except Exception:  # noqa: BLE001 - unreadable as a table: not one of ours
+        return False
+    return "t_s" in names and any(str(n).endswith(CMD) for n in names)
 
 
 def _angles_table(df: pd.DataFrame, t: np.ndarray, motor: dict, cmap: CsvMap, where: str) -> tuple[int, pd.DataFrame]:
