@@ -109,7 +109,15 @@ def test_bad_estimation_data_is_one_line_and_exit_2(sine_sweeps, tmp_path):
     moved.write_text(json.dumps(d))
     _one_line_exit_2(_run("validate", moved, tmp / "est", ok=False), "has changed since the model was fitted")
     # estimation data of another axis than the model
-    _one_line_exit_2(_run("validate", tmp / "pe.json", tmp / "val", "--train", PIEZO, ok=False), "is for axis 'ap'")
+    _one_line_exit_2(_run("validate", tmp / "pe.json", tmp / "val", "--train", PIEZO, ok=False),
+                     "is for axis 'ap' but " + str(PIEZO) + " (estimation data) has axis piezo")
+    # a validation record too short to test its residual; fewer than two rolling-origin blocks
+    pd.read_csv(PIEZO).iloc[:1].rename(columns=lambda c: c.replace("piezo", "ap")).to_csv(tmp_path / "one.csv",
+                                                                                        index=False)
+    _one_line_exit_2(_run("validate", tmp / "pe.json", tmp_path / "one.csv", ok=False),
+                     "1 sample(s) of axis ap; validation needs at least 4")
+    _one_line_exit_2(_run("validate", tmp / "pe.json", tmp / "val", "--cv", "rolling", "--folds", "1", ok=False),
+                     "--folds must be 2 or more")
     # --train with --cv rolling, an unknown --cv, an unknown --out-of-range
     _one_line_exit_2(_run("validate", tmp / "pe.json", tmp / "val", "--train", tmp / "est", "--cv", "rolling", ok=False),
                      "exclude each other")

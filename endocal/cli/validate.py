@@ -145,7 +145,7 @@ def validate(
     data: Optional[list[Path]] = typer.Argument(None, help="Run folders or aligned tables (.parquet/.csv) to validate on."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (metrics, regimes, residuals, suspects, notes)."),
     json_out: Optional[Path] = typer.Option(None, "--json-out", help="Also write that JSON object to this file (the terminal view still prints)."),
-    folds: int = typer.Option(5, "--folds", help="Held-out blocks of the blocked cross-validation."),
+    folds: int = typer.Option(5, "--folds", help="Held-out blocks of the blocked cross-validation (2 or more)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the bootstrap intervals (and of the backend with --protocol)."),
     compare: list[Path] = typer.Option([], "--compare", help="A previous model: show its error beside this one's. With --trajectory: other models to walk the path with, one per axis per set (repeatable), compared with paired tests."),
     train: list[Path] = typer.Option([], "--train", help="Estimation data (repeatable): candidate effects are fitted on it and scored on DATA. Default: the records the model file names, when found and unchanged."),
@@ -177,6 +177,8 @@ def validate(
     """
     from endocal.models import load_model
 
+    if folds < 2:
+        raise ModelError(f"--folds must be 2 or more (held-out blocks of the rolling-origin scan), got {folds}")
     refuse_input_as_output("--json-out", json_out, [model_path, *(data or []), *train, *compare, planes, force_model,
                                                     sim_config, hardware_config])
     if json_out is not None and not json_out.resolve().parent.is_dir():

@@ -76,7 +76,7 @@ def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str, planes=No
     for a in tables:
         if axis not in a.axes:
             raise ModelError(f"{a.source}: no axis '{axis}' in the data (it has {', '.join(a.axes)}); "
-                             "validate a model of one of those axes, or give data of this axis")
+                             "name one of those axes, or give data of this one")
     if planes is not None:
         tables = [_through_planes(a, axis, planes) for a in tables]
     common = set.intersection(*(set(a.extras) for a in tables))

@@ -159,14 +159,14 @@ def model_label(model: HysteresisModel) -> str:
     return "+".join([model.base_name] + effect_labels(model))
 
 
-def _resolve_axis(model: HysteresisModel, datas: list[AlignedData]) -> str:
+def _resolve_axis(model: HysteresisModel, datas: list[AlignedData], what: str = "validation data") -> str:
     axes = [set(a.axes) for a in datas]
     common = set.intersection(*axes)
     if model.axis is not None:
         for a in datas:
             if model.axis not in a.axes:
-                raise ModelError(f"the model is for axis '{model.axis}' but {a.source} has axis "
-                                 f"{', '.join(a.axes)}; validate it on data of axis '{model.axis}'")
+                raise ModelError(f"the model is for axis '{model.axis}' but {a.source} ({what}) has axis "
+                                 f"{', '.join(a.axes)}; give {what} of axis '{model.axis}'")
         return model.axis
     if len(common) == 1:
         return next(iter(common))
@@ -174,7 +174,7 @@ def _resolve_axis(model: HysteresisModel, datas: list[AlignedData]) -> str:
                      "refit the model with --axis")
 
 
-def _axis_of(datas, model: HysteresisModel, axis: str | None, planes, bending_axes):
+def _axis_of(datas, model: HysteresisModel, axis: str | None, planes, bending_axes, what: str = "validation data"):
     """(HysteresisData, axis, per-table info, bending axes, paths) of loaded tables or one HysteresisData."""
     if isinstance(datas, HysteresisData):
         ax = axis or model.axis or "axis"
@@ -182,7 +182,7 @@ def _axis_of(datas, model: HysteresisModel, axis: str | None, planes, bending_ax
     tables = [datas] if isinstance(datas, AlignedData) else list(datas)
     if not tables:
         raise ModelError("no data given: name at least one run folder or aligned table")
-    ax = _resolve_axis(model, tables)
+    ax = _resolve_axis(model, tables, what)
     data = axis_data(tables, ax, planes)
     info = [{"source": str(a.source), "sha256": a.sha256, "n_samples": len(a.table)} for a in tables]
     axes_all = list(bending_axes) if bending_axes is not None else sorted(set().union(*(a.axes for a in tables)))
@@ -192,6 +192,11 @@ def _axis_of(datas, model: HysteresisModel, axis: str | None, planes, bending_ax
 def _no_scan(reason: str, alpha: float, min_gain_pct: float) -> ScanResult:
     return ScanResult((), (), float("nan"), {}, (), 0, 1, 0, alpha, min_gain_pct, scheme="none",
                       scheme_reason=reason)
+
+
+#: Fewest validation samples: the whiteness test (Ljung-Box) needs a lag-1 autocorrelation of the
+#: residual over a few samples (a record of one back-and-forth sweep has hundreds).
+MIN_VALIDATION_SAMPLES = 4
 
 
 def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | None = None, folds: int = 5,
@@ -270,10 +275,15 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     data, ax, info, axes_all, val_paths = _axis_of(datas, model, axis, planes, bending_axes)
     if data.meas_deg is None:
         raise ModelError("validation needs measured angles")
+    if data.n_samples < MIN_VALIDATION_SAMPLES:
+        where = ", ".join(map(str, val_paths or data_paths or ["the validation data"]))
+        raise ModelError(f"{where}: {data.n_samples} sample(s) of axis {ax}; validation needs at least "
+                         f"{MIN_VALIDATION_SAMPLES} (the residual's autocorrelation is tested at lag 1 and more): "
+                         "validate on a record of the knob moving, e.g. one back-and-forth sweep")
     paths = list(data_paths) if data_paths is not None else (val_paths or ["DATA"])
     est, est_info = None, []
     if train is not None:
-        est, _, est_info, est_axes, est_paths = _axis_of(train, model, ax, planes, bending_axes)
+        est, _, est_info, est_axes, est_paths = _axis_of(train, model, ax, planes, bending_axes, "estimation data")
         axes_all = sorted(set(axes_all) | set(est_axes))
         if train_paths is None:
             train_paths = est_paths or ["TRAIN"]
