@@ -211,3 +211,30 @@ def test_free_weight_jacobian_matches_finite_differences():
     e3 = np.zeros(7)
     e3[3] = 1.0
     assert np.allclose(J[:, 2 + 3], play_bank_forward(u, thr, e3, starts))
+
+
+def _bouc_wen(u, *, a=1.0, beta=0.05, gamma=0.02, alpha=0.3, k=0.8, sub=10):
+    """Bouc-Wen hysteresis (n = 1): each branch is steepest at its reversal and flattens towards saturation."""
+    z, prev, y = 0.0, u[0], np.empty_like(u)
+    for i, x in enumerate(u):
+        du = (x - prev) / sub
+        for _ in range(sub):
+            z += a * du - beta * abs(du) * z - gamma * du * abs(z)
+        prev = x
+        y[i] = k * (alpha * x + (1 - alpha) * z)
+    return y
+
+
+def test_a_fit_no_better_than_a_line_says_so():
+    """A classic PI branch stiffens away from each reversal (more plays engage), so a saturating
+    Bouc-Wen loop, which flattens, is beyond its non-negative weights: the fit stays at the
+    straight line, and its report must say so rather than hand over a model that only looks
+    fitted. The play loop it can draw gets no such warning."""
+    t = np.arange(4000) * 0.01
+    u = 60 * np.sin(2 * np.pi * 0.05 * t)
+    noise = np.random.default_rng(0).normal(0, 0.3, t.size)
+    bw = PIModel().fit(u, _bouc_wen(u) + noise)
+    assert any("no better than a straight line" in w for w in bw.fit_report_.warnings), bw.fit_report_.warnings
+    truth = PIModel(weights="exponential", offset=False).set_parameters({"pi_r": 3.0, "pi_w": 0.5, "pi_beta": 0.08})
+    ok = PIModel().fit(u, truth.predict(u) + noise)
+    assert not any("straight line" in w for w in ok.fit_report_.warnings), ok.fit_report_.warnings

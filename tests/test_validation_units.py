@@ -231,3 +231,28 @@ def test_load_is_called_unidentifiable_only_when_no_covariate_varies_and_none_is
     model = make_model("linear", effects, axis="ap").fit(axis_data(train, "ap"))
     res = validate_offline(model, [val], train=train, model_path="m.json")
     assert res.scan.untestable.get("load", "").startswith(note) if note else "load" not in res.scan.untestable
+
+
+def test_a_suggestion_whose_own_parameter_ends_at_a_bound_carries_a_caution():
+    """`pi` on a saturating Bouc-Wen loop (which its branches cannot draw) and a `delay` candidate.
+
+    The delay runs to its lower bound, -0.5 s, a non-causal latency stretched to take up a loop
+    shape: validate may still list what lowers the validation error, but says that its
+    parameter sits at a bound (and ranks it after candidates that do not)."""
+    from endocal.models import make_model
+    from endocal.validation.offline import validate_offline
+    from tests.test_models_pi import _bouc_wen
+
+    def record(amp, period_s, seed):
+        t = np.arange(0, period_s, 0.02)
+        u = amp * np.sin(2 * np.pi * t / period_s)
+        return HysteresisData(cmd_deg=u, meas_deg=_bouc_wen(u) + np.random.default_rng(seed).normal(0, 0.3, t.size),
+                              t_s=t)
+
+    est, val = record(60, 40, 1), record(45, 34, 2)
+    model = make_model("pi", axis="ap").fit(est)
+    res = validate_offline(model, val, train=est, model_path="m.json")
+    delay = next(s for s in res.scan.tested if s.effect == "delay")
+    assert delay.at_bound.startswith("delay_s = -0.5 sits at its lower bound"), delay.at_bound
+    order = [bool(s.at_bound) for s in res.scan.suspects]
+    assert order == sorted(order)  # at-bound suggestions after the others

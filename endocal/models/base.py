@@ -428,7 +428,8 @@ class HysteresisModel(ABC):
             n_free=n_free, rank_deficient=rank_def,
             warnings=([f"{d.n_samples} samples for {n_free} free parameters (fewer than 10 per parameter): the "
                        "fit may follow the noise; check it on a record it was not fitted on (endocal validate)"]
-                      if d.n_samples < 10 * n_free else []) + _loose_parameters(free, owners, values, stderr, lo, hi),
+                      if d.n_samples < 10 * n_free else []) + _loose_parameters(free, owners, values, stderr, lo, hi)
+                     + _no_better_than_a_line(d, float(math.sqrt(float(r @ r) / m)), self.base_name),
         )
         return self
 
@@ -770,6 +771,23 @@ class HysteresisModel(ABC):
         from endocal.models.io import save_model
 
         save_model(self, path)
+
+
+def _no_better_than_a_line(d: HysteresisData, rmse_deg: float, base: str) -> list[str]:
+    """A warning when the fit is within 5 % of the least-squares straight line ``meas = a*cmd + b``.
+
+    Such a model has found no hysteresis it can shape: a loop the base cannot draw (a `pi`
+    branch stiffens away from each reversal, so a loop that flattens towards its ends, as
+    saturating friction draws it, leaves it at its start), or a record without a loop.
+    """
+    A = np.column_stack([d.cmd_deg, np.ones(d.n_samples)])
+    coef, *_ = np.linalg.lstsq(A, d.meas_deg, rcond=None)
+    line = float(np.sqrt(np.mean((A @ coef - d.meas_deg) ** 2)))
+    if not (line > 0 and rmse_deg >= 0.95 * line):
+        return []
+    return [f"the fit ({rmse_deg:.3g} deg RMSE) is no better than a straight line through the data ({line:.3g} deg): "
+            f"the {base} model found no loop it can shape; look at the loop (endocal report) and try another base "
+            "(--model bspline or linear)"]
 
 
 def _loose_parameters(free: list[str], owners: dict, values: dict, stderr: dict, lo: np.ndarray,

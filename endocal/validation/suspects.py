@@ -101,6 +101,10 @@ class Suspect:
     screened : bool
         Not refitted beyond the first fold: its training fit gained too little (see
         :func:`scan_effects`).
+    at_bound : str
+        Under the estimation/validation scheme: the candidate's own parameters that its fit
+        left at a bound (``delay_s = -0.5 sits at its lower bound ...``), a term stretched to
+        take up what it does not model; such a suggestion ranks after those without.
     evidence : str
         ``significant``, ``not significant``, or ``not enough evidence (N units)`` when the
         validation data holds too few independent units for any p-value to reach ``alpha``
@@ -122,6 +126,7 @@ class Suspect:
     n_blocks: int
     screened: bool = False
     evidence: str = ""
+    at_bound: str = ""
 
     def to_dict(self) -> dict:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
@@ -691,6 +696,17 @@ def predict_errors(model: HysteresisModel, data: HysteresisData) -> np.ndarray:
     return _predict_errors(model, data)
 
 
+def _split_candidate(model: HysteresisModel, effects: Sequence[str], train: HysteresisData,
+                     val: HysteresisData) -> tuple[np.ndarray, list[str]]:
+    """Validation errors of ``base + effects`` fitted on ``train``, and its fit's warnings about
+    parameters of effects ``model`` lacks that sit at a bound."""
+    m = split_fit(model, effects, train)
+    have = set(effect_labels(model))
+    prefixes = tuple(e.prefix + "_" for e in m.effects_ if e.label not in have)
+    bound = [w for w in m.fit_report_.warnings if prefixes and w.startswith(prefixes) and "sits at its" in w]
+    return _predict_errors(m, val), bound
+
+
 def split_errors(model: HysteresisModel, effects: Sequence[str], train: HysteresisData, val: HysteresisData,
                  stride: int = 1) -> np.ndarray:
     """Validation errors ``pred - meas`` (deg) of ``base + effects`` fitted on ``train`` (every ``stride``-th sample)."""
@@ -757,19 +773,20 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     # the same structure on the same data could only stop elsewhere); else its structure is refitted
     as_is = fitted_on(model, train)
     with one_blas_thread():
-        errors = map_jobs(lambda effects: split_errors(model, effects, dt, val),
-                          ([] if as_is else [have]) + [have + [c] for c in tested_cands], jobs)
+        results = map_jobs(lambda effects: _split_candidate(model, effects, dt, val),
+                           ([] if as_is else [have]) + [have + [c] for c in tested_cands], jobs)
     if as_is:
-        errors = [predict_errors(model, val)] + errors
-    if isinstance(errors[0], ModelError):
-        raise ModelError(f"the model as it stands cannot be refitted on the estimation data: {errors[0]}") from None
-    err_base = errors[0]
-    fitted = []
-    for c, err in zip(tested_cands, errors[1:]):
-        if isinstance(err, ModelError):
-            untestable[c] = f"could not be fitted on the estimation data ({err})"
+        results = [(predict_errors(model, val), [])] + results
+    if isinstance(results[0], ModelError):
+        raise ModelError(f"the model as it stands cannot be refitted on the estimation data: {results[0]}") from None
+    err_base = results[0][0]
+    fitted, bounds = [], {}
+    for c, res in zip(tested_cands, results[1:]):
+        if isinstance(res, ModelError):
+            untestable[c] = f"could not be fitted on the estimation data ({res})"
         else:
-            fitted.append((c, err))
+            fitted.append((c, res[0]))
+            bounds[c] = "; ".join(res[1])
     rmse_base = float(np.sqrt(np.mean(err_base**2)))
     units = make_units(val, [err_base] + [e for _, e in fitted])
     need = min_units_for(len(fitted), alpha)
@@ -790,7 +807,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
         tested.append(Suspect(effect=c, column=col or None, gain_pct=gain, p_value=float(pa), p_raw=float(p),
                               rmse_heldout_deg=rmse, base_rmse_heldout_deg=rmse_base, significant=significant,
                               command=cmd, cause=cls.cause, signature=cls.signature, protocol=cls.protocol,
-                              n_blocks=units.n, evidence=evidence))
+                              n_blocks=units.n, evidence=evidence, at_bound=bounds[c]))
         errs[c] = err
     tested.sort(key=lambda s: -s.gain_pct)
     # Significant candidates are suspects. Without one, a candidate that still cuts the validation
@@ -798,6 +815,8 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     # and measured here, so the refit it names lowers this error by that much; the test only says
     # the gain is not consistent enough across units to rule out chance.
     suspects = [s for s in tested if s.significant] or [s for s in tested if s.gain_pct >= min_gain_pct]
+    # a candidate whose own parameter ended at a bound (a delay at -0.5 s) ranks after those that did not
+    suspects.sort(key=lambda s: bool(s.at_bound))
     notes = _ambiguities(suspects, errs, alpha) if any(s.significant for s in suspects) else []
     notes += [f"{k}: {v}" for k, v in untestable.items()]
     if thin and fitted:
