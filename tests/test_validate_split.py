@@ -226,10 +226,15 @@ def test_report_ladder_follows_validates_scheme(sine_sweeps):
     assert on_est["scheme"] in ("rolling-origin", None), on_est
     # the summary names the scheme its rungs ran
     _run("fit", "hysteresis", tmp / "est", "--axis", "ap", "--model", "pi", "--effects", "envelope,deadzone",
-         "--out", tmp / "pe-dz.json", "--force")
+         "--start-from", tmp / "pe.json", "--out", tmp / "pe-dz.json", "--force")
     rep = build_report([tmp / "pe.json", tmp / "pe-dz.json"], [tmp / "val"], regime_boot=0)
     line = next(x for x in rep.summary_lines() if x.startswith("ladder val"))
     assert "(held-out RMSE deg, fitted on the estimation data)" in line, line
+    # the rung's test is validate's: the same units of the validation record, the same p (before Holm)
+    step = next(s for s in rep.ladder if s["data"] == "val" and s["model"] == "pe-dz")
+    cand = next(t for t in v["scan"]["tested"] if t["effect"] == "deadzone")
+    assert step["heldout_rmse_deg"] == pytest.approx(cand["rmse_heldout_deg"], rel=1e-9)
+    assert step["p_value"] == pytest.approx(cand["p_raw"], rel=1e-9)
 
 
 @pytest.fixture(scope="module")

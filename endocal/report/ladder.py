@@ -22,10 +22,12 @@ Beside it, the **in-sample** RMSE of the *same* fold fits on their own training 
 in-sample error falls with every parameter added, held-out error only when the effect is
 real, and the gap between them is the overfit. Each rung's held-out errors are tested
 against the previous rung on the same record (ladder order: models of one base together,
-fewer effects first) with the one-sided, autocorrelation-aware paired
-test of the effect scan (:func:`~endocal.validation.suspects.paired_test`: Diebold-Mariano
-loss differentials averaged over blocks of three correlation times, Wilcoxon signed-rank),
-Holm-corrected over the steps of one record.
+fewer effects first) with the one-sided paired test ``validate`` runs under the same scheme:
+on the validation record, the sign-flip test on its units (half-cycles, or decorrelation
+blocks; :func:`~endocal.validation.suspects.unit_test`); under rolling origin, the block test of
+the effect scan (:func:`~endocal.validation.suspects.paired_test`: Diebold-Mariano loss
+differentials averaged over blocks of three correlation times, Wilcoxon signed-rank). Holm-
+corrected over the steps of one record.
 """
 
 from __future__ import annotations
@@ -57,7 +59,9 @@ from endocal.validation.suspects import (
     paired_test,
     predict_errors,
     split_fit,
+    unit_test,
 )
+from endocal.validation.units import make_units
 
 #: Held-out blocks and the longest record scored undecimated: ``endocal validate``'s defaults
 #: (``--folds``, ``max_scan_samples``), so the ladder's held-out RMSE is the one validate prints.
@@ -270,7 +274,11 @@ def model_ladder(models: list[ModelEntry], groups: list[Group], *, folds: int = 
                 if prev is not None and cv is not None and prev.scheme == cv.scheme:
                     if prev.metrics.rmse_deg > 0:
                         row["change_pct"] = 100.0 * (cv.metrics.rmse_deg / prev.metrics.rmse_deg - 1.0)
-                    row["p_value"], _ = paired_test(prev.errors_deg, cv.errors_deg)
+                    if cv.scheme == "estimation/validation":  # validate's units and test, so both agree
+                        units = make_units(g.hdata, [prev.errors_deg])
+                        row["p_value"] = unit_test(prev.errors_deg, cv.errors_deg, units)
+                    else:
+                        row["p_value"], _ = paired_test(prev.errors_deg, cv.errors_deg)
                 if cv is not None:
                     prev = cv
                 rows.append(row)

@@ -788,7 +788,9 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
             fitted.append((c, res[0]))
             bounds[c] = "; ".join(res[1])
     rmse_base = float(np.sqrt(np.mean(err_base**2)))
-    units = make_units(val, [err_base] + [e for _, e in fitted])
+    # units sized by the error of the model as it stands: the same for every candidate (a p-value
+    # does not depend on which others were tested) and for the report's ladder, which has only the pair
+    units = make_units(val, [err_base])
     need = min_units_for(len(fitted), alpha)
     thin = units.n < need
     raw = [unit_test(err_base, e, units) for _, e in fitted]
