@@ -228,6 +228,7 @@ def test_force_never_deletes_a_folder_that_is_not_a_run(tmp_path, tee):
     lambda df, p: p.with_suffix(".csv").write_text(df.to_csv(index=False).replace(",", ", ")),  # hand-edited
     lambda df, p: p.with_suffix(".csv").write_text(df.to_csv(index=False), encoding="utf-8-sig"),  # with a BOM
     lambda df, p: p.with_suffix(".dat").write_text(df.to_string(index=False, float_format="{:.17g}".format)),  # lined up
+    lambda df, p: p.with_suffix(".csv").write_text(df.to_csv(index=False) + ",,,\n" * 3),  # a spreadsheet's empty rows
 ])
 def test_an_aligned_table_reads_the_same_however_the_csv_was_written(tmp_path, write):
     t = np.arange(50) / 100.0

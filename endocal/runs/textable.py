@@ -13,6 +13,7 @@ from __future__ import annotations
 import io
 import re
 
+import numpy as np
 import pandas as pd
 
 #: delimiters recognised in the header line, most common first (ties go to the earlier one)
@@ -57,7 +58,7 @@ def read_csv_table(raw: bytes) -> pd.DataFrame:
     stripped of surrounding spaces; a first line of numbers only is data, not a header, and
     the columns are numbered ``"1"``, ``"2"``, ... (``df.attrs["headerless"]`` is then True);
     with a delimiter other than ``,``, a file with a text column that reads ``12,5``
-    throughout is re-read with ``,`` as the decimal mark.
+    throughout is re-read with ``,`` as the decimal mark; empty rows at the end are dropped.
 
     Raises
     ------
@@ -77,6 +78,10 @@ def read_csv_table(raw: bytes) -> pd.DataFrame:
     if headerless:
         df.columns = [str(i + 1) for i in range(df.shape[1])]
     df.columns = [c.strip() if isinstance(c, str) else c for c in df.columns]
+    # rows left empty at the end (a spreadsheet's export of its formatted range, ",,,"): no data;
+    # those inside the table stay, so that line numbers in messages remain the file's
+    filled = np.flatnonzero(df.notna().any(axis=1).to_numpy())
+    df = df.iloc[: filled[-1] + 1 if filled.size else 0]
     df.attrs["headerless"] = headerless
     return df
 
