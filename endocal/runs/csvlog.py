@@ -48,6 +48,8 @@ from endocal.runs.format import atomic_write_bytes, check_parent, parquet_bytes,
 from endocal.runs.imported import tracker_stream, write_imported_run
 from endocal.runs.textable import read_csv_table
 
+#: What a drafted map (:mod:`endocal.runs.mapdraft`) writes where it could not place a column.
+UNFILLED = "FILL IN"
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "datetime": None}  # s per unit; datetime: text stamps
 ANGLE_UNITS = ("deg", "rad", "ticks")
 _SCALE = {"deg": 1.0, "rad": 180.0 / np.pi, "mm": 1.0, "m": 1000.0}  # to the run's deg or mm
@@ -325,8 +327,18 @@ def read_map(path: str | Path) -> CsvMap:
         raise RunFormatError(f"{where}: no [knobs.{missing[0]}] table: {whose} "
                              f"({', '.join(angles or probe.bending_axes)}) needs its knob column")
     tip, base = (None, None) if angles else (_pose(d, "tip", where), _pose(d, "base", where))
-    return CsvMap(probe, column, factor, float(rate) if rate is not None else None, knobs, tip, base, angles,
+    cmap = CsvMap(probe, column, factor, float(rate) if rate is not None else None, knobs, tip, base, angles,
                   _extras(d, where), where, d)
+    if UNFILLED in cmap.columns():
+        raise RunFormatError(f"{where}: a column is still '{UNFILLED}' (a drafted map): name the log's column for "
+                             "that role, or delete the role if the log has none")
+    valid = {p.valid for p in (tip, base) if p is not None and p.valid}  # one flag may serve both sensors
+    named = [c for c in cmap.columns() if c not in valid]
+    twice = sorted({c for c in named if named.count(c) > 1})
+    if twice:
+        raise RunFormatError(f"{where}: column '{twice[0]}' is named for two roles (e.g. the clock and a knob); "
+                             "each role needs its own column")
+    return cmap
 
 
 def _read_csv(raw: bytes, where: str) -> pd.DataFrame:

@@ -30,8 +30,8 @@ import numpy as np
 import pandas as pd
 
 from endocal.probe import load_probe
+from endocal.runs.csvlog import UNFILLED as FILL, read_log_table
 
-FILL = "FILL IN"
 _TIME = {"t", "time", "stamp", "timestamp", "ts", "clock", "datetime", "date", "sec", "secs", "seconds", "elapsed"}
 _TIME_UNIT = {"s": "s", "sec": "s", "secs": "s", "seconds": "s", "ms": "ms", "msec": "ms", "millis": "ms",
               "milliseconds": "ms", "us": "us", "usec": "us", "micros": "us", "ns": "ns", "nsec": "ns",
@@ -324,7 +324,6 @@ def write_draft(log: str | Path, out: str | Path, *, force: bool = False) -> Dra
         ``out`` exists and ``force`` is False.
     """
     from endocal.errors import OutputExistsError
-    from endocal.runs.csvlog import read_log_table
     from endocal.runs.format import atomic_write_bytes, check_parent
 
     log, out = Path(log), Path(out)
