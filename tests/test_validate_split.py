@@ -59,7 +59,7 @@ def _loop(tmp, model, val):
     second = _validate_json(tmp, cmd[cmd.index("--out") + 1], val)
     for d in (first, second):
         # a model fitted on the estimation data is scored as it is, not refitted (a refit of a
-        # B-spline + delay from its own values once stopped 60 % worse than the file it came from)
+        # B-spline + delay from its own values once stopped 68 % worse than the file it came from)
         assert d["heldout_rmse_deg"] == pytest.approx(d["metrics"]["rmse_deg"], rel=1e-12)
     if first["scan"]["cv"]["stride"] == 1 and not any("beyond the model's fitted range" in n for n in first["notes"]):
         # the printed refit is the fit the scan scored (it starts from the validated model as the

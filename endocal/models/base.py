@@ -777,8 +777,8 @@ def _no_better_than_a_line(d: HysteresisData, rmse_deg: float, base: str) -> lis
     """A warning when the fit is within 5 % of the least-squares straight line ``meas = a*cmd + b``.
 
     Such a model has found no hysteresis it can shape: a loop the base cannot draw (a `pi`
-    branch stiffens away from each reversal, so a loop that flattens towards its ends, as
-    saturating friction draws it, leaves it at its start), or a record without a loop.
+    branch stiffens away from each reversal, so it cannot follow a loop that flattens towards
+    its ends, as saturating friction draws one), or a record without a loop.
     """
     A = np.column_stack([d.cmd_deg, np.ones(d.n_samples)])
     coef, *_ = np.linalg.lstsq(A, d.meas_deg, rcond=None)

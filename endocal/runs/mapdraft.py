@@ -175,140 +175,158 @@ def draft_map(df: pd.DataFrame, log_name: str = "LOG.csv") -> Draft:
         The map's TOML text (every guess marked ``CHECK``), the roles found, the checks and
         the roles left ``FILL IN``.
     """
-    cols = [str(c) for c in df.columns]
-    all_words = {w for c in cols for w in words(c)}
-    probe = load_probe("duodenoscope" if {"ud", "lr"} & all_words and not {"ap", "ml"} & all_words else "tee")
-    w = _Writer()
-    roles: dict[str, str] = {}
-    unmatched: list[str] = []
-    taken: set[str] = set()
-    w.lines += [f"# Column map drafted by `endocal import csv {log_name} --draft-map`: read every line marked",
-                "# CHECK (guessed from the numbers, not the names) and every FILL IN, then import with",
-                f"# `endocal import csv {log_name} --map THIS.toml --out RUN`. Keys: configs/csv-map.example.toml.",
-                ""]
-    w.key("probe", probe.name, "names the bending axes: tee has ap and ml, duodenoscope ud and lr")
+    return _Drafter(df, log_name).draft()
 
-    tip_p, tip_q = _pose_columns(cols, "tip", taken)
-    base_p, base_q = _pose_columns(cols, "base", taken)
-    poses = tip_p is not None and tip_q is not None
 
-    time_col = _pick(cols, _TIME, taken=taken)
-    rising = ""
-    if time_col is None:  # no name says clock: the first column whose numbers rise throughout
-        time_col = next((c for c in cols if (v := _numbers(df, c)).size == len(df) > 1 and np.all(np.diff(v) > 0)),
-                        None)
-        rising = f"column '{time_col}' rises throughout, read as the clock; " if time_col else ""
-    w.table("time")
-    if time_col is not None:
-        taken.add(time_col)
-        unit, why = _time_unit(df, time_col)
-        w.key("column", time_col, "the clock column", check=rising.rstrip("; "), where="[time] ")
-        w.key("unit", unit, "s, ms, us, ns or datetime", check=why, where="[time] ")
-        roles["time"] = f"{time_col} ({unit})"
-    else:
-        w.key("sample_rate_hz", 100.0, check="no clock column found: the rows are taken 1/rate apart; give "
-              "the logger's rate (or column = ... and unit = ...)", where="[time] ")
-        roles["time"] = "none (sample_rate_hz)"
+class _Drafter:
+    """One log's map, drafted section by section; each section marks the columns it takes."""
 
-    axes = list(probe.bending_axes)
-    knobs: dict[str, str] = {}
-    for axis in axes:
-        goal = _pick(cols, _GOAL, need={axis}, taken=taken)
-        pos = _pick(cols, _POSITION | _ANGLE_UNIT.keys(), avoid=_NOT_KNOB, need={axis},
-                    taken=taken | ({goal} if goal else set()))
-        if pos is None and goal is not None:
-            pos, goal = goal, None
-        if pos is None:
-            continue
-        knobs[axis] = pos
-        taken |= {pos} | ({goal} if goal else set())
-        cur = _pick(cols, _CURRENT, need={axis}, taken=taken)
-        w.table(f"knobs.{axis}")
-        w.key("position", pos, "the knob's measured position (the command when there is no goal)")
-        _knob_unit(w, df, pos, axis)
-        if goal:
-            w.key("goal", goal, "the goal sent to the servo, same unit")
-        if cur:
-            taken.add(cur)
-            w.key("current", cur, "motor current")
-            w.key("current_unit", "A" if "a" in words(cur)[-1:] or "amp" in words(cur) else "mA",
-                  "mA or A")
-        roles[f"knob {axis}"] = pos + (f" (goal {goal})" if goal else "")
-    if not knobs:  # a bench: one motor, named for what it is rather than for a probe axis
-        goal = _pick(cols, _GOAL, avoid=_CURRENT | {"tip"}, taken=taken)
-        pos = _pick(cols, _DRIVE, avoid=_NOT_KNOB, taken=taken) or _pick(cols, _POSITION, avoid=_NOT_KNOB,
-                                                                         taken=taken) or goal
-        if pos == goal:
-            goal = None
-        w.table(f"knobs.{axes[0]}", "the one driven axis of a bench is the probe's first")
-        w.key("position", pos or FILL, "the driving knob or pulley, as its encoder reads it")
-        if pos:
-            knobs[axes[0]] = pos
-            taken |= {pos} | ({goal} if goal else set())
-            _knob_unit(w, df, pos, axes[0])
-            if goal:
-                w.key("goal", goal, "the goal sent to the motor, same unit")
-            roles[f"knob {axes[0]}"] = pos + (f" (goal {goal})" if goal else "")
+    def __init__(self, df: pd.DataFrame, log_name: str):
+        self.df, self.log_name = df, log_name
+        self.cols = [str(c) for c in df.columns]
+        words_all = {w for c in self.cols for w in words(c)}
+        self.probe = load_probe("duodenoscope" if {"ud", "lr"} & words_all and not {"ap", "ml"} & words_all else "tee")
+        self.w = _Writer()
+        self.roles: dict[str, str] = {}
+        self.unmatched: list[str] = []
+        self.taken: set[str] = set()
+
+    def draft(self) -> Draft:
+        w = self.w
+        w.lines += [f"# Column map drafted by `endocal import csv {self.log_name} --draft-map`: read every line marked",
+                    "# CHECK (guessed from the numbers, not the names) and every FILL IN, then import with",
+                    f"# `endocal import csv {self.log_name} --map THIS.toml --out RUN`. Keys: "
+                    "configs/csv-map.example.toml.", ""]
+        w.key("probe", self.probe.name, "names the bending axes: tee has ap and ml, duodenoscope ud and lr")
+        tip, base = _pose_columns(self.cols, "tip", self.taken), _pose_columns(self.cols, "base", self.taken)
+        self._time()
+        knobs = self._knobs()
+        if tip[0] is not None and tip[1] is not None:
+            self._poses({"tip": tip, "base": base})
         else:
-            w.key("unit", "deg", "deg, rad or ticks")
-            unmatched.append(f"[knobs.{axes[0]}] position")
+            self._angles(list(knobs) or list(self.probe.bending_axes[:1]))
+        extras = [c for c in self.cols if c not in self.taken and _numbers(self.df, c).size == len(self.df) > 0]
+        if extras:  # a top-level key: before the first table
+            w.lines[5:5] = ["# further numeric columns, carried into the table (covariates for load:COLUMN): drop "
+                            "what is not one", "extras = [" + "".join(f"\n    {_toml(c)}," for c in extras) + "\n]"]
+            self.roles["extras"] = ", ".join(extras)
+        return Draft("\n".join(w.lines) + "\n", self.roles, w.checks, self.unmatched)
 
-    if poses:
-        for sensor, p, q in (("tip", tip_p, tip_q), ("base", base_p, base_q)):
+    def _time(self) -> None:
+        df, w = self.df, self.w
+        col = _pick(self.cols, _TIME, taken=self.taken)
+        rising = ""
+        if col is None:  # no name says clock: the first column whose numbers rise throughout
+            col = next((c for c in self.cols if (v := _numbers(df, c)).size == len(df) > 1 and np.all(np.diff(v) > 0)),
+                       None)
+            rising = f"column '{col}' rises throughout, read as the clock" if col else ""
+        w.table("time")
+        if col is None:
+            w.key("sample_rate_hz", 100.0, check="no clock column found: the rows are taken 1/rate apart; give "
+                  "the logger's rate (or column = ... and unit = ...)", where="[time] ")
+            self.roles["time"] = "none (sample_rate_hz)"
+            return
+        self.taken.add(col)
+        unit, why = _time_unit(df, col)
+        w.key("column", col, "the clock column", check=rising, where="[time] ")
+        w.key("unit", unit, "s, ms, us, ns or datetime", check=why, where="[time] ")
+        self.roles["time"] = f"{col} ({unit})"
+
+    def _knob(self, axis: str, pos: str, goal: str | None, cur: str | None, what: str) -> None:
+        w = self.w
+        self.taken |= {pos} | ({goal} if goal else set()) | ({cur} if cur else set())
+        w.key("position", pos, what)
+        _knob_unit(w, self.df, pos, axis)
+        if goal:
+            w.key("goal", goal, "the goal sent to the motor, same unit")
+        if cur:
+            w.key("current", cur, "motor current")
+            w.key("current_unit", "A" if words(cur)[-1:] == ["a"] or "amp" in words(cur) else "mA", "mA or A")
+        self.roles[f"knob {axis}"] = pos + (f" (goal {goal})" if goal else "")
+
+    def _knobs(self) -> list[str]:
+        """The knob tables: a column per probe axis (``ap_present_ticks``), else a bench's one motor."""
+        axes, found = list(self.probe.bending_axes), []
+        for axis in axes:
+            goal = _pick(self.cols, _GOAL, need={axis}, taken=self.taken)
+            pos = _pick(self.cols, _POSITION | _ANGLE_UNIT.keys(), avoid=_NOT_KNOB, need={axis},
+                        taken=self.taken | ({goal} if goal else set()))
+            if pos is None:
+                pos, goal = goal, None
+            if pos is None:
+                continue
+            cur = _pick(self.cols, _CURRENT, need={axis}, taken=self.taken | {pos, goal})
+            self.w.table(f"knobs.{axis}")
+            self._knob(axis, pos, goal, cur, "the knob's measured position (the command when there is no goal)")
+            found.append(axis)
+        if found:
+            return found
+        # a bench: one motor, named for what it is rather than for a probe axis
+        goal = _pick(self.cols, _GOAL, avoid=_CURRENT | {"tip"}, taken=self.taken)
+        pos = (_pick(self.cols, _DRIVE, avoid=_NOT_KNOB, taken=self.taken)
+               or _pick(self.cols, _POSITION, avoid=_NOT_KNOB, taken=self.taken) or goal)
+        self.w.table(f"knobs.{axes[0]}", "the one driven axis of a bench is the probe's first")
+        if pos is None:
+            self.w.key("position", FILL, "the driving knob or pulley, as its encoder reads it")
+            self.w.key("unit", "deg", "deg, rad or ticks")
+            self.unmatched.append(f"[knobs.{axes[0]}] position")
+            return []
+        self._knob(axes[0], pos, None if goal == pos else goal, None,
+                   "the driving knob or pulley, as its encoder reads it")
+        return [axes[0]]
+
+    def _poses(self, sensors: dict) -> None:
+        w = self.w
+        for sensor, (p, q) in sensors.items():
             w.table(sensor, f"the EM sensor at the {sensor} of the bending section")
             if p is None or q is None:
                 w.key("position", [FILL] * 3, "x, y, z columns")
                 w.key("unit", "mm", "mm or m")
                 w.key("quaternion", [FILL] * 4, "w, x, y, z columns")
                 w.key("order", "wxyz", "the order of the columns above")
-                unmatched.append(f"[{sensor}] pose (or fixed_position/fixed_quaternion for a clamped base)")
+                self.unmatched.append(f"[{sensor}] pose (or fixed_position/fixed_quaternion for a clamped base)")
                 continue
-            taken |= set(p) | set(q)
-            lu = next((_LENGTH_UNIT[x] for x in reversed(words(p[0])) if x in _LENGTH_UNIT), None)
+            self.taken |= set(p) | set(q)
+            unit = next((_LENGTH_UNIT[x] for x in reversed(words(p[0])) if x in _LENGTH_UNIT), None)
             why = ""
-            if lu is None:
-                v = np.concatenate([_numbers(df, c) for c in p])
-                mag = float(np.median(np.abs(v))) if v.size else 0.0
-                lu, why = ("m", f"positions of median size {mag:.3g} read as metres") if mag < 2.0 else \
-                          ("mm", f"positions of median size {mag:.3g} read as millimetres")
+            if unit is None:
+                v = np.concatenate([_numbers(self.df, c) for c in p])
+                size = float(np.median(np.abs(v))) if v.size else 0.0
+                unit = "m" if size < 2.0 else "mm"
+                why = f"positions of median size {size:.3g} read as {'metres' if unit == 'm' else 'millimetres'}"
             w.key("position", p, "x, y, z in the tracker frame")
-            w.key("unit", lu, "mm or m", check=why, where=f"[{sensor}] ")
-            scalar_first = words(q[0])[-1] in ("q0",)
-            w.key("quaternion", q, "scalar first, as listed", check="q0 read as the scalar part (NDI's convention)"
-                  if scalar_first else "", where=f"[{sensor}] ")
+            w.key("unit", unit, "mm or m", check=why, where=f"[{sensor}] ")
+            w.key("quaternion", q, "scalar first, as listed", where=f"[{sensor}] ",
+                  check="q0 read as the scalar part (NDI's convention)" if words(q[0])[-1] == "q0" else "")
             w.key("order", "wxyz", "the order of the columns above")
-            roles[sensor] = ", ".join(p + q)
-    else:
-        measured = [c for c in cols if c not in taken and set(words(c)) & _MEASURED and _numbers(df, c).size]
-        for i, axis in enumerate(list(knobs) or axes[:1]):
+            self.roles[sensor] = ", ".join(p + q)
+
+    def _angles(self, axes: list[str]) -> None:
+        w = self.w
+        measured = [c for c in self.cols if c not in self.taken and set(words(c)) & _MEASURED
+                    and _numbers(self.df, c).size]
+        for i, axis in enumerate(axes):
             col = next((c for c in measured if axis in words(c)), None) or (measured[i] if i < len(measured) else None)
             w.table(f"angles.{axis}", "the measured bending angle (an encoder, a camera)")
             w.key("column", col or FILL, "")
             if col is None:
-                unmatched.append(f"[angles.{axis}] column (or [tip] and [base] EM poses)")
+                self.unmatched.append(f"[angles.{axis}] column (or [tip] and [base] EM poses)")
                 continue
             measured.remove(col)
-            taken.add(col)
-            unit, why = _angle_unit(df, col, ticks_ok=False)
+            self.taken.add(col)
+            unit, why = _angle_unit(self.df, col, ticks_ok=False)
             w.key("unit", unit, "deg or rad", check=why, where=f"[angles.{axis}] ")
             w.key("zero", 0.0, "the reading when the section is straight (same unit)")
             w.key("direction", 1, "1, or -1 when the sensor counts the other way")
-            roles[f"angle {axis}"] = col
-
-    extras = [c for c in cols if c not in taken and _numbers(df, c).size == len(df) > 0]
-    if extras:
-        # top-level keys must come before the first table
-        w.lines[5:5] = ["# further numeric columns, carried into the table (covariates for load:COLUMN): drop what is "
-                        "not one", "extras = [" + "".join(f"\n    {_toml(c)}," for c in extras) + "\n]"]
-        roles["extras"] = ", ".join(extras)
-    return Draft("\n".join(w.lines) + "\n", roles, w.checks, unmatched)
+            self.roles[f"angle {axis}"] = col
 
 
 def _knob_unit(w: _Writer, df: pd.DataFrame, col: str, axis: str) -> None:
     unit, why = _angle_unit(df, col, ticks_ok=True)
     w.key("unit", unit, "deg, rad or ticks", check=why, where=f"[knobs.{axis}] ")
     if unit == "ticks":
-        w.key("zero_ticks", 2048, check="the tick count with the knob at 0 deg (probe straight)", where=f"[knobs.{axis}] ")
+        w.key("zero_ticks", 2048, check="the tick count with the knob at 0 deg (probe straight)",
+              where=f"[knobs.{axis}] ")
         w.key("ticks_per_rev", 4096, "XM430: 4096")
     w.key("direction", 1, "1, or -1 when a positive count bends the tip towards -y")
 

@@ -488,7 +488,7 @@ def settings_args(model: HysteresisModel) -> list[str]:
 
 def refit_command(data_paths: Sequence[str], axis: str | None, base: str, effects: Sequence[str], out: str,
                   extra_args: Sequence[str] = (), start_from: str | None = None) -> str:
-    """``endocal fit hysteresis DATA... --axis AXIS --model BASE --effects E1,E2 [EXTRA...] [--start-from MODEL] --out OUT``.
+    """``endocal fit hysteresis DATA... --axis AXIS --model BASE --effects E1,E2 [EXTRA...] [--start-from M] --out OUT``.
 
     ``start_from`` is the model under validation: the scan fitted each candidate starting from
     its parameters (:func:`split_fit`), and the refit does the same, so it is the fit the scan
@@ -674,7 +674,7 @@ def fitted_on(model: HysteresisModel, data: HysteresisData) -> bool:
 
     Then the model *is* its structure fitted on that estimation data: scoring it as it stands
     is what a refit would do, minus the chance of the refit stopping in another local minimum
-    (a B-spline + delay refitted from its own values once ended 60 % worse on the validation
+    (a B-spline + delay refitted from its own values once ended 68 % worse on the validation
     record than the file it came from).
     """
     recorded = getattr(model, "training_data_", None) or []
