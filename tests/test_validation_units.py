@@ -252,6 +252,8 @@ def test_a_suggestion_whose_own_parameter_ends_at_a_bound_carries_a_caution():
     est, val = record(60, 40, 1), record(45, 34, 2)
     model = make_model("pi", axis="ap").fit(est)
     res = validate_offline(model, val, train=est, model_path="m.json")
+    # validate repeats what the fit said: this base found no loop it can shape
+    assert any("no better than a straight line" in w for w in res.model["fit_warnings"]), res.model
     delay = next(s for s in res.scan.tested if s.effect == "delay")
     assert delay.at_bound.startswith("delay_s = -0.5 sits at its lower bound"), delay.at_bound
     order = [bool(s.at_bound) for s in res.scan.suspects]

@@ -75,6 +75,8 @@ def render(result) -> None:
     out.print(f"[bold]{m['label']}[/] on axis {result.axis}: {sum(d['n_samples'] for d in result.data)} samples "
               f"from {len(result.data)} table(s)")
     out.print(m["equation"], markup=False)
+    for w in m.get("fit_warnings", []):  # what its fit said (a parameter at a bound, no better than a line)
+        out.print(f"fit warning: {w}", markup=False)
     if scan.scheme != "none":
         out.print(f"scheme: {_SCHEME_WORDS[scan.scheme]} ({scan.scheme_reason})", markup=False)
     if result.estimation:

@@ -353,8 +353,9 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
             old_rmse_deg=float(np.sqrt(np.mean((old_pred - data.meas_deg) ** 2))), new_rmse_deg=metrics.rmse_deg,
             old_heldout_rmse_deg=float(np.sqrt(np.mean(old_err**2))),
             new_heldout_rmse_deg=scan.baseline_rmse_heldout_deg)
+    rep = getattr(model, "fit_report_", None)
     model_info = {"path": model_path, "base": model.base_name, "effects": labels, "label": model_label(model),
-                  "equation": model.equation()}
+                  "equation": model.equation(), "fit_warnings": list(rep.warnings) if rep is not None else []}
     return ValidationResult(axis=ax, model=model_info, data=info, metrics=metrics, regimes=regimes,
                             residuals=resid, scan=scan, notes=tuple(notes), compare=comp, pointers=tuple(pointers),
                             estimation=est_info, shift=shift)
