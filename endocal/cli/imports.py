@@ -24,7 +24,7 @@ def import_csv_cmd(
     out_dir: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder to create; a .parquet or .csv aligned table when the map gives measured [angles] instead of poses."),
     draft: Optional[Path] = typer.Option(None, "--draft-map", help="Instead of importing, write a first map for this log, guessed from its column names and numbers; every guess is marked CHECK."),
     dedupe: bool = typer.Option(False, "--dedupe", help="Drop rows that repeat an earlier row exactly (ROS bridges write them) and merge rows of one time stamp that fill different columns (a motor tick and a tracker frame in the same millisecond); without it duplicated time stamps are refused."),
-    force: bool = typer.Option(False, "--force", help="Replace --out if it is a run folder (or the table an angles map writes)."),
+    force: bool = typer.Option(False, "--force", help="Replace --out if it is a run folder (or the table an angles map writes), or an existing --draft-map."),
 ) -> None:
     """Convert a lab's CSV log into a run folder: knob positions (deg, rad or servo ticks),
     optional goals and currents, tip and base EM poses (mm or m, quaternions xyzw or wxyz).
@@ -44,12 +44,12 @@ def import_csv_cmd(
     if draft is not None:
         if map_path is not None or out_dir is not None:
             raise ConfigError("--draft-map writes a map and imports nothing: run it without --map and --out, then "
-                             "import with the map it wrote")
+                              "import with the map it wrote")
         _draft(log, draft, force)
         return
     if map_path is None or out_dir is None:
         raise ConfigError(f"give --map MAP.toml and --out RUN (or --draft-map MAP.toml to have a first map guessed "
-                         f"from {log.name})")
+                          f"from {log.name})")
 
     res = import_csv(log, map_path, out_dir, dedupe=dedupe, force=force, command="endocal " + " ".join(sys.argv[1:]))
     rate = f"{res.rate_hz:.1f} Hz" if res.rate_hz else "one sample"
