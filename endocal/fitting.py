@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from endocal.errors import ModelError
 from endocal.models import make_model
 from endocal.models.base import HysteresisModel
@@ -20,6 +22,12 @@ class HysteresisFit:
     sources: list[Path]
     hashes: list[str]
     samples: int
+    duration_s: float = 0.0  # summed over the records: with ``samples``, the rate a user can check
+
+    @property
+    def rate_hz(self) -> float:
+        """Mean sample rate over the records (0 when they span no time)."""
+        return self.samples / self.duration_s if self.duration_s > 0 else 0.0
 
 
 def fit_hysteresis(
@@ -63,4 +71,5 @@ def fit_hysteresis(
     datas = [load_aligned(p) for p in paths]
     data = axis_data(datas, axis, planes)
     model = make_model(base, effects=effects or (), axis=axis, **settings).fit(data, warm_start=warm)
-    return HysteresisFit(model, [d.source for d in datas], [d.sha256 for d in datas], len(data.cmd_deg))
+    span = sum(float(np.ptp(d.table["t_s"])) for d in datas)
+    return HysteresisFit(model, [d.source for d in datas], [d.sha256 for d in datas], len(data.cmd_deg), span)

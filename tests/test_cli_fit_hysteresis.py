@@ -89,3 +89,14 @@ def test_start_from_a_fitted_model_refits_from_its_values_and_records_it(run, tm
     one_line_error(endocal("fit", "hysteresis", run, "--axis", "ml", "--model", "bspline", "--effects", "deadzone",
                            "--start-from", base, "--out", tmp_path / "y.json"), "of axis ap")
     assert not (tmp_path / "x.json").exists() and not (tmp_path / "y.json").exists()
+
+
+def test_the_fit_states_its_sample_rate_and_questions_a_clock_in_ms(run, tmp_path):
+    ok = endocal("fit", "hysteresis", run, "--axis", "ap", "--model", "linear", "--out", tmp_path / "a.json")
+    assert ok.returncode == 0 and " Hz) from 1 source(s)" in ok.stdout and "is t_s in seconds" not in ok.stdout
+    table = load_aligned(run).table
+    table["t_s"] *= 1000.0  # a lab's clock in ms written as t_s
+    table.to_csv(tmp_path / "ms.csv", index=False)
+    slow = endocal("fit", "hysteresis", tmp_path / "ms.csv", "--axis", "ap", "--model", "linear", "--out",
+                   tmp_path / "b.json")
+    assert slow.returncode == 0 and "is t_s in seconds?" in slow.stdout, slow.stdout

@@ -114,10 +114,13 @@ def hysteresis(
     rep = result.model.fit_report_
     out.print(str(result.model), markup=False)
     out.print(
-        f"fit: {result.samples} samples from {len(result.sources)} source(s); RMSE {rep.rmse_deg:.3f} deg; "
-        f"{rep.nfev} evaluations; {rep.message}",
+        f"fit: {result.samples} samples ({result.duration_s:.4g} s, {result.rate_hz:.3g} Hz) from "
+        f"{len(result.sources)} source(s); RMSE {rep.rmse_deg:.3f} deg; {rep.nfev} evaluations; {rep.message}",
         markup=False,
     )
+    if 0 < result.rate_hz < 1.0:  # knob loops are logged at tens of Hz: a clock in ms read as s looks like this
+        out.print(f"warning: {result.rate_hz:.3g} samples per second: is t_s in seconds? (a clock in ms reads "
+                  "1000x too slow; endocal import csv converts units)", markup=False)
     for w in rep.warnings:
         out.print(f"warning: {w}", markup=False)
     err.print(f"wrote {out_path}")
