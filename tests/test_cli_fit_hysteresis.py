@@ -100,3 +100,5 @@ def test_the_fit_states_its_sample_rate_and_questions_a_clock_in_ms(run, tmp_pat
     slow = endocal("fit", "hysteresis", tmp_path / "ms.csv", "--axis", "ap", "--model", "linear", "--out",
                    tmp_path / "b.json")
     assert slow.returncode == 0 and "is t_s in seconds?" in slow.stdout, slow.stdout
+    val = endocal("validate", tmp_path / "a.json", tmp_path / "ms.csv", "--cv", "rolling")
+    assert val.returncode == 0 and "is t_s in seconds?" in val.stdout, val.stdout

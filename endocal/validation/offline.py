@@ -184,7 +184,8 @@ def _axis_of(datas, model: HysteresisModel, axis: str | None, planes, bending_ax
         raise ModelError("no data given: name at least one run folder or aligned table")
     ax = _resolve_axis(model, tables, what)
     data = axis_data(tables, ax, planes)
-    info = [{"source": str(a.source), "sha256": a.sha256, "n_samples": len(a.table)} for a in tables]
+    info = [{"source": str(a.source), "sha256": a.sha256, "n_samples": len(a.table),
+             "duration_s": float(np.ptp(a.table["t_s"].to_numpy()))} for a in tables]
     axes_all = list(bending_axes) if bending_axes is not None else sorted(set().union(*(a.axes for a in tables)))
     return data, ax, info, axes_all, [str(a.source) for a in tables]
 
