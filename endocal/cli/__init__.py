@@ -18,8 +18,6 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
-    # help text is plain text, reflowed to the terminal: no Rich markup, so `[angles.AXIS]` and
-    # a docstring's line breaks print as a reader expects
     # help text is Markdown: paragraphs reflow to the terminal (with Rich markup a docstring's
     # line breaks stay and wrap raggedly) and `[angles.AXIS]` prints as written
     rich_markup_mode="markdown",

@@ -43,7 +43,7 @@ import pandas as pd
 
 from endocal.errors import OutputExistsError, OutputPathError, RunFormatError
 from endocal.probe import TRANSLATION, ProbeConfig, load_probe
-from endocal.runs.aligned import CMD, MEAS, check_aligned, measured_at
+from endocal.runs.aligned import CMD, MEAS, check_aligned, load_aligned, measured_at
 from endocal.runs.format import atomic_write_bytes, check_parent, parquet_bytes, prepare_output, software_versions
 from endocal.runs.imported import tracker_stream, write_imported_run
 from endocal.runs.textable import read_csv_table
@@ -570,24 +570,18 @@ def _prepare_table(out: Path, force: bool, map_source: str) -> None:
         raise OutputExistsError(f"output {out} already exists: choose a new --out or pass --force to replace it")
     if out.exists() and not _is_aligned_table(out):
         # --force replaces an aligned table, never a lab's own file that happens to end in .csv
-        raise OutputPathError(f"output {out} exists and is not an aligned table (t_s and <axis>_cmd_deg columns): "
+        raise OutputPathError(f"output {out} exists and is not an aligned table (t_s, <axis>_cmd_deg, <axis>_meas_deg): "
                               "--force only replaces tables; choose another --out")
     check_parent(out)
 
 
 def _is_aligned_table(path: Path) -> bool:
-    """Whether ``path`` holds an aligned table (its header has ``t_s`` and a ``<axis>_cmd_deg`` column)."""
+    """Whether ``path`` holds an aligned table, as every command that reads one checks it."""
     try:
-        if path.suffix.lower() == ".parquet":
-            import pyarrow.parquet as pq
-
-            names = pq.read_schema(path).names
-        else:
-            with open(path, "rb") as fh:
-                names = list(read_csv_table(fh.readline()).columns)
-    except Exception:  # noqa: BLE001 - unreadable as a table: not one of ours
+        load_aligned(path)
+    except RunFormatError:
         return False
-    return "t_s" in names and any(str(n).endswith(CMD) for n in names)
+    return True
 
 
 def _angles_table(df: pd.DataFrame, t: np.ndarray, motor: dict, cmap: CsvMap, where: str) -> tuple[int, pd.DataFrame]:

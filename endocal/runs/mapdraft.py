@@ -68,7 +68,7 @@ class Draft:
     unmatched: list[str] = field(default_factory=list)
 
 
-def _numbers(df: pd.DataFrame, col: str) -> np.ndarray:
+def _values(df: pd.DataFrame, col: str) -> np.ndarray:
     v = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=float)
     return v[np.isfinite(v)]
 
@@ -106,7 +106,7 @@ def _time_unit(df: pd.DataFrame, col: str) -> tuple[str, str]:
     for w in reversed(words(col)):
         if w in _TIME_UNIT:
             return _TIME_UNIT[w], ""
-    v = _numbers(df, col)
+    v = _values(df, col)
     if v.size < 0.5 * len(df):
         return "datetime", "the stamps are text: read as ISO 8601 date-times"
     mag = float(np.median(np.abs(v))) if v.size else 0.0
@@ -125,7 +125,7 @@ def _angle_unit(df: pd.DataFrame, col: str, ticks_ok: bool) -> tuple[str, str]:
     for w in reversed(words(col)):
         if w in _ANGLE_UNIT and (ticks_ok or _ANGLE_UNIT[w] != "ticks"):
             return _ANGLE_UNIT[w], ""
-    v = _numbers(df, col)
+    v = _values(df, col)
     if v.size == 0:
         return "deg", "no numbers: degrees assumed"
     if ticks_ok and np.all(v == np.round(v)) and v.min() >= 0 and v.max() <= 4095 and np.ptp(v) > 20:
@@ -205,7 +205,7 @@ class _Drafter:
             self._poses({"tip": tip, "base": base})
         else:
             self._angles(list(knobs) or list(self.probe.bending_axes[:1]))
-        extras = [c for c in self.cols if c not in self.taken and _numbers(self.df, c).size == len(self.df) > 0]
+        extras = [c for c in self.cols if c not in self.taken and _values(self.df, c).size == len(self.df) > 0]
         if extras:  # a top-level key: before the first table
             w.lines[5:5] = ["# further numeric columns, carried into the table (covariates for load:COLUMN): drop "
                             "what is not one", "extras = [" + "".join(f"\n    {_toml(c)}," for c in extras) + "\n]"]
@@ -217,7 +217,7 @@ class _Drafter:
         col = _pick(self.cols, _TIME, taken=self.taken)
         rising = ""
         if col is None:  # no name says clock: the first column whose numbers rise throughout
-            col = next((c for c in self.cols if (v := _numbers(df, c)).size == len(df) > 1 and np.all(np.diff(v) > 0)),
+            col = next((c for c in self.cols if (v := _values(df, c)).size == len(df) > 1 and np.all(np.diff(v) > 0)),
                        None)
             rising = f"column '{col}' rises throughout, read as the clock" if col else ""
         w.table("time")
@@ -290,7 +290,7 @@ class _Drafter:
             unit = next((_LENGTH_UNIT[x] for x in reversed(words(p[0])) if x in _LENGTH_UNIT), None)
             why = ""
             if unit is None:
-                v = np.concatenate([_numbers(self.df, c) for c in p])
+                v = np.concatenate([_values(self.df, c) for c in p])
                 size = float(np.median(np.abs(v))) if v.size else 0.0
                 unit = "m" if size < 2.0 else "mm"
                 why = f"positions of median size {size:.3g} read as {'metres' if unit == 'm' else 'millimetres'}"
@@ -304,7 +304,7 @@ class _Drafter:
     def _angles(self, axes: list[str]) -> None:
         w = self.w
         measured = [c for c in self.cols if c not in self.taken and set(words(c)) & _MEASURED
-                    and _numbers(self.df, c).size]
+                    and _values(self.df, c).size]
         for i, axis in enumerate(axes):
             col = next((c for c in measured if axis in words(c)), None) or (measured[i] if i < len(measured) else None)
             w.table(f"angles.{axis}", "the measured bending angle (an encoder, a camera)")
