@@ -76,6 +76,19 @@ def refuse_input_as_output(flag: str, output: Path | None, inputs) -> None:
                                   "choose another path")
 
 
+def slow_clock_warning(n_samples: int, span_s: float) -> str | None:
+    """``warning: ...`` when records hold under one sample per second, else None.
+
+    Knob loops are logged at tens of Hz or more; a clock in ms written as ``t_s`` reads 1000x
+    too slow and would make every time-based effect (delay, creep, drift) meaningless.
+    """
+    rate = n_samples / span_s if span_s > 0 else 0.0
+    if not 0 < rate < 1.0:
+        return None
+    return (f"warning: {rate:.3g} samples per second: is t_s in seconds? (a clock in ms reads 1000x too slow; "
+            "endocal import csv converts units)")
+
+
 def stdout_is_terminal() -> bool:
     return sys.stdout.isatty()
 

@@ -8,7 +8,7 @@ from typing import Optional
 
 import typer
 
-from endocal.cli._common import cli_errors, err, out, refuse_input_as_output
+from endocal.cli._common import cli_errors, err, out, refuse_input_as_output, slow_clock_warning
 from endocal.errors import OutputExistsError
 
 app = typer.Typer(help="Fit bending planes (`fit planes`), hysteresis models (`fit hysteresis`) and contact-force models (`fit force`).", no_args_is_help=True)
@@ -118,9 +118,9 @@ def hysteresis(
         f"{len(result.sources)} source(s); RMSE {rep.rmse_deg:.3f} deg; {rep.nfev} evaluations; {rep.message}",
         markup=False,
     )
-    if 0 < result.rate_hz < 1.0:  # knob loops are logged at tens of Hz: a clock in ms read as s looks like this
-        out.print(f"warning: {result.rate_hz:.3g} samples per second: is t_s in seconds? (a clock in ms reads "
-                  "1000x too slow; endocal import csv converts units)", markup=False)
+    slow = slow_clock_warning(result.samples, result.duration_s)
+    if slow:
+        out.print(slow, markup=False)
     for w in rep.warnings:
         out.print(f"warning: {w}", markup=False)
     err.print(f"wrote {out_path}")

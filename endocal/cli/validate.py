@@ -19,6 +19,7 @@ from endocal.cli._common import (
     guard_factory,
     out,
     refuse_input_as_output,
+    slow_clock_warning,
     warnings_as_lines,
 )
 from endocal.errors import ModelError
@@ -77,10 +78,10 @@ def render(result) -> None:
     out.print(m["equation"], markup=False)
     for w in m.get("fit_warnings", []):  # what its fit said (a parameter at a bound, no better than a line)
         out.print(f"fit warning: {w}", markup=False)
-    span = sum(d.get("duration_s") or 0.0 for d in result.data)
-    if span > 0 and sum(d["n_samples"] for d in result.data) / span < 1.0:  # as `fit` questions it
-        out.print("warning: fewer than 1 sample per second: is t_s in seconds? (a clock in ms reads 1000x too "
-                  "slow; endocal import csv converts units)", markup=False)
+    slow = slow_clock_warning(sum(d["n_samples"] for d in result.data),
+                              sum(d.get("duration_s") or 0.0 for d in result.data))
+    if slow:
+        out.print(slow, markup=False)
     if scan.scheme != "none":
         out.print(f"scheme: {_SCHEME_WORDS[scan.scheme]} ({scan.scheme_reason})", markup=False)
     if result.estimation:
