@@ -7,6 +7,7 @@ names the file, never a traceback, and nothing half-written.
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -137,3 +138,27 @@ def test_no_command_writes_over_its_own_inputs(tmp_path):
                               "--force"])
     _one_line_exit_2(res, "notes.csv")
     assert "is not an aligned table" in res.output and notes.read_text().startswith("date,remark")
+
+
+def test_every_output_makes_the_folders_it_names(tmp_path):
+    """`--out results/ap/m.json` works as `excite --out runs/a/b` always did: every command
+    creates the missing folders of its outputs (one rule in the atomic writer), and refuses,
+    in one line, only a path that cannot become a folder (a file on the way)."""
+    piezo = REPO / "data_samples" / "piezo" / "piezo_aligned.csv"
+    lines = piezo.read_text().splitlines(keepends=True)
+    est, val = tmp_path / "est.csv", tmp_path / "val.csv"
+    est.write_text("".join(lines[:801]))
+    val.write_text("".join(lines[:1] + lines[801:1601]))
+    model, js, html = tmp_path / "models" / "a" / "m.json", tmp_path / "out" / "v.json", tmp_path / "rep" / "r.html"
+    for args, made in [
+        (["fit", "hysteresis", str(est), "--axis", "piezo", "--model", "linear", "--out", str(model)], [model]),
+        (["validate", str(model), str(val), "--json-out", str(js)], [js]),
+        (["report", str(model), "--data", str(val), "--out", str(html)], [html, html.with_suffix(".json")]),
+        (["import", "csv", str(val), "--draft-map", str(tmp_path / "maps" / "m.toml")], [tmp_path / "maps" / "m.toml"]),
+    ]:
+        res = runner.invoke(app, args)
+        assert res.exit_code == 0, res.output
+        assert all(p.is_file() for p in made), (args, res.output)
+    json.loads(js.read_text())  # whole files, not stubs
+    res = runner.invoke(app, ["fit", "hysteresis", str(est), "--axis", "piezo", "--out", str(est / "m.json")])
+    _one_line_exit_2(res, "est.csv")

@@ -106,8 +106,8 @@ def test_bad_input_is_one_line_and_exit_2(drifting, tmp_path):
     d["effects"] = [{"name": "warp", "settings": {}}]
     (tmp_path / "bad.json").write_text(json.dumps(d))
     _one_line_exit_2(_invoke(tmp_path / "bad.json", csv), "unknown effect 'warp'")
-    # --json-out into a folder that does not exist: refused before the validation runs
-    _one_line_exit_2(_invoke(tmp / "m.json", csv, "--json-out", tmp_path / "no" / "v.json"), "does not exist")
+    # --json-out under a file (a folder that cannot be made): refused before the validation runs
+    _one_line_exit_2(_invoke(tmp / "m.json", csv, "--json-out", csv / "v.json"), "is not a folder")
     # data too short for cross-validation, with no estimation data: the metrics, regimes and
     # residual tests still run; the scan says why it cannot and what to give it
     short = tmp_path / "short.csv"

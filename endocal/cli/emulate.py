@@ -113,13 +113,13 @@ def rig(
     from endocal.emulate.stage import StageFaults
     from endocal.errors import ConfigError
     from endocal.probe import load_probe
+    from endocal.runs.format import check_parent
     from endocal.sim import SimConfig
 
     errors = _hardware_errors(hardware_error)
     if [m for m in missing if m not in ("tip", "base")]:
         raise ConfigError(f"--missing: name a sensor, tip or base (got {', '.join(missing)})")
-    if not config_out.resolve().parent.is_dir():
-        raise ConfigError(f"cannot write {config_out}: its folder does not exist")
+    check_parent(config_out)
     cfg = SimConfig.from_toml(sim_config) if sim_config is not None else None
     rig_ = EmulatedRig(load_probe(probe), cfg, seed=seed, on_event=_event,
                        bus_faults=BusFaults(drop_probability=drop, corrupt_probability=corrupt, unplug_after_s=unplug_after,

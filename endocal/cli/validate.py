@@ -190,11 +190,10 @@ def validate(
         raise ModelError(f"--folds must be 2 or more (held-out blocks of the rolling-origin scan), got {folds}")
     refuse_input_as_output("--json-out", json_out, [model_path, *(data or []), *train, *compare, planes, force_model,
                                                     sim_config, hardware_config])
-    if json_out is not None and not json_out.resolve().parent.is_dir():
-        from endocal.errors import OutputPathError
+    if json_out is not None:
+        from endocal.runs.format import check_parent
 
-        # before any work: a long validation must not end in an output that cannot be written
-        raise OutputPathError(f"cannot write {json_out}: folder {json_out.parent} does not exist; create it or pick another path")
+        check_parent(json_out)  # before any work: a long validation must not end in an output it cannot write
     if trajectory is not None:
         if protocol is not None:
             raise ModelError("give either --trajectory (a tip path) or --protocol (desired angles of one axis), not both")

@@ -130,6 +130,7 @@ class EmulatedRig(Served):
             f"\n[dynamixel.motors.{axis}]\nid = {i}\nzero_ticks = {ZERO_TICKS}\ndirection = 1\n"
             f"limits_deg = [{self.probe.knob_limits_deg[axis][0]:g}, {self.probe.knob_limits_deg[axis][1]:g}]\n"
             for axis, i in self.ids.items())
+        path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(
             "# Written by `endocal emulate rig`: the emulated devices of this session.\n"
             'name = "emulated rig"\n\n'

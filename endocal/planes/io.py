@@ -75,7 +75,6 @@ def save_planes(calibration: PlanesCalibration, path: str | Path, *, force: bool
         raise OutputExistsError(f"{path} exists; pass force (--force) to overwrite it")
     text = json.dumps(planes_to_dict(calibration), indent=2, allow_nan=False) + "\n"
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_bytes(path, text.encode())
     except OSError as exc:
         raise OutputPathError(f"cannot write {path}: {exc.strerror or exc}") from None

@@ -14,6 +14,7 @@ from matplotlib.figure import Figure
 from endocal.errors import OutputPathError
 from endocal.probe import ProbeConfig
 from endocal.protocols.trajectory import Trajectory
+from endocal.runs.format import check_parent
 
 
 def trajectory_figure(traj: Trajectory, probe: ProbeConfig | None = None, title: str | None = None) -> Figure:
@@ -82,10 +83,10 @@ def plot_trajectory(traj: Trajectory, path: str | Path, probe: ProbeConfig | Non
     path = Path(path)
     if path.suffix.lower() != ".png":
         raise OutputPathError(f"plot output {path} must be a .png file")
-    if not path.parent.is_dir():
-        raise OutputPathError(f"cannot write {path}: folder {path.parent} does not exist")
+    check_parent(path)
     fig = trajectory_figure(traj, probe, title)
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(path, format="png", dpi=100)
     except OSError as exc:
         raise OutputPathError(f"cannot write {path}: {exc.strerror or exc}") from None

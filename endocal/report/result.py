@@ -217,7 +217,6 @@ class Report:
         out = Path(out_html)
         paths = check_output(out, force=force)
         try:
-            out.parent.mkdir(parents=True, exist_ok=True)
             contents = {"json": self.to_json().encode(), "csv": self.to_csv().encode(), "html": self.to_html().encode()}
             for k in ("json", "csv", "html"):
                 atomic_write_bytes(paths[k], contents[k])

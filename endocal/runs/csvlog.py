@@ -620,7 +620,6 @@ def _angles_table(df: pd.DataFrame, t: np.ndarray, motor: dict, cmap: CsvMap, wh
 def _write_table(out: Path, table: pd.DataFrame, provenance: dict) -> None:
     """Write the aligned table whole or not at all; Parquet carries the provenance as metadata."""
     data = table.to_csv(index=False).encode() if out.suffix.lower() == ".csv" else parquet_bytes(table, provenance)
-    out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(out, data)
 
 

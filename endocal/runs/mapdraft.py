@@ -349,6 +349,5 @@ def write_draft(log: str | Path, out: str | Path, *, force: bool = False) -> Dra
         raise OutputExistsError(f"{out} already exists: choose another --draft-map or pass --force")
     check_parent(out)
     draft = draft_map(read_log_table(log)[0], log.name)
-    out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(out, draft.text.encode())
     return draft
