@@ -418,7 +418,8 @@ def _dedupe(df: pd.DataFrame, t: np.ndarray, lines: np.ndarray, dedupe: bool,
                 col = next(c for c in df.columns if df.iloc[rows][c].dropna().nunique() > 1)
                 raise RunFormatError(f"{where}: rows at lines {lines[rows[0]]} and {lines[rows[1]]} share a time stamp "
                                      f"(t = {t[rows[0]]:g}) but differ in column '{col}'; no merge can settle which "
-                                     "is right: fix the log's clock")
+                                     "is right: fix the log's clock, or, if its rows are evenly spaced in time, replace [time] column with "
+                                     "sample_rate_hz in the map")
             merged = int(shared.sum())
             t, lines = t[~shared], lines[~shared]
             df = df.groupby(group, sort=False).first().set_axis(lines)

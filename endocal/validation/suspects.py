@@ -826,7 +826,9 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
                      f"{need} are needed before any can be significant at {alpha:g}: candidates are ranked by their "
                      "validation gain alone; validate on a longer record (or more records) to test them")
     if stride > 1:
-        notes.append(f"candidates fitted on 1 estimation sample in {stride} ({dt.n_samples} of {train.n_samples})")
+        notes.append(f"candidates fitted on 1 estimation sample in {stride} ({dt.n_samples} of {train.n_samples}) to "
+                     "keep the scan quick; the printed refit fits every sample, so its validation RMSE can differ "
+                     "from the candidate's by a few per cent")
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), 0, stride,
                       dt.n_samples, alpha, min_gain_pct, scheme="estimation/validation", scheme_reason=scheme_reason,
                       units=units.to_dict(), min_units=need)
