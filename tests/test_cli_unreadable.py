@@ -8,6 +8,7 @@ names the file, never a traceback, and nothing half-written.
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -160,5 +161,10 @@ def test_every_output_makes_the_folders_it_names(tmp_path):
         assert res.exit_code == 0, res.output
         assert all(p.is_file() for p in made), (args, res.output)
     json.loads(js.read_text())  # whole files, not stubs
+    # with the mode any new file gets (the temporary file of an atomic write is private, 0600,
+    # which left every model and run unreadable to the rest of the lab)
+    mask = os.umask(0o022)
+    os.umask(mask)
+    assert {oct(p.stat().st_mode & 0o777) for p in (model, js, html)} == {oct(0o666 & ~mask)}
     res = runner.invoke(app, ["fit", "hysteresis", str(est), "--axis", "piezo", "--out", str(est / "m.json")])
     _one_line_exit_2(res, "est.csv")
