@@ -211,6 +211,46 @@ def test_moved_run_folder_is_found_beside_the_model(sine_sweeps, tmp_path):
     assert v["scheme"]["name"] == "estimation/validation"
 
 
+def test_a_moved_planes_file_given_to_report_stands_in_for_the_recorded_one(thesis, tmp_path):
+    """report's --planes draws the calibration; when a model's recorded planes file has moved, the
+    same file given there is the one the model's angles are read through (another file is refused)."""
+    from endocal.report import build_report
+
+    tmp = thesis
+    model = tmp_path / "ap.json"
+    _run("fit", "hysteresis", tmp / "est", "--axis", "ap", "--model", "linear", "--planes", tmp / "planes.json",
+         "--out", model)
+    d = json.loads(model.read_text())
+    d["provenance"]["planes"] = str(tmp_path / "gone" / "planes.json")
+    model.write_text(json.dumps(d))
+    shutil.copy(tmp / "planes.json", tmp_path / "moved.json")
+    rep = build_report([model], [tmp / "val"], planes=tmp_path / "moved.json", regime_boot=0, n_boot=20)
+    assert rep.groups and not rep.not_evaluated, rep.not_evaluated
+    via = json.loads(_run("validate", model, tmp / "val", "--planes", tmp_path / "moved.json", "--json").stdout)
+    assert rep.groups[0].evaluations[0].metrics.rmse_deg == pytest.approx(via["metrics"]["rmse_deg"], rel=1e-9)
+    other = json.loads((tmp / "planes.json").read_text())
+    other["delta_deg"] = other.get("delta_deg", 0.0)
+    (tmp_path / "other.json").write_text(json.dumps(other, indent=1))  # same calibration, other bytes
+    res = _run("report", model, "--data", tmp / "val", "--planes", tmp_path / "other.json", "--out",
+               tmp_path / "r.html", ok=False)
+    _one_line_exit_2(res, "is another file (SHA-256 differs)")
+
+
+def test_records_named_relative_to_the_fit_folder_are_found_from_anywhere(sine_sweeps, tmp_path, monkeypatch):
+    """A lab fits in its project folder (`fit runs/est --planes planes.json --out models/m.json`)
+    and validates from another: the relative paths are looked up where the fit ran (recorded
+    as provenance.cwd), not only in today's working folder or beside the model."""
+    tmp = sine_sweeps
+    proj = tmp_path / "proj"
+    shutil.copytree(tmp / "est", proj / "runs" / "est")
+    monkeypatch.chdir(proj)
+    _run("fit", "hysteresis", "runs/est", "--axis", "ap", "--model", "linear", "--out", "models/m.json")
+    assert json.loads((proj / "models" / "m.json").read_text())["provenance"]["cwd"] == str(proj)
+    monkeypatch.chdir(tmp_path)
+    v = _validate_json(tmp_path, "proj/models/m.json", tmp / "val")
+    assert v["scheme"]["name"] == "estimation/validation" and v["estimation"][0]["source"].endswith("runs/est"), v["scheme"]
+
+
 def test_report_ladder_follows_validates_scheme(sine_sweeps):
     """The report's ladder scores a model fitted on another acquisition by the same
     estimation/validation split as validate: its held-out RMSE is validate's validation RMSE."""

@@ -73,6 +73,7 @@ def hysteresis(
     model prints as its equation with standard errors, and the fit report says how the
     optimiser stopped.
     """
+    import os
     import sys
 
     from endocal.fitting import fit_hysteresis
@@ -99,6 +100,7 @@ def hysteresis(
         "software": software_versions(),
         "created_utc": utc_now(),
         "command": "endocal " + " ".join(sys.argv[1:]),
+        "cwd": os.getcwd(),  # the folder the relative paths below are relative to
         "data": [{"path": str(p), "sha256": h} for p, h in zip(result.sources, result.hashes)],
         "planes": None if planes_file is None else str(planes_file),
         "planes_sha256": None if planes_file is None else sha256_of(planes_file),

@@ -37,7 +37,8 @@ def report(
     out_path: Path = typer.Option(..., "--out", "-o", help="HTML file to write; NAME.json and NAME_metrics.csv "
                                   "are written beside it (report.json, report_metrics.csv for report.html)."),
     planes: Optional[Path] = typer.Option(None, "--planes", help="planes.json from `endocal fit planes`: adds the "
-                                          "bending-plane figure before/after orthogonal compensation."),
+                                          "bending-plane figure before/after orthogonal compensation, and stands in "
+                                          "for a model's planes file that was moved (same SHA-256)."),
     bootstrap: int = typer.Option(400, "--bootstrap", help="Block-bootstrap replicates for the 95 % intervals "
                                   "(the default matches `endocal validate`)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the bootstrap."),

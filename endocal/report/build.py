@@ -179,8 +179,8 @@ def build_report(
     n_groups = sum(1 for d in data_entries for a in d.aligned.axes if any(m.axis == a for m in model_entries))
     n_fig_est = 5 * n_groups + len(model_entries) + 2 + (planes is not None)
     # each model is scored through the planes it was fitted through (its file records them);
-    # --planes only draws the calibration
-    read_planes, off_planes, model_entries = axis_planes(model_entries)
+    # --planes draws the calibration, and stands in for a model's planes file that was moved
+    read_planes, off_planes, model_entries = axis_planes(model_entries, moved=planes_path)
     groups, skipped = evaluate(model_entries, data_entries, n_boot=n_boot, regime_boot=regime_boot, seed=seed,
                                progress=stage(0, 2 * n_eval + n_fig_est), planes=read_planes)
     skipped = off_planes + skipped

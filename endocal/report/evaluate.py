@@ -344,14 +344,15 @@ def _finding(data: DataEntry, axis: str, evs: list[Evaluation], comp: Comparison
                    margin, pct, sig, p, comp.test, eff, text)
 
 
-def axis_planes(models: list[ModelEntry], given=None) -> tuple[dict, list[NotEvaluated], list[ModelEntry]]:
+def axis_planes(models: list[ModelEntry], given=None, *, moved=None) -> tuple[dict, list[NotEvaluated], list[ModelEntry]]:
     """The bending planes each axis's records are read through, and the models that fit them.
 
     ``given`` (a planes file or calibration) applies to every model, as ``validate --planes``
     does; otherwise each model brings the planes it was fitted through (recorded in its file,
     found and unchanged: :func:`endocal.validation.estimation.recorded_planes`). Models of one
     axis fitted through other planes than the first of that axis would be scored on other
-    angles: they are not evaluated, with the reason.
+    angles: they are not evaluated, with the reason. ``moved`` (the report's ``--planes``) stands
+    in for a model's recorded planes file that is not found where it was, when it is that file.
 
     Returns
     -------
@@ -368,7 +369,7 @@ def axis_planes(models: list[ModelEntry], given=None) -> tuple[dict, list[NotEva
         if given is not None and not isinstance(given, (str, Path)):  # a PlanesCalibration object
             cal, path = given, "the given planes"
         else:
-            cal, path = recorded_planes(m.model, m.path, given)
+            cal, path = recorded_planes(m.model, m.path, given, moved=moved)
         key = None if path is None else str(Path(path).resolve())
         if m.axis not in out:
             out[m.axis] = (cal, path, key)

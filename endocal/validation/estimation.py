@@ -65,21 +65,25 @@ class EstimationPlan:
         return ["--planes", self.planes_path] if self.planes_path else []
 
 
-def _locate(recorded: str, model_path: Path | None) -> Path | None:
-    """A recorded path as given (relative to the working folder), else relative to the model file's folder."""
+def _locate(recorded: str, model_path: Path | None, fit_cwd: str | None = None) -> Path | None:
+    """A recorded path as given (relative to the working folder), else relative to the folder the
+    fit ran in (``fit_cwd``, recorded with it), else relative to the model file's folder."""
     p = Path(recorded)
     if p.exists():
         return p
-    if not p.is_absolute() and model_path is not None:
-        q = model_path.parent / p
-        if q.exists():
-            return q
+    if p.is_absolute():
+        return None
+    for folder in ([Path(fit_cwd)] if fit_cwd else []) + ([model_path.parent] if model_path is not None else []):
+        if (folder / p).exists():
+            return folder / p
     return None
 
 
-def recorded_planes(model, model_path: str | Path | None, planes_path: str | Path | None = None):
+def recorded_planes(model, model_path: str | Path | None, planes_path: str | Path | None = None, *,
+                    moved: str | Path | None = None):
     """The bending planes to read data through for ``model``: ``planes_path`` when given, else
-    the planes its file records (looked up as given, then beside the model file; hash checked).
+    the planes its file records (looked up as given, where the fit ran, then beside the model
+    file; hash checked), else ``moved`` when it is that very file (same SHA-256) moved elsewhere.
 
     Returns
     -------
@@ -100,10 +104,13 @@ def recorded_planes(model, model_path: str | Path | None, planes_path: str | Pat
     recorded = prov.get("planes")
     if not recorded:
         return None, None
-    found = _locate(recorded, model_path)
+    found = _locate(recorded, model_path, prov.get("cwd"))
+    if found is None and moved is not None and sha256_of(moved) == prov.get("planes_sha256"):
+        found = Path(moved)
     if found is None:
-        raise ModelError(f"the model was fitted through the bending planes {recorded}, which are not found: give "
-                         "them with --planes (validating without them would score other angles than the fit did)")
+        other = f"; {moved} is another file (SHA-256 differs)" if moved is not None else ""
+        raise ModelError(f"the model was fitted through the bending planes {recorded}, which are not found{other}: "
+                         "give them with --planes (validating without them would score other angles than the fit did)")
     digest = prov.get("planes_sha256")
     if digest and sha256_of(found) != digest:
         raise ModelError(f"the bending planes {found} have changed since the model was fitted through them "
@@ -170,7 +177,7 @@ def plan_estimation(model, val: Sequence[AlignedData], *, model_path: str | Path
                               "data", planes, ppath)
     train, paths = [], []
     for d in recorded:
-        found = _locate(d["path"], mpath)
+        found = _locate(d["path"], mpath, (getattr(model, "provenance_", None) or {}).get("cwd"))
         if found is None:
             raise ModelError(f"the model was fitted on {d['path']}, which is not found: give the estimation data with "
                              "--train (or --cv rolling to cross-validate on the validation data alone)")
