@@ -234,6 +234,9 @@ def test_a_moved_planes_file_given_to_report_stands_in_for_the_recorded_one(thes
     res = _run("report", model, "--data", tmp / "val", "--planes", tmp_path / "other.json", "--out",
                tmp_path / "r.html", ok=False)
     _one_line_exit_2(res, "is another file (SHA-256 differs)")
+    # a playback through the model's inverse bends the planes it was fitted through, as offline
+    res = _run("validate", model, "--protocol", "triangle", ok=False)
+    _one_line_exit_2(res, "fitted through the bending planes")
 
 
 def test_records_named_relative_to_the_fit_folder_are_found_from_anywhere(sine_sweeps, tmp_path, monkeypatch):

@@ -212,8 +212,8 @@ def validate(
         if data:
             raise ModelError("give either DATA (offline validation) or --protocol (playback on a backend), not both")
         apply_out_of_range(model, out_of_range)
-        _playback(model, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets, runs_out, json_out,
-                  force_model, max_force_n)
+        _playback(model, model_path, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets,
+                  runs_out, json_out, force_model, max_force_n)
         return
     if force_model is not None or max_force_n is not None:
         raise ModelError("--force-model and --max-force-n guard a playback: use them with --protocol")
@@ -250,18 +250,19 @@ def validate(
         err.print(f"compared with {old_path} (the model this one was refitted from)")
 
 
-def _playback(model, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets, runs_out, json_out,
-              force_model=None, max_force_n=None) -> None:
+def _playback(model, model_path, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets,
+              runs_out, json_out, force_model=None, max_force_n=None) -> None:
     from endocal.backends.registry import make_backend
-    from endocal.planes import load_planes
     from endocal.probe import load_probe
     from endocal.protocols import load_protocol, parse_overrides
+    from endocal.validation.estimation import recorded_planes
     from endocal.validation.playback import validate_on_backend
 
     probe_cfg = load_probe(probe)
     proto = load_protocol(protocol, overrides=parse_overrides(sets) or None)
     make_backend(backend, probe_cfg, seed=seed, sim_config=sim_config, hardware_config=hardware_config)  # check configs first
-    cal = load_planes(planes) if planes is not None else None
+    # the planes the model was fitted through (as offline): its commands bend those planes
+    cal = recorded_planes(model, model_path, planes)[0]
     make_guard = guard_factory(force_model, max_force_n, probe_cfg)
     with warnings_as_lines():
         result = validate_on_backend(
