@@ -131,7 +131,15 @@ def test_train_equal_to_the_validation_data_warns_the_scores_are_in_sample(sine_
     d = _validate_json(tmp, tmp / "pe.json", tmp / "est")  # fitted on est, validated on est: rolling origin
     assert d["scheme"]["name"] in ("rolling-origin", "none") and "fitted on the data validated here" in d["scheme"]["reason"]
     res = _run("validate", tmp / "pe.json", tmp / "est", "--train", tmp / "est")
-    assert "in-sample" in res.stdout
+    # said where the numbers are, not only in a note at the end: every RMSE line calls itself in-sample
+    lines = res.stdout.splitlines()
+    assert any(ln.startswith("warning: the estimation data includes the record validated here") for ln in lines)
+    assert not any("validation RMSE" in ln for ln in lines), res.stdout
+    assert any(ln.startswith("in-sample RMSE") for ln in lines), res.stdout
+    # a model refitted on estimation + validation data (--refit-on all) finds both in its file
+    _run("fit", "hysteresis", tmp / "est", tmp / "val", "--axis", "ap", "--model", "linear", "--out", tmp / "both.json")
+    d = _validate_json(tmp, tmp / "both.json", tmp / "val")
+    assert d["scheme"]["name"] == "estimation/validation" and d["scheme"]["in_sample"] is True, d["scheme"]
 
 
 def test_real_piezo_one_cycle_to_fit_one_to_validate(tmp_path):

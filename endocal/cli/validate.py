@@ -62,11 +62,20 @@ _SCHEME_WORDS = {
 }
 
 
-def heldout_label(scan) -> str:
+def heldout_label(scan, in_sample: bool = False) -> str:
     """What the scan's held-out RMSE is, in words."""
     if scan.scheme == "estimation/validation":
+        if in_sample:
+            return "in-sample RMSE (structure fitted on estimation data that includes this record)"
         return "validation RMSE (structure fitted on the estimation data)"
     return f"held-out RMSE (model refitted on earlier data, rolling origin, {scan.folds} blocks)"
+
+
+def _scheme_word(result) -> str:
+    """What kind of RMSE the scan's numbers are, in one word."""
+    if result.scan.scheme != "estimation/validation":
+        return "held-out"
+    return "in-sample" if result.in_sample else "validation"
 
 
 def render(result) -> None:
@@ -87,13 +96,16 @@ def render(result) -> None:
     if result.estimation:
         out.print(f"  estimation data: {', '.join(str(d['source']) for d in result.estimation)} "
                   f"({sum(d['n_samples'] for d in result.estimation)} samples)", markup=False)
+    if result.in_sample:
+        out.print("[bold]warning:[/] the estimation data includes the record validated here: every score below is "
+                  "in-sample and flatters the model; validate on a record it was not fitted on")
     out.print(_metrics_table("How far off (measured vs predicted)", result.metrics))
     if scan.scheme != "none":
-        out.print(f"{heldout_label(scan)}: {scan.baseline_rmse_heldout_deg:.3g} deg", markup=False)
+        out.print(f"{heldout_label(scan, result.in_sample)}: {scan.baseline_rmse_heldout_deg:.3g} deg", markup=False)
     c = result.compare
     if c is not None:
         arrow = "fell" if c.change_pct < 0 else "rose"
-        what = "validation" if scan.scheme == "estimation/validation" else "held-out"
+        what = _scheme_word(result)
         out.print(f"[bold]Watch the error fall:[/] {what} RMSE {c.old_label} {c.old_heldout_rmse_deg:.3g} deg -> "
                   f"{c.new_label} {c.new_heldout_rmse_deg:.3g} deg ({arrow} {abs(c.change_pct):.0f} %); "
                   f"on all data {c.old_rmse_deg:.3g} -> {c.new_rmse_deg:.3g} deg")
@@ -107,7 +119,7 @@ def render(result) -> None:
     for x in result.residuals.significant():
         out.print(f"  correlates with {x.signal} (|r| = {x.max_abs_corr:.2f} at lag {x.lag_s:+.3g} s): {x.hint}",
                   markup=False)
-    what = "validation" if scan.scheme == "estimation/validation" else "held-out"
+    what = _scheme_word(result)
     if result.suspects:
         thin = not any(s.significant for s in result.suspects)
         few = all(s.evidence.startswith("not enough") for s in result.suspects)

@@ -126,6 +126,12 @@ class ValidationResult:
         return self.scan.suspects
 
     @property
+    def in_sample(self) -> bool:
+        """True when the estimation data includes a validated record: every score is then in-sample."""
+        own = {d.get("sha256") for d in self.data} - {None, ""}
+        return bool(own & {d.get("sha256") for d in self.estimation})
+
+    @property
     def clean(self) -> bool:
         """True when nothing is missing: the scan ran, found no suspect and no candidate that clears
         the gain bar, and the residual points at no effect."""
@@ -144,7 +150,7 @@ class ValidationResult:
             "residuals": self.residuals.to_dict(),
             "suspects": [s.to_dict() for s in self.scan.suspects],
             "scan": self.scan.to_dict(),
-            "scheme": {"name": self.scan.scheme, "reason": self.scan.scheme_reason},
+            "scheme": {"name": self.scan.scheme, "reason": self.scan.scheme_reason, "in_sample": self.in_sample},
             "estimation": list(self.estimation),
             "pointers": [p.to_dict() for p in self.pointers],
             "shift": None if self.shift is None else self.shift.to_dict(),
