@@ -193,6 +193,25 @@ def test_thesis_workflow_fit_and_validate_agree_and_the_diagnosis_pays(thesis, a
     assert second["metrics"]["rmse_deg"] < first["metrics"]["rmse_deg"]
 
 
+def test_a_sine_set_validated_on_itself_says_what_rolling_origin_cannot_see(thesis):
+    """The sine-set moves one knob, then the other. Validated on its own record (rolling origin),
+    ap's held-out blocks are ml's sweeps: ap rests there, so "nothing is missing" would be read
+    off blocks that test nothing; ml has no reversal in the first training block, which is not a
+    short record (the message used to say "give a longer run" of a 10-minute one)."""
+    tmp = thesis
+    for axis in ("ap", "ml"):
+        _run("fit", "hysteresis", tmp / "est", "--axis", axis, "--model", "linear", "--planes", tmp / "planes.json",
+             "--out", tmp / f"self-{axis}.json", "--force")
+    ap = _validate_json(tmp, tmp / "self-ap.json", tmp / "est")
+    assert ap["scheme"]["name"] == "rolling-origin" and ap["scan"]["cv"]["still_blocks"] >= 1, ap["scan"]["cv"]
+    assert ap["clean"] is False and "hold no motion of this axis" in ap["notes"][0] if ap["notes"] else False, ap
+    ml = _validate_json(tmp, tmp / "self-ml.json", tmp / "est")
+    reason = ml["scheme"]["reason"]
+    assert ml["scheme"]["name"] == "none" and "its knob rests through the first" in reason, reason
+    # not "give a longer run", nor --train with the very record the model was fitted on
+    assert "longer run" not in reason and reason.endswith("validate the model on a record it was not fitted on"), reason
+
+
 def test_a_residual_pointing_at_an_effect_the_scan_cannot_test_is_named(thesis):
     """sine-set drives each knob in turn: under rolling origin no training block sees the other knob move."""
     tmp = thesis

@@ -148,8 +148,10 @@ def render(result) -> None:
                   f"{what} RMSE by {best.gain_pct:.0f} % but not consistently (Holm-corrected p = {best.p_value:.2g}); "
                   "the residual points at nothing the scan could not test.", markup=False)
     else:
+        rests = (f" But {scan.still_blocks} of its {scan.folds} held-out blocks hold no motion of this axis: "
+                 "this says little (see the notes)." if scan.still_blocks else "")
         out.print(f"[bold]Which effect is missing:[/] nothing: no catalog effect lowers the {what} RMSE by "
-                  f"{scan.min_gain_pct:g} % or more, and the residual points at nothing the scan could not test.")
+                  f"{scan.min_gain_pct:g} % or more, and the residual points at nothing the scan could not test.{rests}")
     if result.pointers:
         out.print("[bold]Untested suspects[/] (the data point at them; the scan did not confirm them):")
         for p in result.pointers:

@@ -133,10 +133,11 @@ class ValidationResult:
 
     @property
     def clean(self) -> bool:
-        """True when nothing is missing: the scan ran, found no suspect and no candidate that clears
-        the gain bar, and the residual points at no effect."""
+        """True when nothing is missing: the scan ran on blocks where the axis moves, found no
+        suspect and no candidate that clears the gain bar, and the residual points at no effect."""
         unsettled = any(s.gain_pct >= self.scan.min_gain_pct for s in self.scan.tested)
-        return not self.suspects and not self.pointers and not unsettled and self.scan.scheme != "none"
+        return (not self.suspects and not self.pointers and not unsettled and self.scan.scheme != "none"
+                and not self.scan.still_blocks)
 
     def to_dict(self) -> dict:
         """One JSON-able object: ``metrics``, ``regimes``, ``residuals``, ``suspects``, ``notes`` and more."""
@@ -322,9 +323,10 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
         try:
             check_cv_data(data.decimate(max(1, -(-data.n_samples // max_scan_samples))), folds)
         except ModelError as exc:
+            instead = ("validate the model on a record it was not fitted on" if fitted_on(model, data) else
+                       "give the record the model was fitted on with --train to test effects on this one as a whole")
             scan = _no_scan(f"{reason}, and rolling-origin cross-validation cannot run on this record alone "
-                            f"({exc}); give the record the model was fitted on with --train to test effects on "
-                            "this one as a whole", alpha, min_gain_pct)
+                            f"({exc}); {instead}", alpha, min_gain_pct)
         else:
             scan = scan_effects(model, data, folds=folds, alpha=alpha, min_gain_pct=min_gain_pct,
                                 load_columns=load_columns, bending_axes=axes_all, max_samples=max_scan_samples,

@@ -166,6 +166,8 @@ class ScanResult:
         The validation data's units of the paired test (estimation/validation scheme).
     min_units : int
         Fewest units with which the best candidate could reach significance.
+    still_blocks : int
+        Rolling-origin held-out blocks in which this axis's knob rests (:func:`still_blocks`).
     """
 
     suspects: tuple[Suspect, ...]
@@ -182,6 +184,7 @@ class ScanResult:
     scheme_reason: str = ""
     units: dict | None = None
     min_units: int = 0
+    still_blocks: int = 0
 
     @property
     def thin_evidence(self) -> bool:
@@ -200,7 +203,8 @@ class ScanResult:
             "notes": list(self.notes),
             "cv": {"scheme": self.scheme, "reason": self.scheme_reason, "folds": self.folds, "stride": self.stride,
                    "n_samples": self.n_samples, "alpha": self.alpha, "min_gain_pct": self.min_gain_pct,
-                   "units": self.units, "min_units": self.min_units, "test": test},
+                   "units": self.units, "min_units": self.min_units, "test": test,
+                   "still_blocks": self.still_blocks},
         }
 
 
@@ -283,9 +287,31 @@ def check_cv_data(data: HysteresisData, folds: int, train_frac: float = 0.5, min
     first = fold_split(data, fold_bounds(n, folds, train_frac)[0])[0]
     n_turns = int(turning_points(first).size)
     if n_turns < 2:
+        if np.ptp(first.cmd_deg) <= STILL_FRAC * np.ptp(data.cmd_deg) and turning_points(data).size >= 2:
+            # not short: this knob rests, then moves (a sine-set moves one knob, then the other)
+            raise ModelError(f"this axis reverses {int(turning_points(data).size)} times in the record but its knob "
+                             f"rests through the first {first.n_samples} samples (the first training block), so no "
+                             "model can be fitted there")
         raise ModelError(f"data too short for blocked cross-validation: the first {first.n_samples} samples (the first "
                          f"training block) hold {n_turns} direction reversal(s), a hysteresis model needs at least 2; "
                          "give a longer run")
+
+
+#: A knob "rests" in a stretch of record when its command stays within this fraction of its
+#: range over the record: 2 % of a 120 deg sweep is 2.4 deg, below any loop a tendon drive draws.
+STILL_FRAC = 0.02
+
+
+def still_blocks(data: HysteresisData, bounds: Sequence[tuple[int, int]]) -> int:
+    """Held-out blocks in which this axis's knob rests (:data:`STILL_FRAC`) while the other moves:
+    they test nothing of its hysteresis, only where the model puts the resting bend."""
+    span = float(np.ptp(data.cmd_deg))
+    still = 0
+    for bd in bounds:
+        _, over, held = fold_split(data, bd)
+        cmd = over.cmd_deg[held]
+        still += int(cmd.size == 0 or np.ptp(cmd) <= STILL_FRAC * span)
+    return still
 
 
 def _template(model: HysteresisModel, effects: Sequence[str]) -> HysteresisModel:
@@ -971,8 +997,15 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
     notes += [f"{k}: {v}" for k, v in untestable.items()]
     if stride > 1:
         notes.append(f"scanned 1 sample in {stride} ({d.n_samples} of {data.n_samples})")
+    still = still_blocks(d, bounds)
+    if still:
+        where = (f"all {folds} held-out blocks hold" if still == folds else f"{still} of the {folds} held-out blocks hold")
+        notes.insert(0, f"{where} no motion of this axis (its knob rests while the record goes on): there the scan "
+                        "scores only where the model puts the resting bend, not its hysteresis; validate on a record "
+                        "where this axis moves throughout")
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), folds, stride,
-                      d.n_samples, alpha, min_gain_pct, scheme="rolling-origin", scheme_reason=scheme_reason)
+                      d.n_samples, alpha, min_gain_pct, scheme="rolling-origin", scheme_reason=scheme_reason,
+                      still_blocks=still)
 
 
 def _ambiguities(suspects: list[Suspect], errs: dict, alpha: float, close_pct: float = 5.0) -> list[str]:
