@@ -157,7 +157,9 @@ def is_smooth(values: np.ndarray, data: HysteresisData, min_lag1: float = 0.5) -
 
     A column that is mostly sample-to-sample noise (a current reading of a motor at rest) is
     not a load on the tendons; a play whose width follows it acts as an extra backlash of
-    random width and would pass for a load on data with any lag.
+    random width and would pass for a load on data with any lag. A column constant within
+    each record but not across them (the sheath curvature each acquisition was made at) is
+    the smoothest load of all: a condition per record.
     """
     num = den = 0.0
     for sl in data.run_slices():
@@ -165,7 +167,9 @@ def is_smooth(values: np.ndarray, data: HysteresisData, min_lag1: float = 0.5) -
         x = x - x.mean()
         num += float(x[1:] @ x[:-1])
         den += float(x @ x)
-    return den > 0 and num / den >= min_lag1
+    if den == 0.0:
+        return not is_constant(values)
+    return num / den >= min_lag1
 
 
 def check_columns(data: HysteresisData, columns: Sequence[str], vary: bool = True, what: str = "the data") -> None:
