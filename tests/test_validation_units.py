@@ -255,6 +255,6 @@ def test_a_suggestion_whose_own_parameter_ends_at_a_bound_carries_a_caution():
     # validate repeats what the fit said: this base found no loop it can shape
     assert any("no better than a straight line" in w for w in res.model["fit_warnings"]), res.model
     delay = next(s for s in res.scan.tested if s.effect == "delay")
-    assert delay.at_bound.startswith("delay_s = -0.5 sits at its lower bound"), delay.at_bound
-    order = [bool(s.at_bound) for s in res.scan.suspects]
+    assert delay.caution.startswith("delay_s = -0.5 sits at its lower bound"), delay.caution
+    order = [bool(s.caution) for s in res.scan.suspects]
     assert order == sorted(order)  # at-bound suggestions after the others

@@ -132,8 +132,8 @@ def render(result) -> None:
             out.print(f"  {i}. {s.effect}: -{s.gain_pct:.0f} % {what} RMSE ({s.base_rmse_heldout_deg:.3g} -> "
                       f"{s.rmse_heldout_deg:.3g} deg), {stat}", markup=False)
             out.print(f"     {s.cause}; signature: {s.signature}", markup=False)
-            if s.at_bound:
-                out.print(f"     caution: {s.at_bound}", markup=False)
+            if s.caution:
+                out.print(f"     caution: {s.caution}", markup=False)
         out.print("[bold]Next:[/] refit with the first " + ("candidate" if thin else "suspect") +
                   ", then validate the new model:")
         out.print("  " + result.suspects[0].command, markup=False)

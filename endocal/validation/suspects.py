@@ -35,6 +35,7 @@ from __future__ import annotations
 import contextlib
 import copy
 import math
+import re
 import shlex
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -101,10 +102,13 @@ class Suspect:
     screened : bool
         Not refitted beyond the first fold: its training fit gained too little (see
         :func:`scan_effects`).
-    at_bound : str
-        Under the estimation/validation scheme: the candidate's own parameters that its fit
-        left at a bound (``delay_s = -0.5 sits at its lower bound ...``), a term stretched to
-        take up what it does not model; such a suggestion ranks after those without.
+    caution : str
+        Under the estimation/validation scheme, why the candidate may stand in for something
+        it does not model: its own parameters that its fit left at a nonzero bound
+        (``delay_s = -0.5 sits at its lower bound ...``; a share at its zero bound is the term
+        switched off, not stretched), or values its physics cannot have
+        (:meth:`~endocal.models.effects.base.Effect.implausible`); such a suggestion ranks
+        after those without.
     evidence : str
         ``significant``, ``not significant``, or ``not enough evidence (N units)`` when the
         validation data holds too few independent units for any p-value to reach ``alpha``
@@ -126,7 +130,7 @@ class Suspect:
     n_blocks: int
     screened: bool = False
     evidence: str = ""
-    at_bound: str = ""
+    caution: str = ""
 
     def to_dict(self) -> dict:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
@@ -722,15 +726,22 @@ def predict_errors(model: HysteresisModel, data: HysteresisData) -> np.ndarray:
     return _predict_errors(model, data)
 
 
+_AT_BOUND = re.compile(r"sits at its (?:lower|upper) bound (\S+):")
+
+
 def _split_candidate(model: HysteresisModel, effects: Sequence[str], train: HysteresisData,
                      val: HysteresisData) -> tuple[np.ndarray, list[str]]:
-    """Validation errors of ``base + effects`` fitted on ``train``, and its fit's warnings about
-    parameters of effects ``model`` lacks that sit at a bound."""
+    """Validation errors of ``base + effects`` fitted on ``train``, and the cautions about the
+    effects ``model`` lacks (:attr:`Suspect.caution`)."""
     m = split_fit(model, effects, train)
     have = set(effect_labels(model))
-    prefixes = tuple(e.prefix + "_" for e in m.effects_ if e.label not in have)
-    bound = [w for w in m.fit_report_.warnings if prefixes and w.startswith(prefixes) and "sits at its" in w]
-    return _predict_errors(m, val), bound
+    new = [e for e in m.effects_ if e.label not in have]
+    prefixes = tuple(e.prefix + "_" for e in new)
+    cautions = [w for w in m.fit_report_.warnings if prefixes and w.startswith(prefixes)
+                and (b := _AT_BOUND.search(w)) and float(b.group(1)) != 0.0]
+    _, eff_p = m._grouped(m.params_)
+    cautions += [c for e in new if (c := e.implausible(eff_p[id(e)], train))]
+    return _predict_errors(m, val), cautions
 
 
 def split_errors(model: HysteresisModel, effects: Sequence[str], train: HysteresisData, val: HysteresisData,
@@ -835,7 +846,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
         tested.append(Suspect(effect=c, column=col or None, gain_pct=gain, p_value=float(pa), p_raw=float(p),
                               rmse_heldout_deg=rmse, base_rmse_heldout_deg=rmse_base, significant=significant,
                               command=cmd, cause=cls.cause, signature=cls.signature, protocol=cls.protocol,
-                              n_blocks=units.n, evidence=evidence, at_bound=bounds[c]))
+                              n_blocks=units.n, evidence=evidence, caution=bounds[c]))
         errs[c] = err
     tested.sort(key=lambda s: -s.gain_pct)
     # Significant candidates are suspects. Without one, a candidate that still cuts the validation
@@ -844,8 +855,8 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     # the gain is not consistent enough across units to rule out chance.
     suspects = [s for s in tested if s.significant] or [s for s in tested if s.gain_pct >= min_gain_pct]
     # a candidate whose own parameter ended at a bound (a delay at -0.5 s) ranks after those that did not
-    suspects.sort(key=lambda s: bool(s.at_bound))
-    notes = _ambiguities(suspects, errs, alpha) if any(s.significant for s in suspects) else []
+    suspects.sort(key=lambda s: bool(s.caution))
+    notes = _demoted(suspects) + (_ambiguities(suspects, errs, alpha) if any(s.significant for s in suspects) else [])
     notes += [f"{k}: {v}" for k, v in untestable.items()]
     if thin and fitted:
         notes.append(f"the validation data holds {units.n} {units.kind}s; with {len(fitted)} candidates at least "
@@ -1008,6 +1019,17 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
                       still_blocks=still)
 
 
+def _demoted(suspects: list[Suspect]) -> list[str]:
+    """Notes on suggestions that lower the error more than the first but rank after it (a caution)."""
+    if not suspects or suspects[0].caution:
+        return []
+    top = suspects[0]
+    return [f"{s.effect} lowers the validation RMSE more than {top.effect} ({s.rmse_heldout_deg:.3g} vs "
+            f"{top.rmse_heldout_deg:.3g} deg) but ranks after it: {s.caution}; it may stand in for something it does "
+            "not model (how the records start, a loop shape)" for s in suspects[1:]
+            if s.caution and s.rmse_heldout_deg < top.rmse_heldout_deg]
+
+
 def _ambiguities(suspects: list[Suspect], errs: dict, alpha: float, close_pct: float = 5.0) -> list[str]:
     """Notes on suspects that explain the residual about as well as the top one."""
     if len(suspects) < 2:
@@ -1015,8 +1037,11 @@ def _ambiguities(suspects: list[Suspect], errs: dict, alpha: float, close_pct: f
     top = suspects[0]
     notes = []
     for other in suspects[1:]:
+        if other.caution and not top.caution:
+            continue  # ranked apart on purpose (_demoted says why)
         p, _ = paired_test(errs[other.effect], errs[top.effect])
-        rel = 100.0 * (other.rmse_heldout_deg - top.rmse_heldout_deg) / max(top.rmse_heldout_deg, 1e-300)
+        lo, hi = sorted((top.rmse_heldout_deg, other.rmse_heldout_deg))
+        rel = 100.0 * (hi - lo) / max(lo, 1e-300)
         if p < alpha and rel >= close_pct:
             continue
         a, b = top.effect.partition(":")[0], other.effect.partition(":")[0]
@@ -1024,6 +1049,7 @@ def _ambiguities(suspects: list[Suspect], errs: dict, alpha: float, close_pct: f
         if how is None:
             how = (f"{top.effect} is revealed by {EFFECTS[a].protocol}; "
                    f"{other.effect} by {EFFECTS[b].protocol}")
-        notes.append(f"{top.effect} and {other.effect} explain the residual about equally (held-out RMSE "
+        alike = "about equally" if rel < close_pct else f"alike within chance (paired p = {p:.2g})"
+        notes.append(f"{top.effect} and {other.effect} explain the residual {alike} (held-out RMSE "
                      f"{top.rmse_heldout_deg:.3g} vs {other.rmse_heldout_deg:.3g} deg); to tell them apart: {how}")
     return notes

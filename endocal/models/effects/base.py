@@ -86,6 +86,11 @@ class Effect(ABC):
         """True when the term has no effect at these values (dropped from the printed equation)."""
         return all(v == 0.0 for v in p.values())
 
+    def implausible(self, p: dict, data: HysteresisData) -> str:
+        """Why values fitted on ``data`` cannot be this effect's physics (so the term stands in for
+        something else); ``""`` when they can. Default: no physical bound to check."""
+        return ""
+
     def _bracket(self, p: dict, se: dict) -> str:
         parts = [f"{k}={fmt_value(p[k], se.get(k), self.units.get(k, ''))}" for k in self.param_names()]
         return "[" + ", ".join(parts) + "]"

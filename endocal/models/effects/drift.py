@@ -37,6 +37,30 @@ class Drift(OutputEffect):
     def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
         return [Parameter(f"{self.prefix}_rate_dps", 0.0)]
 
+    def implausible(self, p: dict, data: HysteresisData) -> str:
+        """A drift is slow against the motion it rides on. One at more than 5 % of the bend's mean
+        speed moves the zero by a tenth of the range in every knob cycle: no settling sheath or
+        creeping mount does that. Fitted on records that all start alike (cycles cut from one
+        recording), such a term follows the time since each record began and fails on a longer
+        one. The speed is the command's (the measured angle's differences are mostly tracker
+        noise at 100 Hz) in bend units: times the bend range over the command range."""
+        if data.meas_deg is None or data.t_s is None:
+            return ""
+        speeds = []
+        for sl in data.run_slices():
+            du, dt = np.diff(data.cmd_deg[sl]), np.diff(data.t_s[sl])
+            if dt.size and dt.sum() > 0:
+                speeds.append(np.abs(du).sum() / dt.sum())
+        cmd_span, bend_span = float(np.ptp(data.cmd_deg)), float(np.ptp(data.meas_deg))
+        if not speeds or cmd_span <= 0.0:
+            return ""
+        bend_speed = float(np.mean(speeds)) * bend_span / cmd_span
+        rate = abs(p["rate_dps"])
+        if rate <= 0.05 * bend_speed:
+            return ""
+        return (f"{self.prefix}_rate_dps = {p['rate_dps']:.3g} is {100 * rate / bend_speed:.0f} % of the bend's mean speed "
+                f"({bend_speed:.3g} deg/s): no slow drift moves that fast; it likely fits how the records start")
+
     def term(self, p: dict, cmd: np.ndarray, data: HysteresisData) -> np.ndarray:
         return p["rate_dps"] * _elapsed_s(data)
 
