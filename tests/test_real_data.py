@@ -113,3 +113,20 @@ def test_a_drift_that_follows_how_cut_cycles_start_is_not_the_first_suggestion()
     first = res.suspects[0]
     assert not first.caution and first.effect != "drift"
     assert any(n.startswith(f"drift lowers the validation RMSE more than {first.effect}") for n in res.notes), res.notes
+
+
+def test_a_residual_that_follows_the_loop_is_never_called_nothing_missing():
+    """`pi` fitted on cycle 0, which starts with a step from the stack's rest, is off by 1.97 on
+    cycle 4 (0.59 from other cycles) and no candidate repairs it. Its residual stays correlated
+    for 0.065 s, a fifth of the time between reversals (interpolated sensor noise: a few samples),
+    so validate must not read "nothing is missing" off the scan alone."""
+    from endocal.models import make_model
+    from endocal.validation.data import axis_data
+    from endocal.validation.offline import validate_offline
+
+    data = load_aligned(PIEZO)
+    train = [_cycle(data, 0)]
+    model = make_model("pi", axis="piezo").fit(axis_data(train, "piezo"))
+    res = validate_offline(model, [_cycle(data, 4)], train=train, model_path="m.json")
+    assert not res.suspects and not res.clean
+    assert res.unexplained.startswith("the residual is not noise") and "of a half-cycle" in res.unexplained

@@ -142,6 +142,9 @@ def render(result) -> None:
     elif result.pointers:
         out.print("[bold]Which effect is missing:[/] no catalog effect confirmed by the scan, but the data "
                   "point at effects it could not settle (below).")
+    elif result.unexplained:
+        out.print(f"[bold]Which effect is missing:[/] no catalog effect lowers the {what} RMSE by {scan.min_gain_pct:g} % "
+                  f"or more, but {result.unexplained}.", markup=False)
     elif scan.tested and scan.tested[0].gain_pct >= scan.min_gain_pct:
         best = scan.tested[0]
         out.print(f"[bold]Which effect is missing:[/] nothing significant: the best candidate, {best.effect}, lowers the "

@@ -17,7 +17,7 @@ from endocal.models.base import HysteresisModel
 from endocal.runs.aligned import AlignedData
 from endocal.validation.data import axis_data, check_columns, load_candidates
 from endocal.validation.metrics import ErrorMetrics, error_metrics
-from endocal.validation.regimes import RegimeBreakdown, error_by_regime
+from endocal.validation.regimes import RegimeBreakdown, error_by_regime, turning_points
 from endocal.validation.residuals import ResidualTests, residual_tests
 from endocal.validation.suspects import (
     MAX_SCAN_SAMPLES,
@@ -106,6 +106,8 @@ class ValidationResult:
     shift : RecordShift or None
         A zero shift and a friction change fitted on the validation data with the model held
         (:mod:`endocal.validation.shift`; estimation/validation scheme only).
+    unexplained : str
+        When the residual is a shape rather than noise (:func:`unexplained_shape`), what it says.
     """
 
     axis: str
@@ -120,6 +122,7 @@ class ValidationResult:
     pointers: tuple[Pointer, ...] = ()
     estimation: list = ()
     shift: RecordShift | None = None
+    unexplained: str = ""
 
     @property
     def suspects(self):
@@ -137,7 +140,7 @@ class ValidationResult:
         suspect and no candidate that clears the gain bar, and the residual points at no effect."""
         unsettled = any(s.gain_pct >= self.scan.min_gain_pct for s in self.scan.tested)
         return (not self.suspects and not self.pointers and not unsettled and self.scan.scheme != "none"
-                and not self.scan.still_blocks)
+                and not self.scan.still_blocks and not self.unexplained)
 
     def to_dict(self) -> dict:
         """One JSON-able object: ``metrics``, ``regimes``, ``residuals``, ``suspects``, ``notes`` and more."""
@@ -156,6 +159,7 @@ class ValidationResult:
             "pointers": [p.to_dict() for p in self.pointers],
             "shift": None if self.shift is None else self.shift.to_dict(),
             "clean": self.clean,
+            "unexplained": self.unexplained,
             "notes": list(self.notes),
             "compare": None if self.compare is None else self.compare.to_dict(),
         }
@@ -367,4 +371,24 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
                   "equation": model.equation(), "fit_warnings": list(rep.warnings) if rep is not None else []}
     return ValidationResult(axis=ax, model=model_info, data=info, metrics=metrics, regimes=regimes,
                             residuals=resid, scan=scan, notes=tuple(notes), compare=comp, pointers=tuple(pointers),
-                            estimation=est_info, shift=shift)
+                            estimation=est_info, shift=shift, unexplained=unexplained_shape(data, resid))
+
+
+def unexplained_shape(data: HysteresisData, resid: ResidualTests, frac: float = 0.1) -> str:
+    """What a residual that is a shape rather than noise says, or ``""``.
+
+    Tracker noise interpolated onto the motor clock stays correlated for a few frames (tens of
+    ms); a residual that stays correlated for a tenth of a half-cycle (the time between two
+    reversals) or longer is an error that follows the loop: a shape the model lacks, whether or
+    not a catalog term captures it. Then "nothing is missing" would contradict the residual.
+    """
+    w = resid.whiteness
+    if w.white or data.t_s is None:
+        return ""
+    duration = sum(float(np.ptp(data.t_s[sl])) for sl in data.run_slices())
+    half = duration / (turning_points(data).size + 1)
+    if not half > 0 or w.correlation_time_s < frac * half:
+        return ""
+    return (f"the residual is not noise: it stays correlated for {w.correlation_time_s:.3g} s, "
+            f"{100 * w.correlation_time_s / half:.0f} % of a half-cycle ({half:.3g} s), so the model misses a shape that "
+            "follows the loop; look at the loop (endocal report) and at another base (--model)")
