@@ -103,18 +103,25 @@ def test_duplicated_stamps_are_refused_or_dropped(sim_log, tmp_path):
                             "--dedupe"), "lines 102 and 103 share a time stamp", "differ in column 'ap_present_ticks'")
 
 
-def test_a_motor_tick_and_a_frame_logged_in_one_millisecond_on_two_rows_are_merged(sim_log, tmp_path):
-    # a logger writing one row per message: where a tick and a frame share a stamp, the motor
-    # cells and the pose cells come on two rows, the other's cells empty
-    log = pd.read_csv(sim_log / "log.csv")
+def _one_row_per_message(log: pd.DataFrame, **per_device) -> tuple[pd.DataFrame, int]:
+    """A logger writing one row per message: where a tick and a frame share a stamp, the motor
+    cells and the pose cells come on two rows, the other's cells empty. ``per_device``: a column
+    with a value for the motor rows and one for the tracker rows (``frame_id=("knobs", "aurora")``).
+    Returns the log and the number of shared stamps."""
     pose = [c for c in log.columns if c.startswith(("tip_", "base_"))]
     both = log[pose].notna().all(axis=1) & log["ap_present_ticks"].notna()
     motor_part, pose_part = log[both].copy(), log[both].copy()
     motor_part[pose] = np.nan
     pose_part[[c for c in log.columns if c not in pose and c != "stamp_ms"]] = np.nan
-    split = pd.concat([log[~both], motor_part, pose_part]).sort_values("stamp_ms", kind="stable")
+    rest = log[~both].copy()
+    for col, (motor_value, tracker_value) in per_device.items():
+        rest[col], motor_part[col], pose_part[col] = motor_value, motor_value, tracker_value
+    return pd.concat([rest, motor_part, pose_part]).sort_values("stamp_ms", kind="stable"), int(both.sum())
+
+
+def test_a_motor_tick_and_a_frame_logged_in_one_millisecond_on_two_rows_are_merged(sim_log, tmp_path):
+    split, n = _one_row_per_message(pd.read_csv(sim_log / "log.csv"))
     split.to_csv(tmp_path / "split.csv", index=False)
-    n = int(both.sum())
     assert n > 100  # every frame of the 40 Hz tracker shares its instant with a 100 Hz motor tick
     one_line_exit_2(endocal("import", "csv", tmp_path / "split.csv", "--map", MAP, "--out", tmp_path / "r1"),
                     f"{n} row(s) repeat a time stamp", "--dedupe")
@@ -362,3 +369,226 @@ def test_a_draft_that_could_not_place_a_role_says_so_and_the_import_refuses_it(t
     one_line_exit_2(endocal("import", "csv", tmp_path / "opaque.csv"), "give --map MAP.toml and --out RUN")
     one_line_exit_2(endocal("import", "csv", tmp_path / "opaque.csv", "--draft-map", draft), "already exists")
     assert not (tmp_path / "x.toml").exists()
+
+
+def _run_json(run: Path) -> dict:
+    import json
+
+    return json.loads((run / "run.json").read_text())
+
+
+def test_invalid_tracker_frames_and_incomplete_motor_rows_are_left_out_and_counted(sim_log, tmp_path):
+    # a tracker writes zeros for a sensor out of the field, a ROS bridge empty cells; a servo
+    # read can fail: such frames and motor rows are dropped, and every one is counted
+    log = pd.read_csv(sim_log / "log.csv")
+    frame_only = np.flatnonzero((log["tip_x_m"].notna() & log["ap_present_ticks"].isna()).to_numpy())
+    motor_only = np.flatnonzero((log["tip_x_m"].isna() & log["ap_present_ticks"].notna()).to_numpy())
+    zero_q, empty, no_knob = frame_only[100:105], frame_only[200:203], motor_only[300:304]
+    log.loc[zero_q, ["base_qw", "base_qx", "base_qy", "base_qz"]] = 0.0  # scipy: "zero norm quaternions"
+    log.loc[empty, "tip_qx"] = np.nan
+    log.loc[no_knob, "ap_present_ticks"] = np.nan
+    log.to_csv(tmp_path / "gaps.csv", index=False)
+    proc = endocal("import", "csv", tmp_path / "gaps.csv", "--map", MAP, "--out", tmp_path / "r")
+    assert proc.returncode == 0, proc.stderr
+    n_frames = int(log["tip_x_m"].notna().sum())
+    assert f"{n_frames} tracker frames (8 invalid, left out)" in proc.stdout, proc.stdout
+    first = int(min(zero_q[0], empty[0])) + 2  # data row k is on line k + 2
+    assert f"8 tracker frame(s) were invalid" in proc.stderr and f"the first at line {first}" in proc.stderr
+    assert "4 row(s) with knob cells but not every knob position" in proc.stderr, proc.stderr
+    meta = _run_json(tmp_path / "r")
+    assert meta["status"] == "complete"
+    assert meta["counts"]["tracker_invalid_dropped"] == 8  # one sensor reading in each of the 8 frames
+    assert meta["backend"]["tracker_frames_invalid"] == 8 and meta["backend"]["motor_rows_incomplete"] == 4
+    table = load_aligned(tmp_path / "r").table
+    assert np.isfinite(table[["ap_meas_deg", "ml_meas_deg"]].to_numpy()).all()
+    # the stored stream carries the dropped readings as endocal's own dropouts: NaN, valid false
+    tracker = read_stream(tmp_path / "r", "tracker")
+    bad = tracker[~tracker["valid"]]
+    assert len(bad) == 8 and bad[["qw", "qx", "qy", "qz"]].isna().all().all()
+
+
+def test_a_failed_import_leaves_nothing_at_out(sim_log, tmp_path, monkeypatch):
+    # whatever fails while the run is written (here: after every file, as a full disk would),
+    # no half-written run folder with run.json "running" is left, and --force keeps the old run
+    # (the staging is import ros's too: both write through runs.imported.write_imported_run)
+    import endocal.runs.csvlog as csvlog
+    import endocal.runs.imported as imported
+
+    real = imported._write_run
+
+    def fails(out, *args, **kwargs):
+        real(out, *args, **kwargs)
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(imported, "_write_run", fails)
+    with pytest.raises(OSError, match="No space left"):
+        csvlog.import_csv(sim_log / "log.csv", MAP, tmp_path / "new")
+    assert not (tmp_path / "new").exists()
+    shutil.copytree(sim_log / "run", tmp_path / "old")
+    with pytest.raises(OSError, match="No space left"):
+        csvlog.import_csv(sim_log / "log.csv", MAP, tmp_path / "old", force=True)
+    assert _run_json(tmp_path / "old")["backend"]["name"] != "csv-import"  # the old run, untouched
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["old"]  # no staging folder left beside it
+    monkeypatch.setattr(imported, "_write_run", real)
+    csvlog.import_csv(sim_log / "log.csv", MAP, tmp_path / "old", force=True)
+    assert _run_json(tmp_path / "old")["backend"]["name"] == "csv-import"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["old"]
+
+
+def test_dedupe_merges_rows_that_differ_only_in_columns_the_map_does_not_use(sim_log, tmp_path):
+    # a ROS bridge's rows of one stamp: a motor message and a tracker message, each with its own
+    # arrival time, sequence number and frame name, none of which the map reads
+    split, n = _one_row_per_message(pd.read_csv(sim_log / "log.csv"), frame_id=("knobs", "aurora"))
+    split.insert(0, "%time", np.arange(len(split)) * 1000 + 1_732_460_987_000_000)  # arrival, us
+    split.insert(1, "seq", np.arange(len(split)))
+    split.to_csv(tmp_path / "ros.csv", index=False)
+    ok = endocal("import", "csv", tmp_path / "ros.csv", "--map", MAP, "--out", tmp_path / "r", "--dedupe")
+    assert ok.returncode == 0 and f"merged {n} row(s)" in ok.stderr, ok.stderr
+    a, b = load_aligned(sim_log / "run").table, load_aligned(tmp_path / "r").table
+    assert len(a) == len(b)
+    np.testing.assert_allclose(b["ap_meas_deg"], a["ap_meas_deg"], atol=1e-9)
+    # a column the map uses still has to agree
+    k = int(np.flatnonzero((split["frame_id"] == "aurora").to_numpy())[0])
+    split.iloc[k, split.columns.get_loc("ap_goal_ticks")] = 1234.0
+    split.to_csv(tmp_path / "clash.csv", index=False)
+    one_line_exit_2(endocal("import", "csv", tmp_path / "clash.csv", "--map", MAP, "--out", tmp_path / "r2",
+                            "--dedupe"), "differ in column 'ap_goal_ticks' ([knobs.ap] goal)")
+
+
+def _no_tick_keys(text: str) -> str:
+    """The example map with the ap knob's tick keys removed (for a unit other than ticks)."""
+    return text.replace("zero_ticks = 2048             # ticks when the knob is at 0 deg (probe straight)\n", "").replace(
+        "ticks_per_rev = 4096          # XM430: 4096\n", "")
+
+
+@pytest.mark.parametrize("edit, fragments", [
+    # the clock in ms declared as s: 100 Hz becomes 0.1 Hz (one aligned row)
+    (lambda t: t.replace('unit = "ms"', 'unit = "s"'), ('[time] unit = "s"', "0.1 Hz", "in ms they would be 100 Hz")),
+    # ... as us: 100 kHz, knob speeds a thousand times the servo's
+    (lambda t: t.replace('unit = "ms"', 'unit = "us"'), ('[time] unit = "us"', "1e+05 Hz", "in ms they would be 100 Hz")),
+    # servo ticks read as degrees (2048 at the knob's zero) or radians
+    (lambda t: _no_tick_keys(t).replace('unit = "ticks"                # deg', 'unit = "deg" # deg'),
+     ("'ap_present_ticks' read as deg", "far beyond the limits of probe 'tee' (-90..90 deg)", "[knobs.ap] unit",
+      'unit = "ticks"')),
+    (lambda t: _no_tick_keys(t).replace('unit = "ticks"                # deg', 'unit = "rad" # deg'),
+     ("'ap_present_ticks' read as rad", "[knobs.ap] unit")),
+    # ... or with the tick keys left in place: they would be ignored, so the map is refused
+    (lambda t: t.replace('unit = "ticks"                # deg', 'unit = "deg" # deg'),
+     ("[knobs.ap]", 'zero_ticks and ticks_per_rev apply to unit = "ticks" only')),
+    # poses in metres declared as millimetres: sensors 0.06 mm apart on a 60 mm section
+    (lambda t: t.replace('unit = "m"                                          # ...in mm or m', 'unit = "mm"')
+     .replace('position = ["base_x_m", "base_y_m", "base_z_m"]\nunit = "m"',
+              'position = ["base_x_m", "base_y_m", "base_z_m"]\nunit = "mm"'),
+     ('[tip] unit = "mm"', "bends over 60 mm", "metres need unit")),
+])
+def test_numbers_no_rig_logs_are_refused_as_a_unit_mistake(sim_log, tmp_path, edit, fragments):
+    (tmp_path / "map.toml").write_text(edit(MAP.read_text()))
+    one_line_exit_2(endocal("import", "csv", sim_log / "log.csv", "--map", tmp_path / "map.toml", "--out",
+                            tmp_path / "run"), *fragments)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["map.toml"]
+
+
+def test_too_few_aligned_rows_for_any_fit_are_refused(sim_log, tmp_path):
+    # the tracker logged its first 0.3 s only (12 frames at 40 Hz): about 30 motor samples
+    # lie in its span, 22 is the least a fit can use (2 samples per parameter + 20)
+    log = pd.read_csv(sim_log / "log.csv")
+    late = log["stamp_ms"] > log["stamp_ms"].iloc[0] + 300
+    pose = [c for c in log.columns if c.startswith(("tip_", "base_"))]
+    log.loc[late, pose] = np.nan
+    log.to_csv(tmp_path / "ok.csv", index=False)
+    proc = endocal("import", "csv", tmp_path / "ok.csv", "--map", MAP, "--out", tmp_path / "ok")
+    assert proc.returncode == 0, proc.stderr
+    log.loc[log["stamp_ms"] > log["stamp_ms"].iloc[0] + 100, pose] = np.nan  # 0.1 s: about 10 motor samples
+    log.to_csv(tmp_path / "short.csv", index=False)
+    one_line_exit_2(endocal("import", "csv", tmp_path / "short.csv", "--map", MAP, "--out", tmp_path / "r"),
+                    "only 11 motor sample(s)", "fewer than any fit can use (22)", "the tracker frames 0.000..0.100 s",
+                    "[time] column 'stamp_ms'")
+    assert not (tmp_path / "r").exists()
+
+
+def test_epoch_time_stamps_in_errors_are_printed_so_the_row_can_be_found(sim_log, tmp_path):
+    # a clock in seconds since 1970: "t = 1.73246e+09" would point at no row
+    log = pd.read_csv(sim_log / "log.csv")
+    log.insert(0, "stamp_s", 1_732_460_987.0 + log.pop("stamp_ms") / 1000.0)
+    rep = pd.concat([log.iloc[:101], log.iloc[100:101], log.iloc[101:]], ignore_index=True)
+    rep.to_csv(tmp_path / "rep.csv", index=False)
+    text = MAP.read_text().replace('column = "stamp_ms"', 'column = "stamp_s"').replace('unit = "ms"', 'unit = "s"')
+    (tmp_path / "map.toml").write_text(text)
+    written = (tmp_path / "rep.csv").read_text().splitlines()[102].split(",")[0]  # the stamp as the file has it
+    since = log["stamp_s"].iloc[100] - log["stamp_s"].iloc[0]
+    proc = endocal("import", "csv", tmp_path / "rep.csv", "--map", tmp_path / "map.toml", "--out", tmp_path / "r")
+    one_line_exit_2(proc, "line 103", f"stamp_s = {written}, {since:.3f} s after the first row")
+    assert "e+09" not in proc.stderr
+    back = log.copy()
+    back.iloc[[200, 201]] = back.iloc[[201, 200]].to_numpy()
+    back.to_csv(tmp_path / "back.csv", index=False)
+    later = back["stamp_s"].iloc[201] - back["stamp_s"].iloc[0]
+    one_line_exit_2(endocal("import", "csv", tmp_path / "back.csv", "--map", tmp_path / "map.toml", "--out",
+                            tmp_path / "r"), "time goes back at line 203", f"{later:.3f} s after the first row")
+
+
+@pytest.mark.parametrize("old, new, fragments", [
+    ("ticks_per_rev = 4096          # XM430: 4096", "ticks_per_rev = 0",
+     ("[knobs.ap]", "ticks_per_rev must be a positive number", "got 0")),
+    ("ticks_per_rev = 4096          # XM430: 4096", "ticks_per_rev = -4096", ("ticks_per_rev must be a positive number",)),
+    ("ticks_per_rev = 4096          # XM430: 4096", 'ticks_per_rev = "4096"', ("ticks_per_rev must be a positive number",)),
+    ("zero_ticks = 2048 ", "zero_ticks = nan ", ("[knobs.ap]", "zero_ticks must be a number", "got nan")),
+    ('goal = "ap_goal_ticks"', "goal = 5", ("[knobs.ap]", "goal must name a column", "got 5")),
+    ('column = "stamp_ms"', "column = 1", ("[time]", "column must name a column",)),
+])
+def test_numbers_of_a_map_are_checked_in_one_line(sim_log, tmp_path, old, new, fragments):
+    proc = endocal("import", "csv", sim_log / "log.csv", "--map", _map(tmp_path, old, new), "--out", tmp_path / "run")
+    one_line_exit_2(proc, *fragments)
+    assert "RuntimeWarning" not in proc.stderr and not (tmp_path / "run").exists()
+
+
+def test_a_pose_map_writes_a_run_folder_not_a_table(sim_log, tmp_path):
+    one_line_exit_2(endocal("import", "csv", sim_log / "log.csv", "--map", MAP, "--out", tmp_path / "run.parquet"),
+                    "maps EM poses, so the import is a run folder", "give --out a folder name")
+    assert not (tmp_path / "run.parquet").exists()
+
+
+@pytest.fixture
+def ros_log(sim_log):
+    """The simulated run as `rostopic echo -p` of a merged topic writes it: numbered JointState
+    arrays of servo ticks (field.position0, field.goal1), poses in metres, a ROS header."""
+    log = pd.read_csv(sim_log / "log.csv")
+    ns = (1_732_460_987_000_000_000 + np.round(log["stamp_ms"] * 1e6)).astype("int64")
+    ros = pd.DataFrame({"%time": ns + 150_000, "field.header.seq": np.arange(len(log)), "field.header.stamp": ns,
+                        "field.header.frame_id": "rig"})
+    for i, axis in enumerate(("ap", "ml")):
+        ros[f"field.position{i}"] = np.round(log[f"{axis}_present_ticks"])  # a servo reports whole ticks
+        ros[f"field.goal{i}"] = np.round(log[f"{axis}_goal_ticks"])
+    for sensor in ("tip", "base"):
+        for a in "xyz":
+            ros[f"field.{sensor}.pose.position.{a}"] = log[f"{sensor}_{a}_m"]
+        for a in "wxyz":
+            ros[f"field.{sensor}.pose.orientation.{a}"] = log[f"{sensor}_q{a}"]
+    return ros
+
+
+def test_a_drafted_map_of_a_ros_log_maps_its_numbered_motors_and_never_a_pose_as_a_knob(ros_log, sim_log, tmp_path):
+    ros_log.to_csv(tmp_path / "ros.csv", index=False)
+    draft, stdout = _draft(tmp_path / "ros.csv", tmp_path)
+    assert "knob ap <- field.position0 (goal field.goal0)" in stdout, stdout
+    assert "knob ml <- field.position1 (goal field.goal1)" in stdout, stdout
+    assert "CHECK [knobs.ap] position: motor 0 read as the ap knob" in stdout
+    assert "CHECK [knobs.ap] unit: whole numbers" in stdout and "FILL IN" not in stdout
+    assert "extras <-" not in stdout  # a ROS header's stamp and seq are no covariates
+    proc = endocal("import", "csv", tmp_path / "ros.csv", "--map", draft, "--out", tmp_path / "r")
+    assert proc.returncode == 0, proc.stderr
+    a, b = load_aligned(sim_log / "run").table, load_aligned(tmp_path / "r").table
+    assert len(a) == len(b)
+    # ticks rounded by the servo: the command within half a tick (0.044 deg); angles from the
+    # same poses, on a clock read from ns stamps to 2.4e-7 s (< 1e-4 deg at < 100 deg/s)
+    np.testing.assert_allclose(b["ap_cmd_deg"], a["ap_cmd_deg"], atol=0.5 * 360 / 4096 + 1e-9)
+    np.testing.assert_allclose(b["ml_meas_deg"], a["ml_meas_deg"], atol=1e-3)
+
+
+def test_a_draft_that_found_one_numbered_motor_leaves_the_other_knob_to_fill_in(ros_log, tmp_path):
+    ros_log.drop(columns=["field.position1", "field.goal1"]).to_csv(tmp_path / "one.csv", index=False)
+    draft, stdout = _draft(tmp_path / "one.csv", tmp_path)
+    assert "knob ap <- field.position0" in stdout and "FILL IN [knobs.ml] position" in stdout, stdout
+    assert "base.pose" not in "".join(ln for ln in stdout.splitlines() if ln.startswith("  knob"))
+    one_line_exit_2(endocal("import", "csv", tmp_path / "one.csv", "--map", draft, "--out", tmp_path / "r"),
+                    "[knobs.ml] position: a column is still 'FILL IN'")

@@ -23,7 +23,7 @@ def import_csv_cmd(
     map_path: Optional[Path] = typer.Option(None, "--map", help="TOML map naming its columns and units; see configs/csv-map.example.toml (or draft one with --draft-map)."),
     out_dir: Optional[Path] = typer.Option(None, "--out", "-o", help="Run folder to create; a .parquet or .csv aligned table when the map gives measured [angles] instead of poses."),
     draft: Optional[Path] = typer.Option(None, "--draft-map", help="Instead of importing, write a first map for this log, guessed from its column names and numbers; every guess is marked CHECK."),
-    dedupe: bool = typer.Option(False, "--dedupe", help="Drop rows that repeat an earlier row exactly (ROS bridges write them) and merge rows of one time stamp that fill different columns (a motor tick and a tracker frame in the same millisecond); without it duplicated time stamps are refused."),
+    dedupe: bool = typer.Option(False, "--dedupe", help="Drop rows that repeat an earlier row in every column the map uses (ROS bridges write them) and merge rows of one time stamp that fill different columns (a motor tick and a tracker frame in the same millisecond); columns the map does not use (a ROS header's arrival time, seq, frame_id) are not compared. Without it duplicated time stamps are refused."),
     force: bool = typer.Option(False, "--force", help="Replace --out if it is a run folder (or the table an angles map writes), or an existing --draft-map."),
 ) -> None:
     """Convert a lab's CSV log into a run folder: knob positions (deg, rad or servo ticks),
@@ -54,17 +54,30 @@ def import_csv_cmd(
     res = import_csv(log, map_path, out_dir, dedupe=dedupe, force=force, command="endocal " + " ".join(sys.argv[1:]))
     rate = f"{res.rate_hz:.1f} Hz" if res.rate_hz else "one sample"
     measured = "angle readings" if res.angles_measured else "tracker frames"
+    invalid = f" ({res.tracker_invalid} invalid, left out)" if res.tracker_invalid else ""
     out.print(f"imported {log} -> {res.run_dir}: {res.rows} rows, {res.motor_rows} motor samples over "
-              f"{res.duration_s:.2f} s ({rate}), {res.tracker_frames} {measured}, {res.aligned_rows} aligned rows",
-              markup=False)
+              f"{res.duration_s:.2f} s ({rate}), {res.tracker_frames} {measured}{invalid}, "
+              f"{res.aligned_rows} aligned rows", markup=False)
     out.print("columns: " + ", ".join(f"{k} <- {v}" for k, v in res.columns.items()), markup=False)
     if res.duplicates_dropped:
-        err.print(f"note: --dedupe dropped {res.duplicates_dropped} row(s) repeating an earlier row exactly")
+        err.print(f"note: --dedupe dropped {res.duplicates_dropped} row(s) repeating an earlier row in every column "
+                  "the map uses", markup=False)
     if res.rows_merged:
         err.print(f"note: --dedupe merged {res.rows_merged} row(s) into an earlier row of the same time stamp "
-                  "(different columns filled)")
+                  "(different columns filled)", markup=False)
+    if res.motor_rows_incomplete:
+        err.print(f"note: {res.motor_rows_incomplete} row(s) with knob cells but not every knob position were left "
+                  f"out of the motor samples; the first at line {res.motor_rows_incomplete_line}", markup=False)
+    if res.tracker_invalid:
+        err.print(f"note: {res.tracker_invalid} tracker frame(s) were invalid (a sensor's cell empty, its quaternion "
+                  f"no rotation, or flagged by the map's valid column) and left out of the aligned table; the first "
+                  f"at line {res.tracker_invalid_line}", markup=False)
+    if res.rows_unused:
+        err.print(f"note: {res.rows_unused} row(s) held neither a motor sample nor a "
+                  f"{'reading' if res.angles_measured else 'pose'} in the mapped columns; the first at line "
+                  f"{res.rows_unused_line}", markup=False)
     if res.alignment_error:
-        err.print(f"warning: no aligned table: {res.alignment_error}")
+        err.print(f"warning: no aligned table: {res.alignment_error}", markup=False)
 
 
 def _draft(log: Path, path: Path, force: bool) -> None:

@@ -9,10 +9,21 @@ poses exactly as for endocal's own runs (the aligned table is built by the same 
 
 Rows
 ----
-A row with every mapped knob position is a motor sample; a row with finite tip and base poses
-is a tracker frame (both at the row's time). A log with one row per motor tick and the latest
-pose repeated is read as it is; a log with separate motor and tracker rows (empty cells where
-a device did not report) is read exactly.
+A row with every mapped knob position is a motor sample; a row with any pose cell is a tracker
+frame (both at the row's time). A log with one row per motor tick and the latest pose repeated
+is read as it is; a log with separate motor and tracker rows (empty cells where a device did
+not report) is read exactly. A frame whose sensor has an empty cell or a quaternion that is no
+rotation (zeros, for a sensor out of the field) is invalid: kept in the tracker stream as a
+dropout (NaN, ``valid`` false), left out of the aligned table and counted; rows with some knob
+cells but not every position are no motor sample, and are counted too.
+
+Plausibility
+------------
+A unit mistake in a map gives numbers no rig produces, refused in one line naming the map key
+before anything is written: knob positions far beyond the probe's limits (with poses), a
+motor sample rate under 1 Hz or over 10 kHz, tip and base sensors nowhere near a bending
+length apart, fewer aligned rows than any fit can use. The run folder is written beside
+``out`` and renamed into place, so a failure while writing leaves nothing behind.
 
 Measured angles instead of poses
 --------------------------------
@@ -24,10 +35,11 @@ eq. 1's. ``extras`` names further numeric columns (a sheath configuration, a loa
 into the aligned table, where models take them as covariates (``load:COLUMN``).
 
 Duplicated time stamps (ROS bridges often write them) are refused by default, with their
-count and the first line; ``dedupe=True`` drops rows that repeat an earlier row exactly,
-merges rows of one stamp that fill different columns (a motor tick and a tracker frame logged
-in the same millisecond) and says how many, and still refuses a stamp shared by rows with
-different values in one column.
+count and the first line; ``dedupe=True`` drops rows that repeat an earlier row in every
+column the map uses, merges rows of one stamp that fill different columns (a motor tick and a
+tracker frame logged in the same millisecond) and says how many, and still refuses a stamp
+shared by rows with different values in one mapped column (columns the map does not use, such
+as a ROS header's arrival time and sequence number, are not compared).
 """
 
 from __future__ import annotations
@@ -43,7 +55,7 @@ import pandas as pd
 
 from endocal.errors import OutputExistsError, OutputPathError, RunFormatError
 from endocal.probe import TRANSLATION, ProbeConfig, load_probe
-from endocal.runs.aligned import CMD, MEAS, check_aligned, load_aligned, measured_at
+from endocal.runs.aligned import CMD, CSV_SUFFIXES, MEAS, check_aligned, load_aligned, measured_at
 from endocal.runs.format import atomic_write_bytes, check_parent, parquet_bytes, prepare_output, software_versions
 from endocal.runs.imported import tracker_stream, write_imported_run
 from endocal.runs.textable import read_csv_table
@@ -64,10 +76,52 @@ _TIME_KEYS = {"column", "unit", "sample_rate_hz"}
 _KNOB_KEYS = {"position", "goal", "current", "unit", "zero_ticks", "ticks_per_rev", "direction", "current_unit"}
 _POSE_KEYS = {"position", "unit", "quaternion", "order", "valid", "fixed_position", "fixed_quaternion"}
 
+# Plausibility of what a map makes of a log: a wrong unit gives numbers no rig produces, which
+# are refused (naming the map key to fix) before anything is written.
+#: Knob positions and goals may lie beyond the probe's limits by up to one limit span on each
+#: side (-270..270 deg for the tee's -90..90 deg) before the import calls them a unit mistake:
+#: a real log exceeds a preset's limits a little (overshoot, a zero_ticks a quarter turn off,
+#: another probe logged under this preset), while the mistakes this catches scale the values
+#: by 11.4 (servo ticks read as deg: 4096 a turn, the mid-turn 2048 read as 2048 deg), 57.3
+#: (deg read as rad) or 652 (ticks read as rad), many spans out.
+KNOB_MARGIN_SPANS = 1.0
+#: A unit mistake moves every sample; a servo answering garbage once moves one. More than 1 %
+#: of the motor rows beyond the band is a mistake.
+MAX_BEYOND_FRACTION = 0.01
+#: Motor sample rates a lab log can have, Hz. The slowest device of these rigs, the EM tracker,
+#: reports at 40 Hz and servo loops run at 100-1000 Hz: a motor stream under 1 Hz follows no
+#: hysteresis loop, and is what a clock in ms read as s makes of 100 Hz (0.1 Hz). 10 kHz is ten
+#: times the fastest servo loop (a 1 kHz Dynamixel sync read) and a tenth of what a clock in ms
+#: read as us makes of 100 Hz (100 kHz).
+RATE_RANGE_HZ = (1.0, 10_000.0)
+#: The fewest aligned rows worth importing: a fit refuses fewer than two samples per free
+#: parameter plus 20 spare (endocal/models/base.py), so no model, even of one parameter, fits
+#: fewer than 22.
+MIN_ALIGNED_ROWS = 22
+#: Tip-to-base sensor distances a log can show, in bending lengths of the probe: the sensors
+#: sit at the ends of the bending section, give or take a mounting offset or a base sensor
+#: further back on the shaft (a few lengths; the NDI Aurora's field is 0.5 m across), while a
+#: length unit read wrongly (m for mm) scales the distance by 1000.
+DISTANCE_RANGE_LENGTHS = (0.05, 20.0)
+#: The smallest quaternion norm of a valid tracker reading. Every reader normalises the
+#: quaternion (scipy's Rotation), so its norm carries no rotation and a log scaled throughout
+#: still reads right; only one too short to have a direction is no rotation: the zeros a tracker
+#: or ROS bridge writes for a sensor out of the field. A unit quaternion logged to even three
+#: decimals has norm 1 within 2e-3; below 0.5 the reading is invalid.
+QUAT_MIN_NORM = 0.5
+
 
 @dataclass(frozen=True)
 class CsvImportResult:
-    """What :func:`import_csv` wrote."""
+    """What :func:`import_csv` wrote, and what it left out.
+
+    ``tracker_frames`` counts the rows with a pose (angle readings with an angles map), valid
+    or not; ``tracker_invalid`` those left out of the aligned table (a sensor flagged, missing,
+    or with a quaternion that is no rotation). ``motor_rows_incomplete`` counts rows with some
+    knob cells but not every knob position (not motor samples), ``rows_unused`` rows that are
+    neither a motor sample nor a frame; each ``*_line`` is the first such row's line in the log
+    (None when there is none).
+    """
 
     run_dir: Path
     rows: int
@@ -81,6 +135,12 @@ class CsvImportResult:
     rate_hz: float | None
     columns: dict
     alignment_error: str | None
+    motor_rows_incomplete: int = 0
+    motor_rows_incomplete_line: int | None = None
+    tracker_invalid: int = 0
+    tracker_invalid_line: int | None = None
+    rows_unused: int = 0
+    rows_unused_line: int | None = None
 
 
 @dataclass(frozen=True)
@@ -162,15 +222,26 @@ class CsvMap:
     source: str
     raw: dict
 
+    def roles(self) -> list[tuple[str, str]]:
+        """Every CSV column the map names, with the map key that names it (``[knobs.ap] position``)."""
+        out = [("[time] column", self.time_column)] if self.time_column else []
+        for dof, k in self.knobs.items():
+            out += [(f"[knobs.{dof}] {key}", c) for key, c in (("position", k.position), ("goal", k.goal),
+                                                             ("current", k.current)) if c]
+        for name, p in (("tip", self.tip), ("base", self.base)):
+            if p is not None:
+                out += [(f"[{name}] {key}", c) for key, cols in (("position", p.position), ("quaternion", p.quaternion),
+                                                               ("valid", [p.valid] if p.valid else [])) for c in cols]
+        out += [(f"[angles.{axis}] column", a.column) for axis, a in self.angles.items()]
+        return out + [("extras", c) for c in self.extras]
+
     def columns(self) -> list[str]:
         """Every CSV column the map names."""
-        cols = [self.time_column] if self.time_column else []
-        for k in self.knobs.values():
-            cols += [c for c in (k.position, k.goal, k.current) if c]
-        for p in (self.tip, self.base):
-            if p is not None:
-                cols += p.position + p.quaternion + ([p.valid] if p.valid else [])
-        return cols + [a.column for a in self.angles.values()] + list(self.extras)
+        return [c for _, c in self.roles()]
+
+    def role_of(self, column: str) -> str:
+        """The map key naming ``column`` (the first, when several do)."""
+        return next(role for role, c in self.roles() if c == column)
 
 
 def _table(d, key: str, where: str, known: set[str]) -> dict:
@@ -195,8 +266,32 @@ def _names(value, n: int, what: str, where: str) -> list[str]:
     return list(value)
 
 
+def _is_number(x) -> bool:
+    """A finite TOML number (a bool is not one, though Python counts it as an int)."""
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and bool(np.isfinite(x))
+
+
 def _numbers(v, n: int) -> bool:
-    return isinstance(v, list) and len(v) == n and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+    return isinstance(v, list) and len(v) == n and all(_is_number(x) for x in v)
+
+
+def _number(t: dict, key: str, w: str, default: float, what: str, positive: bool = False) -> float:
+    """``t[key]`` as a float (``default`` when absent), refused in one line naming the key when it is
+    not a finite number, or not positive where ``positive``."""
+    v = t.get(key, default)
+    if not _is_number(v) or (positive and not v > 0):
+        raise RunFormatError(f"{w}: {key} must be a {'positive ' if positive else ''}number ({what}), got {v!r}")
+    return float(v)
+
+
+def _column(t: dict, key: str, w: str, what: str, required: bool = True) -> str | None:
+    """``t[key]`` as a column name: a non-empty string (None when absent and not ``required``)."""
+    v = t.get(key)
+    if v is None and not required:
+        return None
+    if not (isinstance(v, str) and v):
+        raise RunFormatError(f"{w}: {key} must name a column ({what}), got {v!r}")
+    return v
 
 
 def _pose(d: dict, key: str, where: str) -> _Pose:
@@ -215,16 +310,14 @@ def _pose(d: dict, key: str, where: str) -> _Pose:
             raise RunFormatError(f"{w}: fixed_position must be 3 numbers and fixed_quaternion a unit quaternion of 4 "
                                  f"(got {pos!r} and {quat!r})")
         return _Pose([], LENGTH_UNITS[unit], [], order, None, tuple(float(v) for v in [*pos, *quat]))
-    valid = t.get("valid")
-    if valid is not None and not isinstance(valid, str):
-        raise RunFormatError(f"{w}: valid must name a column")
+    valid = _column(t, "valid", w, "0 where the tracker flagged the reading", required=False)
     return _Pose(_names(t.get("position"), 3, "position", w), LENGTH_UNITS[unit],
                  _names(t.get("quaternion"), 4, "quaternion", w), order, valid)
 
 
 def _direction(t: dict, w: str) -> float:
     direction = t.get("direction", 1)
-    if direction not in (1, -1):
+    if isinstance(direction, bool) or direction not in (1, -1):
         raise RunFormatError(f"{w}: direction must be 1 or -1, got {direction!r}")
     return float(direction)
 
@@ -247,13 +340,10 @@ def _angles(d: dict, probe: ProbeConfig, where: str) -> dict[str, _Angle]:
             raise RunFormatError(f"{w}: probe '{probe.name}' has no bending axis '{axis}' "
                                  f"(it has {', '.join(probe.bending_axes)})")
         a = _table(angles_d, axis, f"{where} [angles]", _ANGLE_KEYS)
-        if not isinstance(a.get("column"), str) or not a["column"]:
-            raise RunFormatError(f"{w}: column must name the column of the measured angle")
+        column = _column(a, "column", w, "the measured angle")
         unit = _choice(a.get("unit", "deg"), ("deg", "rad"), "angle unit", w)
-        zero = a.get("zero", 0.0)
-        if not isinstance(zero, (int, float)):
-            raise RunFormatError(f"{w}: zero must be a number (the reading when the section is straight), got {zero!r}")
-        out[axis] = _Angle(a["column"], _SCALE[unit], _direction(a, w), float(zero))
+        zero = _number(a, "zero", w, 0.0, "the reading when the section is straight")
+        out[axis] = _Angle(column, _SCALE[unit], _direction(a, w), zero)
     return out
 
 
@@ -276,7 +366,9 @@ def read_map(path: str | Path) -> CsvMap:
     RunFormatError
         Unreadable TOML, a missing or unknown key, an unknown unit or quaternion order, a
         bending axis of the probe without a knob table, ticks without ``zero_ticks`` and
-        ``ticks_per_rev``.
+        ``ticks_per_rev`` (or those keys with another unit), a number that is not finite (or
+        not positive: ``ticks_per_rev``, ``sample_rate_hz``), a column name that is not text,
+        a role still ``FILL IN`` or a column named for two roles (each naming the map key).
     """
     path = Path(path)
     where = str(path)
@@ -296,8 +388,10 @@ def read_map(path: str | Path) -> CsvMap:
         raise RunFormatError(f"{where} [time]: give either column (with unit s, ms, us, ns or datetime) or sample_rate_hz "
                              "(a log without a clock)")
     factor = TIME_UNITS[_choice(t.get("unit", "s"), TIME_UNITS, "time unit", f"{where} [time]")]
-    if rate is not None and not (isinstance(rate, (int, float)) and rate > 0):
-        raise RunFormatError(f"{where} [time]: sample_rate_hz must be a positive number, got {rate!r}")
+    if rate is not None:
+        rate = _number(t, "sample_rate_hz", f"{where} [time]", 0.0, "rows per second", positive=True)
+    if column is not None:
+        column = _column(t, "column", f"{where} [time]", "the clock")
     knobs_d = d.get("knobs")
     if not isinstance(knobs_d, dict) or not knobs_d:
         raise RunFormatError(f"{where}: a [knobs.AXIS] table is required per bending axis ({', '.join(probe.bending_axes)})")
@@ -314,12 +408,19 @@ def read_map(path: str | Path) -> CsvMap:
         unit = _choice(k.get("unit", "deg"), ANGLE_UNITS if dof != TRANSLATION else ("mm", "m"), "unit", w)
         if unit == "ticks" and ("zero_ticks" not in k or "ticks_per_rev" not in k):
             raise RunFormatError(f"{w}: unit 'ticks' needs zero_ticks and ticks_per_rev (e.g. 2048 and 4096)")
+        if unit != "ticks" and ("zero_ticks" in k or "ticks_per_rev" in k):
+            # nothing is silently ignored: a map with tick keys but another unit was most likely
+            # meant for ticks (a drafted map's unit edited, or the keys copied from the example)
+            raise RunFormatError(f"{w}: zero_ticks and ticks_per_rev apply to unit = \"ticks\" only, but unit is "
+                                 f"'{unit}': if the column holds servo ticks set unit = \"ticks\", else delete them")
         direction = _direction(k, w)
-        if not isinstance(k.get("position"), str):
-            raise RunFormatError(f"{w}: position must name a column")
+        position = _column(k, "position", w, "the measured knob position")
+        goal = _column(k, "goal", w, "the goal sent to the motor", required=False)
+        current = _column(k, "current", w, "the motor current", required=False)
         cur_unit = _choice(k.get("current_unit", "mA"), CURRENT_UNITS, "current unit", w)
-        knobs[dof] = _Knob(k["position"], unit, k.get("goal"), k.get("current"), float(k.get("zero_ticks", 0)),
-                           float(k.get("ticks_per_rev", 4096)), float(direction), CURRENT_UNITS[cur_unit])
+        zero = _number(k, "zero_ticks", w, 0.0, "the tick count with the knob at 0 deg")
+        per_rev = _number(k, "ticks_per_rev", w, 4096.0, "ticks per knob revolution, 4096 for an XM430", positive=True)
+        knobs[dof] = _Knob(position, unit, goal, current, zero, per_rev, float(direction), CURRENT_UNITS[cur_unit])
     angles = _angles(d, probe, where)
     missing = [a for a in (angles or probe.bending_axes) if a not in knobs]
     if missing:
@@ -329,14 +430,17 @@ def read_map(path: str | Path) -> CsvMap:
     tip, base = (None, None) if angles else (_pose(d, "tip", where), _pose(d, "base", where))
     cmap = CsvMap(probe, column, factor, float(rate) if rate is not None else None, knobs, tip, base, angles,
                   _extras(d, where), where, d)
-    if UNFILLED in cmap.columns():
-        raise RunFormatError(f"{where}: a column is still '{UNFILLED}' (a drafted map): name the log's column for "
-                             "that role, or delete the role if the log has none")
+    unfilled = [role for role, c in cmap.roles() if c == UNFILLED]
+    if unfilled:
+        raise RunFormatError(f"{where}: {unfilled[0]}: a column is still '{UNFILLED}' (a drafted map): name the log's "
+                             "column for that role, or delete the role if the log has none")
     valid = {p.valid for p in (tip, base) if p is not None and p.valid}  # one flag may serve both sensors
-    named = [c for c in cmap.columns() if c not in valid]
-    twice = sorted({c for c in named if named.count(c) > 1})
-    if twice:
-        raise RunFormatError(f"{where}: column '{twice[0]}' is named for two roles (e.g. the clock and a knob); "
+    named = [(role, c) for role, c in cmap.roles() if c not in valid]
+    cols = [c for _, c in named]
+    twice = next((c for c in cols if cols.count(c) > 1), None)
+    if twice is not None:
+        roles = [role for role, c in named if c == twice]
+        raise RunFormatError(f"{where}: column '{twice}' is named for two roles ({roles[0]} and {roles[1]}); "
                              "each role needs its own column")
     return cmap
 
@@ -389,37 +493,62 @@ def _datetime_s(df: pd.DataFrame, col: str, where: str) -> np.ndarray:
     return (stamps - stamps.min()).dt.total_seconds().to_numpy(float)  # the origin is dropped later anyway
 
 
-def _dedupe(df: pd.DataFrame, t: np.ndarray, lines: np.ndarray, dedupe: bool,
-            where: str) -> tuple[pd.DataFrame, np.ndarray, np.ndarray, int, int]:
-    """Drop exact duplicate rows and merge rows of one stamp (with ``dedupe``), then refuse any
-    time stamp still shared.
+@dataclass(frozen=True)
+class _Stamps:
+    """Where a row is in time, told so that a user finds it in the log: the clock cell as
+    written and the seconds since the log's first row (an epoch stamp printed as
+    ``1.73246e+09`` finds nothing)."""
+
+    column: str
+    t0_s: float
+
+    def at(self, df: pd.DataFrame, t: np.ndarray, k: int) -> str:
+        cell = df[self.column].iloc[k]
+        if isinstance(cell, (float, np.floating)):
+            cell = np.format_float_positional(cell, trim="-")  # every digit, never 1.73246e+18
+        return f"{self.column} = {cell}, {t[k] - self.t0_s:.3f} s after the first row"
+
+
+def _dedupe(df: pd.DataFrame, t: np.ndarray, lines: np.ndarray, dedupe: bool, used: dict[str, str],
+            stamps: _Stamps, where: str) -> tuple[pd.DataFrame, np.ndarray, np.ndarray, int, int]:
+    """Drop repeated rows and merge rows of one stamp (with ``dedupe``), then refuse any time
+    stamp still shared.
 
     A logger writing one row per message puts a motor tick and a tracker frame that arrive in
     the same millisecond on two rows with one stamp, each with the other device's cells empty:
-    ``dedupe`` merges such rows into one. Rows of one stamp with different values in the same
-    column are a conflict no merge can settle, and are refused.
+    ``dedupe`` merges such rows into one. Only the columns the map uses (``used``: column -> its
+    map key, the clock aside) are compared: a ROS bridge's rows of one stamp differ in their
+    arrival time, sequence number and frame name, which the import never reads. Rows of one
+    stamp with different values in a used column are a conflict no merge can settle, and are
+    refused.
 
     ``lines`` are the rows' line numbers in the file (for messages); returned filtered alike,
-    with the number of exact repeats dropped and of rows merged into an earlier one.
+    with the number of repeats dropped (rows equal to an earlier one in every used column and
+    the stamp) and of rows merged into an earlier one.
     """
     dropped = merged = 0
     if dedupe:
-        exact = df.duplicated(keep="first").to_numpy()
+        keyed = df[list(used)].set_axis(range(len(used)), axis=1).assign(t=t)  # no name can clash with t
+        exact = keyed.duplicated(keep="first").to_numpy()
         dropped = int(exact.sum())
         df, t, lines = df[~exact], t[~exact], lines[~exact]
         shared = np.concatenate([[False], np.diff(t) == 0])
         if shared.any():
             group = np.cumsum(~shared)  # t does not decrease here, or the log is refused next
             dup = shared | np.concatenate([shared[1:], [False]])  # every row of a shared stamp
-            conflict = df[dup].groupby(group[dup], sort=False).nunique(dropna=True).max(axis=1) > 1
+            conflict = df[list(used)][dup].groupby(group[dup], sort=False).nunique(dropna=True).max(axis=1) > 1
             if conflict.any():
                 g = int(conflict.index[np.argmax(conflict.to_numpy())])
                 rows = np.flatnonzero(group == g)
-                col = next(c for c in df.columns if df.iloc[rows][c].dropna().nunique() > 1)
-                raise RunFormatError(f"{where}: rows at lines {lines[rows[0]]} and {lines[rows[1]]} share a time stamp "
-                                     f"(t = {t[rows[0]]:g}) but differ in column '{col}'; no merge can settle which "
-                                     "is right: fix the log's clock, or, if its rows are evenly spaced in time, replace [time] column with "
-                                     "sample_rate_hz in the map")
+                col = next(c for c in used if df.iloc[rows][c].dropna().nunique() > 1)
+                vals = df[col].iloc[rows].to_numpy()
+                filled = rows[pd.notna(vals)]
+                a = filled[0]
+                b = next(r for r in filled if df[col].iloc[r] != df[col].iloc[a])  # the first row to disagree
+                raise RunFormatError(f"{where}: rows at lines {lines[a]} and {lines[b]} share a time stamp "
+                                     f"({stamps.at(df, t, a)}) but differ in column '{col}' ({used[col]}); no merge "
+                                     "can settle which is right: fix the log's clock, or, if its rows are evenly "
+                                     "spaced in time, replace [time] column with sample_rate_hz in the map")
             merged = int(shared.sum())
             t, lines = t[~shared], lines[~shared]
             df = df.groupby(group, sort=False).first().set_axis(lines)
@@ -427,9 +556,183 @@ def _dedupe(df: pd.DataFrame, t: np.ndarray, lines: np.ndarray, dedupe: bool,
     if same.any():
         first = int(np.flatnonzero(same)[0])
         raise RunFormatError(f"{where}: {int(same.sum())} row(s) repeat a time stamp (pass --dedupe to drop rows that "
-                             "repeat an earlier row exactly and merge rows of one stamp that fill different columns); "
-                             f"the first at line {lines[first]} (t = {t[first]:g})")
+                             "repeat an earlier row and merge rows of one stamp that fill different columns); "
+                             f"the first at line {lines[first]} ({stamps.at(df, t, first)})")
     return df, t, lines, dropped, merged
+
+
+def _clock(df: pd.DataFrame, cmap: CsvMap, dedupe: bool, where: str) -> tuple[pd.DataFrame, np.ndarray, int, int]:
+    """The rows in time order with their times (s from the first row), after ``dedupe``; with the
+    number of repeats dropped and of rows merged."""
+    lines = df.index.to_numpy()  # line numbers in the file
+    if cmap.time_column is None:
+        # without a clock, two rows equal in the mapped columns may be two samples of a knob
+        # holding still: only a row equal in every column (a counter too) is a repeat
+        exact = df.duplicated(keep="first").to_numpy() if dedupe else np.zeros(len(df), bool)
+        df = df[~exact]
+        return df, np.arange(len(df)) / cmap.sample_rate_hz, int(exact.sum()), 0
+    col = cmap.time_column
+    t = _datetime_s(df, col, where) if cmap.time_factor is None else _numeric(df, col, where) * cmap.time_factor
+    if not np.isfinite(t).all():
+        line = int(lines[np.flatnonzero(~np.isfinite(t))[0]])
+        raise RunFormatError(f"{where}: time column '{col}' is empty or not a number at line {line}")
+    stamps = _Stamps(col, float(t[0]))
+    used: dict[str, str] = {}  # column -> the first map key naming it, in the map's order
+    for role, c in cmap.roles():
+        if c != col:
+            used.setdefault(c, role)
+    df, t, lines, dropped, merged = _dedupe(df, t, lines, dedupe, used, stamps, where)
+    back = np.flatnonzero(np.diff(t) < 0)
+    if back.size:
+        k = int(back[0])
+        raise RunFormatError(f"{where}: time goes back at line {lines[k + 1]} ({stamps.at(df, t, k + 1)}; line "
+                             f"{lines[k]} has {stamps.at(df, t, k)}); sort the log by time")
+    return df, t - t[0], dropped, merged
+
+
+def _motor(df: pd.DataFrame, t: np.ndarray, cmap: CsvMap, where: str) -> tuple[dict, np.ndarray, np.ndarray]:
+    """The motor stream (the run's units), which rows are motor samples, and which rows have a
+    knob's cells but not every knob position (dropped, and counted)."""
+    probe, lines = cmap.probe, df.index.to_numpy()
+    pos = {dof: k.convert(_numeric(df, k.position, where)) for dof, k in cmap.knobs.items()}
+    goal = {dof: k.convert(_numeric(df, k.goal, where)) for dof, k in cmap.knobs.items() if k.goal}
+    is_motor = np.logical_and.reduce([np.isfinite(p) for p in pos.values()])
+    touched = np.logical_or.reduce([np.isfinite(v) for v in [*pos.values(), *goal.values()]])
+    if not is_motor.any():
+        raise RunFormatError(f"{where}: no row has every knob position ({', '.join(k.position for k in cmap.knobs.values())})")
+    motor = {"t_s": t[is_motor]}
+    for dof in probe.dofs:
+        u = probe.unit(dof)
+        k = cmap.knobs.get(dof)
+        p = pos[dof][is_motor] if k is not None else np.zeros(int(is_motor.sum()))
+        g = goal[dof][is_motor] if dof in goal else p
+        if not np.isfinite(g).all():
+            line = int(lines[is_motor][np.flatnonzero(~np.isfinite(g))[0]])
+            raise RunFormatError(f"{where}: goal column '{k.goal}' is empty on a motor row (line {line})")
+        motor[f"{dof}_goal_{u}"] = g
+        motor[f"{dof}_pos_{u}"] = p
+        motor[f"{dof}_vel_{u}ps"] = np.gradient(p, motor["t_s"]) if p.size > 1 else np.zeros_like(p)
+        cur = (_numeric(df, k.current, where)[is_motor] * k.current_factor if k is not None and k.current
+               else np.zeros_like(p))
+        motor[f"{dof}_current_ma"] = np.nan_to_num(cur)
+    for col in cmap.extras:
+        motor[col] = _numeric(df, col, where)[is_motor]
+    return motor, is_motor, touched & ~is_motor
+
+
+def _frames(df: pd.DataFrame, t: np.ndarray, cmap: CsvMap, where: str) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                                                 np.ndarray]:
+    """Tracker frames: the tip and base rows (n, 8: ``t_s``, mm, quaternion scalar first), each
+    sensor's validity (n, 2), and which rows are frames.
+
+    A row with any pose cell is a frame. A sensor's reading is invalid where the map's ``valid``
+    column flags it, a cell is empty, or the quaternion is no rotation (its norm below
+    :data:`QUAT_MIN_NORM`: zeros for a sensor out of the field); an unusable reading is stored
+    as NaN with ``valid`` false, as endocal's own tracker streams carry a dropout, and the
+    aligned table leaves it out (counted in ``run.json``).
+    """
+    rows, present = [], np.zeros(len(df), bool)
+    for pc in (cmap.tip, cmap.base):
+        if pc.fixed is not None:
+            xyz = np.tile(np.array(pc.fixed[:3]) * pc.factor, (len(df), 1))
+            q = np.tile(np.array(pc.fixed[3:]), (len(df), 1))
+        else:
+            xyz = np.column_stack([_numeric(df, c, where) for c in pc.position]) * pc.factor
+            q = np.column_stack([_numeric(df, c, where) for c in pc.quaternion])
+            present |= ~np.isnan(np.column_stack([xyz, q])).all(axis=1)
+        rows.append(np.column_stack([t, xyz, q if pc.order == "wxyz" else q[:, [3, 0, 1, 2]]]))
+    if cmap.tip.fixed is not None and cmap.base.fixed is not None:
+        present[:] = True  # nothing logged: every row holds the one recorded pose
+    valid = np.ones((len(df), 2), bool)
+    for j, (pc, r) in enumerate(zip((cmap.tip, cmap.base), rows)):
+        usable = np.isfinite(r).all(axis=1) & (np.linalg.norm(r[:, 4:], axis=1) >= QUAT_MIN_NORM)
+        r[~usable, 1:] = np.nan
+        valid[:, j] = usable
+        if pc.valid:
+            valid[:, j] &= np.nan_to_num(_numeric(df, pc.valid, where)) != 0
+    return rows[0], rows[1], valid, present
+
+
+def _check_knobs(motor: dict, cmap: CsvMap, where: str) -> None:
+    """Refuse knob positions or goals far beyond the probe's limits: a unit mistake in the map.
+
+    Raises
+    ------
+    RunFormatError
+        More than :data:`MAX_BEYOND_FRACTION` of the samples beyond the limits widened by
+        :data:`KNOB_MARGIN_SPANS` limit spans on each side, naming ``[knobs.AXIS] unit``.
+    """
+    probe = cmap.probe
+    hints = {"deg": 'servo ticks need unit = "ticks" with zero_ticks and ticks_per_rev',
+             "rad": 'degrees need unit = "deg", servo ticks unit = "ticks"',
+             "ticks": "check zero_ticks and ticks_per_rev",
+             "m": 'millimetres need unit = "mm"', "mm": 'metres need unit = "m"'}
+    for dof, k in cmap.knobs.items():
+        u = probe.unit(dof)
+        lo, hi = probe.limits(dof)
+        margin = KNOB_MARGIN_SPANS * (hi - lo)
+        for key, col in (("position", k.position), ("goal", k.goal)):
+            if col is None:
+                continue
+            v = motor[f"{dof}_{'pos' if key == 'position' else 'goal'}_{u}"]
+            beyond = (v < lo - margin) | (v > hi + margin)
+            if beyond.mean() > MAX_BEYOND_FRACTION:
+                raise RunFormatError(
+                    f"{where}: column '{col}' read as {k.unit} gives {dof} knob {key}s of {v.min():.4g}..{v.max():.4g} "
+                    f"{u}, far beyond the limits of probe '{probe.name}' ({lo:g}..{hi:g} {u}) in "
+                    f"{100 * beyond.mean():.0f} % of the motor rows: is [knobs.{dof}] unit right? ({hints[k.unit]})")
+
+
+def _check_rate(motor_t_s: np.ndarray, cmap: CsvMap, where: str) -> None:
+    """Refuse a motor sample rate no lab log has (:data:`RATE_RANGE_HZ`): a clock unit mistake,
+    named with the unit that would give a usual rate."""
+    dt = np.diff(motor_t_s)
+    if cmap.time_factor is None or not dt.size:  # date-time text carries its unit; one sample: no rate
+        return
+    step_s = float(np.median(dt))
+    rate = 1.0 / step_s
+    lo, hi = RATE_RANGE_HZ
+    if lo <= rate <= hi:
+        return
+    unit = next(u for u, f in TIME_UNITS.items() if f == cmap.time_factor)
+    step_raw = step_s / cmap.time_factor
+    # the unit that puts the rate nearest 100 Hz, a servo loop's usual rate, among plausible ones
+    fits = [(abs(np.log(100.0 * step_raw * f)), u) for u, f in TIME_UNITS.items()
+            if f and lo <= 1 / (step_raw * f) <= hi]
+    guess = min(fits)[1] if fits else None
+    then = f"; in {guess} they would be {1 / (step_raw * TIME_UNITS[guess]):.4g} Hz" if guess else ""
+    raise RunFormatError(f"{where}: with [time] unit = \"{unit}\" the motor samples are {step_s:.3g} s apart "
+                         f"({rate:.3g} Hz), {'slower' if rate < lo else 'faster'} than any lab log "
+                         f"({lo:g} Hz to {hi:g} Hz){then}: set [time] unit to the unit of column '{cmap.time_column}'")
+
+
+def _check_distance(tip: np.ndarray, base: np.ndarray, good: np.ndarray, cmap: CsvMap, where: str) -> None:
+    """Refuse a tip-to-base distance the probe cannot have (:data:`DISTANCE_RANGE_LENGTHS`): a
+    length unit mistake in ``[tip]`` or ``[base]``."""
+    dist_mm = float(np.median(np.linalg.norm(tip[good, 1:4] - base[good, 1:4], axis=1)))
+    length = cmap.probe.bending_length_mm
+    lo, hi = DISTANCE_RANGE_LENGTHS
+    if lo * length <= dist_mm <= hi * length:
+        return
+    units = {name: ("m" if pc.factor == LENGTH_UNITS["m"] else "mm")
+             for name, pc in (("tip", cmap.tip), ("base", cmap.base))}
+    raise RunFormatError(f"{where}: read with [tip] unit = \"{units['tip']}\" and [base] unit = \"{units['base']}\" the "
+                         f"tip and base sensors are {dist_mm:.3g} mm apart (median), but probe '{cmap.probe.name}' bends "
+                         f"over {length:g} mm: is the length unit right (metres need unit = \"m\", millimetres \"mm\")?")
+
+
+def _check_aligned(n_aligned: int, t_motor: np.ndarray, t_read: np.ndarray, what: str, cmap: CsvMap, where: str) -> None:
+    """Refuse an import no fit could use: fewer than :data:`MIN_ALIGNED_ROWS` aligned rows
+    (motor samples within :data:`MAX_GAP_S` of a ``what``: tracker frame, angle reading)."""
+    if n_aligned >= MIN_ALIGNED_ROWS:
+        return
+    span = (lambda v: f"{v.min():.3f}..{v.max():.3f} s" if v.size else "nothing")
+    clock = f"[time] column '{cmap.time_column}' and unit" if cmap.time_column else "[time] sample_rate_hz"
+    article = "an" if what[0] in "aeiou" else "a"
+    raise RunFormatError(f"{where}: only {n_aligned} motor sample(s) lie within {MAX_GAP_S:g} s of {article} {what}, "
+                         f"fewer than any fit can use ({MIN_ALIGNED_ROWS}); the motor samples span {span(t_motor)}, the "
+                         f"{what}s {span(t_read)} after the first row: check {clock}, and that every device's rows "
+                         "are on that clock")
 
 
 def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *, dedupe: bool = False,
@@ -446,17 +749,26 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
         Run folder to create; with a map of measured ``angles``, the aligned table to write
         (``.parquet`` or ``.csv``).
     dedupe : bool
-        Drop rows that repeat an earlier row exactly and merge rows of one stamp that fill
-        different columns (else duplicated time stamps are refused).
+        Drop rows that repeat an earlier row in every column the map uses and merge rows of one
+        stamp that fill different columns (else duplicated time stamps are refused).
     force : bool
         Replace an existing run folder (or table).
+
+    Returns
+    -------
+    CsvImportResult
+        With what was dropped: motor rows missing a knob position, invalid tracker frames,
+        rows with neither (also recorded in ``run.json``'s ``backend``).
 
     Raises
     ------
     RunFormatError
         A bad map, a column the map names that the log lacks (listing those it has), a
-        non-numeric column, time that does not increase, duplicated stamps; before anything
-        is written.
+        non-numeric column, time that does not increase, duplicated stamps, and numbers no rig
+        logs (a unit mistake: knob positions far beyond the probe's limits, a sample rate
+        outside :data:`RATE_RANGE_HZ`, sensors too near or too far apart, fewer aligned rows
+        than a fit can use); before anything is written. Whatever fails while writing, nothing
+        is left at ``out``.
     """
     log, out = Path(log), Path(out)
     cmap = mapping if isinstance(mapping, CsvMap) else read_map(mapping)
@@ -465,99 +777,78 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
     df, raw = read_log_table(log)
     missing = [c for c in cmap.columns() if c not in df.columns]
     if missing:
-        raise RunFormatError(f"{cmap.source} names column '{missing[0]}', which {log.name} does not have; its columns: "
-                             f"{', '.join(map(str, df.columns))}")
+        raise RunFormatError(f"{cmap.source} names column '{missing[0]}' ({cmap.role_of(missing[0])}), which {log.name} "
+                             f"does not have; its columns: {', '.join(map(str, df.columns))}")
     if cmap.angles:
         _prepare_table(out, force, cmap.source)
     else:
-        prepare_output(out, force)
+        _prepare_run(out, force, cmap.source)
     n_rows = len(df)
-    lines = df.index.to_numpy()  # line numbers in the file
-    if cmap.time_column:
-        t = (_datetime_s(df, cmap.time_column, where) if cmap.time_factor is None else
-             _numeric(df, cmap.time_column, where) * cmap.time_factor)
-        if not np.isfinite(t).all():
-            line = int(lines[np.flatnonzero(~np.isfinite(t))[0]])
-            raise RunFormatError(f"{where}: time column '{cmap.time_column}' is empty or not a number at line {line}")
-        df, t, lines, dropped, merged = _dedupe(df, t, lines, dedupe, where)
-        back = np.flatnonzero(np.diff(t) < 0)
-        if back.size:
-            k = int(back[0])
-            raise RunFormatError(f"{where}: time goes back at line {lines[k + 1]} ({t[k]:g} -> {t[k + 1]:g} s); "
-                                 "sort the log by time")
-    else:
-        exact = df.duplicated(keep="first").to_numpy() if dedupe else np.zeros(len(df), bool)
-        dropped, merged = int(exact.sum()), 0
-        df = df[~exact]
-        t = np.arange(len(df)) / cmap.sample_rate_hz
-    t0 = float(t[0])
-    t = t - t0
-
-    pos = {dof: k.convert(_numeric(df, k.position, where)) for dof, k in cmap.knobs.items()}
-    is_motor = np.logical_and.reduce([np.isfinite(p) for p in pos.values()])
-    if not is_motor.any():
-        raise RunFormatError(f"{where}: no row has every knob position ({', '.join(k.position for k in cmap.knobs.values())})")
+    df, t, dropped, merged = _clock(df, cmap, dedupe, where)
+    lines = df.index.to_numpy()
+    motor, is_motor, incomplete = _motor(df, t, cmap, where)
+    if not cmap.angles:
+        # with measured angles the probe only names the axes (a bench's pulley may turn past any
+        # probe knob's limits): the knobs are checked against the limits of a probe's run only
+        _check_knobs(motor, cmap, where)
+    _check_rate(motor["t_s"], cmap, where)
     probe = cmap.probe
-    motor = {"t_s": t[is_motor]}
-    for dof in probe.dofs:
-        u = probe.unit(dof)
-        k = cmap.knobs.get(dof)
-        p = pos[dof][is_motor] if k is not None else np.zeros(int(is_motor.sum()))
-        g = k.convert(_numeric(df, k.goal, where))[is_motor] if k is not None and k.goal else p
-        if not np.isfinite(g).all():
-            line = int(np.flatnonzero(~np.isfinite(g))[0])
-            raise RunFormatError(f"{where}: goal column '{k.goal}' is empty on a motor row (sample {line})")
-        motor[f"{dof}_goal_{u}"] = g
-        motor[f"{dof}_pos_{u}"] = p
-        motor[f"{dof}_vel_{u}ps"] = np.gradient(p, motor["t_s"]) if p.size > 1 else np.zeros_like(p)
-        cur = (_numeric(df, k.current, where)[is_motor] * k.current_factor if k is not None and k.current
-               else np.zeros_like(p))
-        motor[f"{dof}_current_ma"] = np.nan_to_num(cur)
-    for col in cmap.extras:
-        motor[col] = _numeric(df, col, where)[is_motor]
 
     sha = hashlib.sha256(raw).hexdigest()
     map_text = Path(cmap.source).read_bytes() if Path(cmap.source).is_file() else b""
     source = {"name": "csv-import", "source": str(log), "sha256": sha, "map": cmap.source,
               "map_sha256": hashlib.sha256(map_text).hexdigest() if map_text else None}
-    backend = {"name": "csv-import", "map": cmap.raw, "rows": n_rows, "duplicates_dropped": dropped,
-               "rows_merged": merged,
-               "command_source": ("goal columns" if all(k.goal for k in cmap.knobs.values()) else
-                                  "knob position where no goal column is mapped (the servo's lag is not in the data)")}
     dt = np.diff(motor["t_s"])
     rate = float(1.0 / np.median(dt)) if dt.size and np.median(dt) > 0 else None
     columns = {"time": cmap.time_column or f"{cmap.sample_rate_hz:g} Hz", **{d: k.position for d, k in cmap.knobs.items()},
                **{f"{a}{MEAS}": ang.column for a, ang in cmap.angles.items()}}
+    first = (lambda mask: int(lines[np.argmax(mask)]) if mask.any() else None)
+
+    def backend(unused: np.ndarray, invalid: np.ndarray) -> dict:
+        return {"name": "csv-import", "map": cmap.raw, "rows": n_rows, "duplicates_dropped": dropped,
+                "rows_merged": merged, "motor_rows_incomplete": int(incomplete.sum()),
+                "tracker_frames_invalid": int(invalid.sum()), "rows_unused": int(unused.sum()),
+                "command_source": ("goal columns" if all(k.goal for k in cmap.knobs.values()) else
+                                   "knob position where no goal column is mapped (the servo's lag is not in the data)")}
+
+    def result(run_dir, n_read, n_aligned, invalid, unused, alignment_error=None) -> CsvImportResult:
+        return CsvImportResult(run_dir, n_rows, bool(cmap.angles), len(motor["t_s"]), n_read, n_aligned, dropped,
+                               merged, float(motor["t_s"][-1]), rate, columns, alignment_error,
+                               int(incomplete.sum()), first(incomplete), int(invalid.sum()), first(invalid),
+                               int(unused.sum()), first(unused))
+
     if cmap.angles:
-        n_read, table = _angles_table(df, t, motor, cmap, where)
-        _write_table(out, table, {"source": source, "backend": backend, "command": command,
+        n_read, is_read, table = _angles_table(df, t, motor, cmap, where)
+        unused, invalid = ~(is_motor | incomplete | is_read), np.zeros(len(df), bool)
+        _write_table(out, table, {"source": source, "backend": backend(unused, invalid), "command": command,
                                   "software": software_versions()})
-        return CsvImportResult(out, n_rows, True, len(motor["t_s"]), n_read, len(table), dropped, merged,
-                               float(motor["t_s"][-1]), rate, columns, None)
+        return result(out, n_read, len(table), invalid, unused)
 
-    def pose_rows(pc: _Pose) -> np.ndarray:
-        if pc.fixed is not None:
-            xyz = np.tile(np.array(pc.fixed[:3]) * pc.factor, (len(df), 1))
-            q = np.tile(np.array(pc.fixed[3:]), (len(df), 1))
-        else:
-            xyz = np.column_stack([_numeric(df, c, where) for c in pc.position]) * pc.factor
-            q = np.column_stack([_numeric(df, c, where) for c in pc.quaternion])
-        wxyz = q if pc.order == "wxyz" else q[:, [3, 0, 1, 2]]
-        return np.column_stack([t, xyz, wxyz])
-
-    tip, base = pose_rows(cmap.tip), pose_rows(cmap.base)
-    valid = np.column_stack([np.ones(len(df), bool), np.ones(len(df), bool)])
-    for j, pc in enumerate((cmap.tip, cmap.base)):
-        if pc.valid:
-            valid[:, j] = np.nan_to_num(_numeric(df, pc.valid, where)) != 0
-    is_frame = np.isfinite(tip).all(axis=1) & np.isfinite(base).all(axis=1)
-    if not is_frame.any():
-        raise RunFormatError(f"{where}: no row has both the tip and the base pose")
+    tip, base, valid, is_frame = _frames(df, t, cmap, where)
+    good = is_frame & valid.all(axis=1)
+    if not good.any():
+        why = (f" ({int(is_frame.sum())} row(s) hold a pose, each with a sensor missing, flagged invalid or with a "
+               "quaternion that is no rotation)" if is_frame.any() else "")
+        raise RunFormatError(f"{where}: no row has both the tip and the base pose{why}")
+    _check_distance(tip, base, good, cmap, where)
+    # the aligned rows align() will make: motor samples within MAX_GAP_S of a frame with both sensors
+    _check_aligned(int(measured_at(t[good], motor["t_s"], MAX_GAP_S).sum()), motor["t_s"], t[good],
+                   "tracker frame", cmap, where)
+    invalid, unused = is_frame & ~good, ~(is_motor | incomplete | is_frame)
     tracker = tracker_stream(tip[is_frame], base[is_frame], valid[is_frame])
-    meta = write_imported_run(out, motor, tracker, probe, source=source, backend=backend, command=command, wall0=wall0)
-    return CsvImportResult(out, n_rows, False, meta["motor_rows"], int(is_frame.sum()),
-                           meta["counts"].get("aligned_rows", 0), dropped, merged, float(motor["t_s"][-1]), rate, columns,
-                           meta.get("alignment_error"))
+    meta = write_imported_run(out, motor, tracker, probe, source=source, backend=backend(unused, invalid), command=command,
+                              wall0=wall0)
+    return result(out, int(is_frame.sum()), meta["counts"].get("aligned_rows", 0), invalid, unused,
+                  meta.get("alignment_error"))
+
+
+def _prepare_run(out: Path, force: bool, map_source: str) -> None:
+    """Check that ``out`` can become a run folder (without creating it): a pose map's import is
+    a run folder (motor and tracker streams, aligned table), never a table file."""
+    if out.suffix.lower() in (".parquet", *CSV_SUFFIXES):
+        raise OutputPathError(f"{map_source} maps EM poses, so the import is a run folder (motor and tracker streams "
+                              f"and their aligned table), not a {out.suffix} table: give --out a folder name (got {out})")
+    prepare_output(out, force)
 
 
 def _prepare_table(out: Path, force: bool, map_source: str) -> None:
@@ -585,8 +876,9 @@ def _is_aligned_table(path: Path) -> bool:
     return True
 
 
-def _angles_table(df: pd.DataFrame, t: np.ndarray, motor: dict, cmap: CsvMap, where: str) -> tuple[int, pd.DataFrame]:
-    """The aligned table of a log with measured angles, and how many rows held a reading.
+def _angles_table(df: pd.DataFrame, t: np.ndarray, motor: dict, cmap: CsvMap,
+                  where: str) -> tuple[int, np.ndarray, pd.DataFrame]:
+    """The aligned table of a log with measured angles, how many rows held a reading, and which.
 
     The readings are interpolated onto the motor samples inside their span, across gaps of
     at most :data:`MAX_GAP_S` (as tracker frames are in :func:`endocal.runs.aligned.align`).
@@ -598,8 +890,7 @@ def _angles_table(df: pd.DataFrame, t: np.ndarray, motor: dict, cmap: CsvMap, wh
                              f"({', '.join(a.column for a in cmap.angles.values())})")
     t_read, t_motor = t[is_read], motor["t_s"]
     ok = measured_at(t_read, t_motor, MAX_GAP_S)
-    if not ok.any():
-        raise RunFormatError(f"{where}: no motor sample lies within {MAX_GAP_S:g} s of an angle reading")
+    _check_aligned(int(ok.sum()), t_motor, t_read, "angle reading", cmap, where)
     probe = cmap.probe
     table = {"t_s": t_motor[ok]}
     for axis in cmap.angles:
@@ -615,7 +906,7 @@ def _angles_table(df: pd.DataFrame, t: np.ndarray, motor: dict, cmap: CsvMap, wh
         table[col] = motor[col][ok]
     out = pd.DataFrame(table)
     check_aligned(out, where)
-    return int(is_read.sum()), out
+    return int(is_read.sum()), is_read, out
 
 
 def _write_table(out: Path, table: pd.DataFrame, provenance: dict) -> None:

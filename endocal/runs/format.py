@@ -26,6 +26,7 @@ import io
 import json
 import os
 import platform
+import secrets
 import shutil
 import sys
 import tempfile
@@ -247,6 +248,40 @@ def run_meta(*, protocol: dict, probe, backend: dict, seed, realtime: bool, comm
         "units": UNITS,
         "streams": {"motor": MOTOR + "/", "tracker": TRACKER + "/", "aligned": ALIGNED},
     }
+
+
+def write_folder_staged(out: Path, write):
+    """Have ``write(stage)`` fill a hidden folder beside ``out``, then rename it to ``out``; on any
+    failure (an error, Ctrl-C) the stage is removed and ``out`` is as it was. Returns what
+    ``write`` returns.
+
+    A folder written in place and stopped halfway would be left with ``run.json`` ``running``,
+    which readers take for a killed recording and which blocks the next import. An existing
+    ``out`` (a run :func:`prepare_output` allowed to replace) is moved aside first and removed
+    only once the new one is in place.
+    """
+    out = Path(out)
+    token = secrets.token_hex(4)
+    stage = out.parent / f".{out.name}.writing-{token}"
+    aside = out.parent / f".{out.name}.replaced-{token}"
+    try:
+        result = write(stage)
+        try:
+            if out.exists():
+                os.replace(out, aside)
+            try:
+                os.replace(stage, out)
+            except OSError:
+                if aside.exists():
+                    os.replace(aside, out)
+                raise
+        except OSError as exc:
+            raise OutputPathError(f"cannot create {out}: {exc.strerror or exc}") from None
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+    shutil.rmtree(aside, ignore_errors=True)
+    return result
 
 
 def create_run_folder(out: Path) -> None:

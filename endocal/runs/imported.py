@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from endocal.probe import ProbeConfig
-from endocal.runs.format import MOTOR, RUN_JSON, create_run_folder, run_meta, utc_now, write_json
+from endocal.runs.format import MOTOR, RUN_JSON, create_run_folder, run_meta, utc_now, write_folder_staged, write_json
 from endocal.runs.logger import StreamLogger, finish_run
 from endocal.streams import StreamChunk
 
@@ -42,7 +42,9 @@ def tracker_stream(tip: np.ndarray, base: np.ndarray, valid: np.ndarray | None =
 
 def write_imported_run(out: Path, motor: dict[str, np.ndarray], tracker: dict[str, np.ndarray], probe: ProbeConfig, *,
                        source: dict, backend: dict, command: str | None, wall0: float | None = None) -> dict:
-    """Write ``out`` as a complete run folder and return its ``run.json`` content.
+    """Write ``out`` as a complete run folder and return its ``run.json`` content; staged beside
+    ``out`` and renamed into place (:func:`endocal.runs.format.write_folder_staged`), so a
+    failure halfway leaves nothing behind.
 
     Parameters
     ----------
@@ -58,6 +60,12 @@ def write_imported_run(out: Path, motor: dict[str, np.ndarray], tracker: dict[st
         How it was recorded and imported (``name`` names the importer).
     """
     wall0 = time.monotonic() if wall0 is None else wall0
+    return write_folder_staged(out, lambda stage: _write_run(stage, motor, tracker, probe, source, backend, command,
+                                                              wall0))
+
+
+def _write_run(out: Path, motor: dict, tracker: dict, probe: ProbeConfig, source: dict, backend: dict,
+               command: str | None, wall0: float) -> dict:
     dt = np.diff(motor["t_s"])
     rate = float(1.0 / np.median(dt)) if dt.size and np.median(dt) > 0 else None
     meta = run_meta(protocol=source, probe=probe, backend=backend, seed=None, realtime=True, command=command,

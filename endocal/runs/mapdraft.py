@@ -10,14 +10,19 @@ one, else by the numbers:
 - the clock: epoch-sized stamps tell their unit by magnitude (1.7e9 s, 1.7e12 ms, 1.7e15 us,
   1.7e18 ns), others by their median step (a sample rate of 1 Hz to 10 kHz); text stamps are
   date-times; no clock gives ``sample_rate_hz``;
-- knob positions: whole numbers within one servo turn are ticks (zero at mid-turn, 4096 per
-  turn, as the XM430 the thesis uses), values within +-2 pi are radians, else degrees;
+- knob positions: a column named for a probe axis (``ap_present_ticks``), else per-motor columns
+  numbered by a suffix as ROS writes a JointState (``position0``, ``goal1``: motor 0 is the
+  probe's first axis, marked CHECK); whole numbers within one servo turn are ticks (zero at
+  mid-turn, 4096 per turn, as the XM430 the thesis uses), values within +-2 pi are radians, else
+  degrees; a column of an EM pose is never a knob;
 - EM positions: below 2 in magnitude are metres, else millimetres;
 - a measured angle within +-pi is radians, else degrees.
 
 Every line decided by the numbers, or by a default, is marked ``CHECK`` with the evidence,
-and a role nothing matched is left as ``"FILL IN"``, which the import refuses by name. The
-remaining numeric columns become ``extras`` (covariates for ``load:COLUMN``).
+and every role the import needs that nothing matched (a knob per bending axis with poses) is
+left as ``"FILL IN"``, which the import refuses naming the role. The remaining numeric columns
+that fill every row, but for clocks and counters (a ROS header's ``stamp`` and ``seq``), become
+``extras`` (covariates for ``load:COLUMN``).
 """
 
 from __future__ import annotations
@@ -49,7 +54,13 @@ _AXES = {"x", "y", "z", "px", "py", "pz"}
 _QUAT = {"qw": "w", "qx": "x", "qy": "y", "qz": "z", "q0": "w", "q1": "x", "q2": "y", "q3": "z"}
 _ROTATION = {"q", "quat", "quaternion", "orientation", "rotation", "rot"}
 _LENGTH_UNIT = {"mm": "mm", "m": "m"}
-_NOT_KNOB = _GOAL | _CURRENT | (_MEASURED - {"angle"}) | {"tip", "distal"}
+#: words of an EM sensor's pose columns (``field.base.pose.position.x``): never a knob
+_POSE_WORDS = {"tip", "distal", "base", "proximal", "pose", "orientation", "quaternion", "quat", "quality"}
+_NOT_KNOB = _GOAL | _CURRENT | (_MEASURED - {"angle"}) | _POSE_WORDS
+#: words of columns that are no covariate: clocks, and counters such as a ROS header's seq
+_NOT_EXTRA = _TIME | {"seq", "sequence", "index", "idx", "counter", "header"}
+#: a word ending in a motor's number, as ROS writes the arrays of a JointState: position0, goal1
+_NUMBERED = re.compile(r"([a-z]+?)(\d+)")
 
 
 def words(name: str) -> list[str]:
@@ -146,6 +157,22 @@ def _pick(cols: list[str], want: set[str], *, avoid: set[str] = frozenset(), nee
     return None
 
 
+def _numbered(cols: list[str], taken: set[str]) -> dict[int, dict[str, str]]:
+    """Per-motor knob columns numbered by a suffix (``field.position0``, ``field.goal1``): motor
+    number -> ``position`` / ``goal`` -> column."""
+    out: dict[int, dict[str, str]] = {}
+    for c in cols:
+        ws = words(c)
+        if c in taken or set(ws) & (_POSE_WORDS | _CURRENT):
+            continue
+        for w in ws:
+            m = _NUMBERED.fullmatch(w)
+            role = m and ("goal" if m.group(1) in _GOAL else "position" if m.group(1) in _POSITION else None)
+            if role:
+                out.setdefault(int(m.group(2)), {}).setdefault(role, c)
+    return out
+
+
 def _pose_columns(cols: list[str], sensor: str, taken: set[str]) -> tuple[list[str] | None, list[str] | None]:
     """x, y, z and w, x, y, z columns of one EM sensor, or None for each part not found."""
     pos, quat = {}, {}
@@ -199,13 +226,17 @@ class _Drafter:
                     "configs/csv-map.example.toml.", ""]
         w.key("probe", self.probe.name, "names the bending axes: tee has ap and ml, duodenoscope ud and lr")
         tip, base = _pose_columns(self.cols, "tip", self.taken), _pose_columns(self.cols, "base", self.taken)
+        poses = tip[0] is not None and tip[1] is not None
+        if poses:  # a pose's columns are taken before any other role can claim one
+            self.taken |= {c for part in (*tip, *base) if part for c in part}
         self._time()
-        knobs = self._knobs()
-        if tip[0] is not None and tip[1] is not None:
+        knobs = self._knobs(poses)
+        if poses:
             self._poses({"tip": tip, "base": base})
         else:
             self._angles(list(knobs) or list(self.probe.bending_axes[:1]))
-        extras = [c for c in self.cols if c not in self.taken and _values(self.df, c).size == len(self.df) > 0]
+        extras = [c for c in self.cols if c not in self.taken and not set(words(c)) & _NOT_EXTRA
+                  and _values(self.df, c).size == len(self.df) > 0]
         if extras:  # a top-level key: before the first table
             w.lines[5:5] = ["# further numeric columns, carried into the table (covariates for load:COLUMN): drop "
                             "what is not one", "extras = [" + "".join(f"\n    {_toml(c)}," for c in extras) + "\n]"]
@@ -232,10 +263,10 @@ class _Drafter:
         w.key("unit", unit, "s, ms, us, ns or datetime", check=why, where="[time] ")
         self.roles["time"] = f"{col} ({unit})"
 
-    def _knob(self, axis: str, pos: str, goal: str | None, cur: str | None, what: str) -> None:
+    def _knob(self, axis: str, pos: str, goal: str | None, cur: str | None, what: str, check: str = "") -> None:
         w = self.w
         self.taken |= {pos} | ({goal} if goal else set()) | ({cur} if cur else set())
-        w.key("position", pos, what)
+        w.key("position", pos, what, check=check, where=f"[knobs.{axis}] ")
         _knob_unit(w, self.df, pos, axis)
         if goal:
             w.key("goal", goal, "the goal sent to the motor, same unit")
@@ -244,8 +275,10 @@ class _Drafter:
             w.key("current_unit", "A" if words(cur)[-1:] == ["a"] or "amp" in words(cur) else "mA", "mA or A")
         self.roles[f"knob {axis}"] = pos + (f" (goal {goal})" if goal else "")
 
-    def _knobs(self) -> list[str]:
-        """The knob tables: a column per probe axis (``ap_present_ticks``), else a bench's one motor."""
+    def _knobs(self, poses: bool) -> list[str]:
+        """The knob tables: a column per probe axis (``ap_present_ticks``), else numbered motors
+        (``position0``), else a bench's one motor; with ``poses`` every bending axis needs a knob,
+        and one no column matched is left ``FILL IN``."""
         axes, found = list(self.probe.bending_axes), []
         for axis in axes:
             goal = _pick(self.cols, _GOAL, need={axis}, taken=self.taken)
@@ -259,9 +292,29 @@ class _Drafter:
             self.w.table(f"knobs.{axis}")
             self._knob(axis, pos, goal, cur, "the knob's measured position (the command when there is no goal)")
             found.append(axis)
-        if found:
-            return found
-        # a bench: one motor, named for what it is rather than for a probe axis
+        if not found:
+            numbered = _numbered(self.cols, self.taken)
+            for axis, n in zip(axes, sorted(numbered)):
+                pos, goal = numbered[n].get("position"), numbered[n].get("goal")
+                self.w.table(f"knobs.{axis}")
+                self._knob(axis, pos or goal, goal if pos else None, None,
+                           "the knob's measured position (the command when there is no goal)",
+                           check=f"motor {n} read as the {axis} knob (numbered motors in the order of the probe's "
+                                 f"axes: {', '.join(axes)})")
+                found.append(axis)
+        if not found:
+            found = self._bench_knob()
+        for axis in axes if poses else []:
+            if axis not in found and f"[knobs.{axis}] position" not in self.unmatched:
+                self.w.table(f"knobs.{axis}")
+                self.w.key("position", FILL, "the knob's measured position: no column looked like it")
+                self.w.key("unit", "deg", "deg, rad or ticks")
+                self.unmatched.append(f"[knobs.{axis}] position")
+        return found
+
+    def _bench_knob(self) -> list[str]:
+        """A bench's one motor, named for what it is rather than for a probe axis."""
+        axes = list(self.probe.bending_axes)
         goal = _pick(self.cols, _GOAL, avoid=_CURRENT | {"tip"}, taken=self.taken)
         pos = (_pick(self.cols, _DRIVE, avoid=_NOT_KNOB, taken=self.taken)
                or _pick(self.cols, _POSITION, avoid=_NOT_KNOB, taken=self.taken) or goal)
