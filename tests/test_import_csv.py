@@ -592,3 +592,20 @@ def test_a_draft_that_found_one_numbered_motor_leaves_the_other_knob_to_fill_in(
     assert "base.pose" not in "".join(ln for ln in stdout.splitlines() if ln.startswith("  knob"))
     one_line_exit_2(endocal("import", "csv", tmp_path / "one.csv", "--map", draft, "--out", tmp_path / "r"),
                     "[knobs.ml] position: a column is still 'FILL IN'")
+
+
+def test_a_log_holding_the_latest_pose_on_every_row_reads_each_frame_at_its_own_time(sim_log, tmp_path):
+    """A logger writing one row per motor tick with the latest pose repeated (the example map's
+    note): each reading is a frame where it first appears, not at every row it was held, which
+    placed readings up to 25 ms late (0.3 deg RMS, 2.1 deg at worst on the red team's log)."""
+    log = pd.read_csv(sim_log / "log.csv")
+    pose = [c for c in log.columns if c.startswith(("tip_", "base_"))]
+    log[pose] = log[pose].ffill()
+    log.dropna(subset=pose).to_csv(tmp_path / "held.csv", index=False)
+    ok = endocal("import", "csv", tmp_path / "held.csv", "--map", MAP, "--out", tmp_path / "r")
+    assert ok.returncode == 0, ok.stderr
+    frames = int(pd.read_csv(sim_log / "log.csv")[pose].notna().all(axis=1).sum())
+    assert f"{frames} tracker frames" in ok.stdout, (frames, ok.stdout)
+    a, b = load_aligned(sim_log / "run").table, load_aligned(tmp_path / "r").table
+    assert len(a) == len(b)
+    np.testing.assert_allclose(b["ap_meas_deg"], a["ap_meas_deg"], atol=1e-9)

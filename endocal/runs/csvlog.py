@@ -630,6 +630,12 @@ def _frames(df: pd.DataFrame, t: np.ndarray, cmap: CsvMap, where: str) -> tuple[
     :data:`QUAT_MIN_NORM`: zeros for a sensor out of the field); an unusable reading is stored
     as NaN with ``valid`` false, as endocal's own tracker streams carry a dropout, and the
     aligned table leaves it out (counted in ``run.json``).
+
+    A log written one row per motor tick with the latest pose repeated holds each reading for
+    several rows: a row whose logged poses equal the previous frame's in every cell is that
+    reading held, not a new one (tracker noise never repeats 14 numbers), so only the row where
+    a reading first appears is its frame. Stamped at every row it was held, the reading would be
+    placed up to a tracker period late (25 ms at 40 Hz: 0.3 deg RMS on a moving bend).
     """
     rows, present = [], np.zeros(len(df), bool)
     for pc in (cmap.tip, cmap.base):
@@ -643,6 +649,12 @@ def _frames(df: pd.DataFrame, t: np.ndarray, cmap: CsvMap, where: str) -> tuple[
         rows.append(np.column_stack([t, xyz, q if pc.order == "wxyz" else q[:, [3, 0, 1, 2]]]))
     if cmap.tip.fixed is not None and cmap.base.fixed is not None:
         present[:] = True  # nothing logged: every row holds the one recorded pose
+    else:
+        logged = np.column_stack([r[:, 1:] for pc, r in zip((cmap.tip, cmap.base), rows) if pc.fixed is None])
+        idx = np.flatnonzero(present)
+        held = np.zeros(len(df), bool)
+        held[idx[1:]] = (logged[idx[1:]] == logged[idx[:-1]]).all(axis=1)  # NaN never equals: a dropout is no hold
+        present &= ~held
     valid = np.ones((len(df), 2), bool)
     for j, (pc, r) in enumerate(zip((cmap.tip, cmap.base), rows)):
         usable = np.isfinite(r).all(axis=1) & (np.linalg.norm(r[:, 4:], axis=1) >= QUAT_MIN_NORM)
