@@ -84,6 +84,10 @@ def test_same_seed_same_run_other_seed_other_noise(tmp_path):
         (["excite", "damped-sine", "--out", "{tmp}/r", "--sim-config", "{tmp}/bad.toml"], ["bad.toml"]),
         (["excite", "damped-sine", "--out", "{tmp}/r", "--backend", "warp"], ["warp"]),
         (["excite", "damped-sine", "--out", "{tmp}/afile/r"], ["afile", "is not a folder"]),
+        # a shortcut the protocol has no parameter for names the flag and what the protocol has
+        (["excite", "sine-set", "--out", "{tmp}/r", "--amplitude", "40"], ["--amplitude sets amplitude_deg",
+                                                                          "amplitudes_deg"]),
+        (["info", "{tmp}/noversion"], ["records no run format version"]),
         (["info", "{tmp}/missing.parquet"], ["does not exist"]),
         (["info", "{tmp}/nocols.csv"], ["_cmd_deg"]),
         (["info", "{tmp}/nan.csv"], ["NaN", "row 2"]),
@@ -93,6 +97,8 @@ def test_same_seed_same_run_other_seed_other_noise(tmp_path):
 def test_bad_input_gets_one_line_and_exit_2(tmp_path, args, fragments):
     (tmp_path / "bad.toml").write_text("name = 'x'\n[[broken\n")
     (tmp_path / "afile").write_text("a file where a folder should be\n")
+    (tmp_path / "noversion").mkdir()
+    (tmp_path / "noversion" / "run.json").write_text('{"format": "endocal-run"}')
     pd.DataFrame({"t_s": [0.0, 0.1], "ap_deg": [1.0, 2.0]}).to_csv(tmp_path / "nocols.csv", index=False)
     pd.DataFrame({"t_s": [0.0, 0.1, 0.2], "ap_cmd_deg": [0, 1, 2], "ap_meas_deg": [0, 1, np.nan]}).to_csv(tmp_path / "nan.csv", index=False)
     pd.DataFrame({"t_s": [0.0, 0.2, 0.1], "ap_cmd_deg": [0, 1, 2], "ap_meas_deg": [0, 1, 2]}).to_csv(tmp_path / "backwards.csv", index=False)

@@ -95,8 +95,12 @@ def test_malformed_file_by_path(runner, tmp_path):
 
 
 def test_plot_into_missing_folder(runner, tmp_path):
+    # made, as every output's folders are; a path through a file is refused in one line
     res = runner.invoke(app, ["plot", "sine", "--out", str(tmp_path / "no" / "p.png")])
-    assert res.exit_code == 2 and "does not exist" in res.stderr
+    assert res.exit_code == 0 and (tmp_path / "no" / "p.png").read_bytes().startswith(b"\x89PNG")
+    (tmp_path / "f").write_text("")
+    res = runner.invoke(app, ["plot", "sine", "--out", str(tmp_path / "f" / "p.png")])
+    assert res.exit_code == 2 and "is not a folder" in res.stderr
 
 
 def test_help_explains_itself(runner):

@@ -28,7 +28,7 @@ def excite(
     probe: str = typer.Option("tee", "--probe", help="Probe preset (`tee`: ap/ml, `duodenoscope`: ud/lr) or a probe .toml."),
     sim_config: Optional[Path] = typer.Option(None, "--sim-config", help="Simulator TOML (effects and physics); see configs/sim-default.toml."),
     hardware_config: Optional[Path] = typer.Option(None, "--hardware-config", help="Rig TOML for --backend hardware; see configs/hardware-example.toml."),
-    seed: int = typer.Option(0, "--seed", help="Seed of every random draw (simulator noise, random protocols)."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of every random draw (simulator noise, random protocols)."),
     realtime: bool = typer.Option(False, "--realtime", help="Pace the simulator to the wall clock (hardware always is)."),
     force: bool = typer.Option(False, "--force", help="Replace --out if it exists."),
     sets: list[str] = typer.Option([], "--set", help="Override a protocol parameter, e.g. --set frequency_hz=0.1 (repeatable)."),
@@ -58,8 +58,15 @@ def excite(
     from endocal.protocols import load_protocol, parse_overrides
 
     overrides = parse_overrides(sets)
-    for key, value in (("amplitude_deg", amplitude), ("offset_deg", offset), ("duration_s", duration), ("sample_rate_hz", sample_rate)):
+    known = {q.name for q in load_protocol(protocol).spec.params}
+    for flag, key, value in (("--amplitude", "amplitude_deg", amplitude), ("--offset", "offset_deg", offset),
+                             ("--duration", "duration_s", duration), ("--sample-rate", "sample_rate_hz", sample_rate)):
         if value is not None:
+            if key not in known:
+                from endocal.errors import ProtocolError
+
+                raise ProtocolError(f"{flag} sets {key}, which protocol '{protocol}' does not have (it has "
+                                    f"{', '.join(sorted(known))}): use --set NAME=VALUE with one of those")
             overrides[key] = value
     if axes is not None:
         overrides["axes"] = [a.strip() for a in axes.split(",") if a.strip()]

@@ -174,6 +174,9 @@ def read_run_json(run_dir: Path) -> dict:
     if meta.get("format") != FORMAT_NAME:
         raise RunFormatError(f"{path} is not an endocal run file (format is {meta.get('format')!r}, expected {FORMAT_NAME!r})")
     version = meta.get("version")
+    if version is None:
+        raise RunFormatError(f"{path} records no run format version, which every run endocal writes has: the file was "
+                             "edited or not written by endocal; record or import the run again")
     if not isinstance(version, int) or version > FORMAT_VERSION:
         raise RunFormatError(
             f"{path} has run format version {version!r}; this endocal reads up to {FORMAT_VERSION}: upgrade endocal"

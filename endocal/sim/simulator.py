@@ -68,7 +68,7 @@ class Simulator:
         if not isinstance(probe, ProbeConfig):
             raise ConfigError(f"Simulator needs a ProbeConfig, got {type(probe).__name__}")
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise ConfigError(f"seed must be a non-negative integer, got {seed!r}")
+            raise ConfigError(f"seed (--seed) must be a non-negative integer, got {seed!r}")
         self.config, self.probe, self.seed = config, probe, int(seed)
         self._axes = probe.bending_axes
         self._columns = motor_columns(probe)

@@ -106,7 +106,8 @@ def _is_number_column(col: pd.Series) -> bool:
 def _through_planes(data: AlignedData, axis: str, planes) -> AlignedData:
     if len(data.axes) != 2:
         raise ModelError(f"{data.source}: the model was fitted through bending planes, which need both bending "
-                         f"axes in the data (it has {', '.join(data.axes)})")
+                         f"axes in the data (it has {', '.join(data.axes)}): give a record of both axes, or validate "
+                         "a model fitted without --planes")
     first, second = data.axes
     comp = planes.compensate(data.meas_deg(first), data.meas_deg(second))
     table = data.table.copy()
