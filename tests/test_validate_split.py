@@ -332,6 +332,7 @@ def test_a_sheath_curved_differently_between_the_records_is_named(sheaths):
     assert s["width_deg"] > 0 and s["gain"] < 1 and s["friction_rmse_deg"] <= 0.7 * s["rmse_deg"], s
     assert "'sheath_wrap_deg' is 180 in the estimation data and 360 here" in load[0]["evidence"]
     assert "load:sheath_wrap_deg" in load[0]["experiment"]
+    assert "log the condition as a column" not in load[0]["experiment"]  # it is logged already
     # the experiment it names: two curvatures with the column, load:sheath_wrap_deg, validated on a third
     _run("fit", "hysteresis", tmp / "w180", tmp / "w360", "--axis", "ap", "--model", "bspline", "--out", tmp / "two.json")
     _run("fit", "hysteresis", tmp / "w180", tmp / "w360", "--axis", "ap", "--model", "bspline", "--effects",
@@ -439,6 +440,12 @@ def test_a_validation_sweep_wider_than_the_estimation_sweep_is_scored_on_the_mod
         clamped = float(np.sqrt(np.mean((model.predict(v) - v.meas_deg) ** 2)))
     # measured 0.80 deg continued against 3.35 clamped (the tracker noise is 0.33)
     assert d["metrics"]["rmse_deg"] <= 0.4 * clamped, (d["metrics"]["rmse_deg"], clamped)
+    # a sine to 70 deg spends a third of its time beyond 60 (|sin| > 6/7): said under the metrics,
+    # before any diagnosis, not only in a note at the end
+    n = d["data"][0]["n_samples"]
+    assert d["beyond_samples"] == pytest.approx(n * (1 - 2 / np.pi * np.arcsin(6 / 7)), rel=0.1)
+    res = _run("validate", tmp / "bs.json", tmp / "wide")
+    assert f"warning: {d['beyond_samples']} of {n} samples command beyond the range" in res.stdout, res.stdout
 
 
 def test_the_refit_folds_the_validation_data_in_only_when_asked(sine_sweeps):

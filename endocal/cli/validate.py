@@ -100,6 +100,12 @@ def render(result) -> None:
         out.print("[bold]warning:[/] the estimation data includes the record validated here: every score below is "
                   "in-sample and flatters the model; validate on a record it was not fitted on")
     out.print(_metrics_table("How far off (measured vs predicted)", result.metrics))
+    n = sum(d["n_samples"] for d in result.data)
+    if result.beyond_samples > 0.1 * n:
+        # said before any diagnosis: no effect term fixes a model asked where it was never fitted
+        out.print(f"[bold]warning:[/] {result.beyond_samples} of {n} samples command beyond the range the model was "
+                  "fitted on: there it is extrapolated, and most of this error may be that; refit on data that "
+                  "covers this record's commands first")
     if scan.scheme != "none":
         out.print(f"{heldout_label(scan, result.in_sample)}: {scan.baseline_rmse_heldout_deg:.3g} deg", markup=False)
     c = result.compare

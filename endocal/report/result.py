@@ -131,7 +131,7 @@ class Report:
             schemes = {s["scheme"] for s in steps if s["scheme"]}
             how = (f"{steps[0]['folds']}-fold rolling origin" if schemes == {"rolling-origin"} else
                    "fitted on the estimation data" if schemes == {"estimation/validation"} else
-                   "mixed schemes: " + ", ".join(sorted(schemes)))
+                   "no rung cross-validated" if not schemes else "mixed schemes: " + ", ".join(sorted(schemes)))
             out.append(f"ladder {key[1]}, {key[0]} (held-out RMSE deg, {how}): " + " -> ".join(parts))
         return out
 

@@ -108,6 +108,8 @@ class ValidationResult:
         (:mod:`endocal.validation.shift`; estimation/validation scheme only).
     unexplained : str
         When the residual is a shape rather than noise (:func:`unexplained_shape`), what it says.
+    beyond_samples : int
+        Samples whose command lies beyond the model's fitted range (predicted by extrapolation).
     """
 
     axis: str
@@ -123,6 +125,7 @@ class ValidationResult:
     estimation: list = ()
     shift: RecordShift | None = None
     unexplained: str = ""
+    beyond_samples: int = 0
 
     @property
     def suspects(self):
@@ -160,6 +163,7 @@ class ValidationResult:
             "shift": None if self.shift is None else self.shift.to_dict(),
             "clean": self.clean,
             "unexplained": self.unexplained,
+            "beyond_samples": self.beyond_samples,
             "notes": list(self.notes),
             "compare": None if self.compare is None else self.compare.to_dict(),
         }
@@ -371,7 +375,8 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
                   "equation": model.equation(), "fit_warnings": list(rep.warnings) if rep is not None else []}
     return ValidationResult(axis=ax, model=model_info, data=info, metrics=metrics, regimes=regimes,
                             residuals=resid, scan=scan, notes=tuple(notes), compare=comp, pointers=tuple(pointers),
-                            estimation=est_info, shift=shift, unexplained=unexplained_shape(data, resid))
+                            estimation=est_info, shift=shift, unexplained=unexplained_shape(data, resid),
+                            beyond_samples=beyond)
 
 
 def unexplained_shape(data: HysteresisData, resid: ResidualTests, frac: float = 0.1) -> str:

@@ -253,12 +253,17 @@ def shift_pointers(shift, scan, covariates: list[str] = (), speeds_dps: tuple[fl
                     "and validate again"))
             if not covariates:
                 return out
-    column = covariates[0].split("'")[1] if covariates else "COLUMN"
+    if covariates:
+        column = covariates[0].split("'")[1]
+        experiment = (f"record two or more conditions with '{column}' logged as here, fit load:{column} on them and "
+                      "validate on another")
+    else:
+        experiment = ("log the condition as a column of every record (e.g. sheath_wrap_deg), record two or more "
+                      "conditions, fit load:COLUMN on them and validate on another")
     return out + [Pointer(
         "load",
         f"{evidence}{seen}",
         "untested",
         "the friction changed between the records (insertion-tube curvature, tendon tension, lubrication): every "
         "candidate is fitted on the estimation record, which holds one condition",
-        f"log the condition as a column of every record (e.g. sheath_wrap_deg), record two or more conditions, "
-        f"fit load:{column} on them and validate on another")]
+        experiment)]
