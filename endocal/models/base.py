@@ -719,6 +719,11 @@ class HysteresisModel(ABC):
         return StreamingCompensator(self, dt_s=dt_s)
 
     # ------------------------------------------------------------------ printing
+    def effect_params(self, effect) -> dict[str, float]:
+        """The fitted values of one of ``effects_``, by the effect's own (unprefixed) names."""
+        self._require_fitted()
+        return self._grouped(self.params_)[1].get(id(effect), {})
+
     def equation(self) -> str:
         """The fitted model as an equation with values and standard errors; zero terms dropped."""
         self._require_fitted()

@@ -739,8 +739,7 @@ def _split_candidate(model: HysteresisModel, effects: Sequence[str], train: Hyst
     prefixes = tuple(e.prefix + "_" for e in new)
     cautions = [w for w in m.fit_report_.warnings if prefixes and w.startswith(prefixes)
                 and (b := _AT_BOUND.search(w)) and float(b.group(1)) != 0.0]
-    _, eff_p = m._grouped(m.params_)
-    cautions += [c for e in new if (c := e.implausible(eff_p[id(e)], train))]
+    cautions += [c for e in new if (c := e.implausible(m.effect_params(e), train))]
     if any(e.name == "creep" for e in new) and _creep_reason(train) and _creep_reason(val):
         # creep shows itself where the knob rests after a move; fitted and scored on motion alone
         # its slow memory takes up smoother reversals, a lag or how the records start, and its
@@ -824,13 +823,13 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     if isinstance(results[0], ModelError):
         raise ModelError(f"the model as it stands cannot be refitted on the estimation data: {results[0]}") from None
     err_base = results[0][0]
-    fitted, bounds = [], {}
+    fitted, cautions = [], {}
     for c, res in zip(tested_cands, results[1:]):
         if isinstance(res, ModelError):
             untestable[c] = f"could not be fitted on the estimation data ({res})"
         else:
             fitted.append((c, res[0]))
-            bounds[c] = "; ".join(res[1])
+            cautions[c] = "; ".join(res[1])
     rmse_base = float(np.sqrt(np.mean(err_base**2)))
     # units sized by the error of the model as it stands: the same for every candidate (a p-value
     # does not depend on which others were tested) and for the report's ladder, which has only the pair
@@ -853,7 +852,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
         tested.append(Suspect(effect=c, column=col or None, gain_pct=gain, p_value=float(pa), p_raw=float(p),
                               rmse_heldout_deg=rmse, base_rmse_heldout_deg=rmse_base, significant=significant,
                               command=cmd, cause=cls.cause, signature=cls.signature, protocol=cls.protocol,
-                              n_blocks=units.n, evidence=evidence, caution=bounds[c]))
+                              n_blocks=units.n, evidence=evidence, caution=cautions[c]))
         errs[c] = err
     tested.sort(key=lambda s: -s.gain_pct)
     # Significant candidates are suspects. Without one, a candidate that still cuts the validation
@@ -861,7 +860,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     # and measured here, so the refit it names lowers this error by that much; the test only says
     # the gain is not consistent enough across units to rule out chance.
     suspects = [s for s in tested if s.significant] or [s for s in tested if s.gain_pct >= min_gain_pct]
-    # a candidate whose own parameter ended at a bound (a delay at -0.5 s) ranks after those that did not
+    # a candidate with a caution (a delay at its -0.5 s bound, a drift too fast to be one) ranks after the others
     suspects.sort(key=lambda s: bool(s.caution))
     notes = _demoted(suspects) + (_ambiguities(suspects, errs, alpha) if any(s.significant for s in suspects) else [])
     notes += [f"{k}: {v}" for k, v in untestable.items()]
