@@ -575,6 +575,8 @@ def test_a_drafted_map_of_a_ros_log_maps_its_numbered_motors_and_never_a_pose_as
     assert "CHECK [knobs.ap] position: motor 0 read as the ap knob" in stdout
     assert "CHECK [knobs.ap] unit: whole numbers" in stdout and "FILL IN" not in stdout
     assert "extras <-" not in stdout  # a ROS header's stamp and seq are no covariates
+    # the clock is when the devices measured (the header stamp), not when the bridge got the message
+    assert "time <- field.header.stamp (ns)" in stdout, stdout
     proc = endocal("import", "csv", tmp_path / "ros.csv", "--map", draft, "--out", tmp_path / "r")
     assert proc.returncode == 0, proc.stderr
     a, b = load_aligned(sim_log / "run").table, load_aligned(tmp_path / "r").table

@@ -245,7 +245,8 @@ class _Drafter:
 
     def _time(self) -> None:
         df, w = self.df, self.w
-        col = _pick(self.cols, _TIME, taken=self.taken)
+        # a ROS message's header stamp is when the device measured; `%time` when the bridge got it
+        col = _pick(self.cols, {"stamp"}, need={"header"}, taken=self.taken) or _pick(self.cols, _TIME, taken=self.taken)
         rising = ""
         if col is None:  # no name says clock: the first column whose numbers rise throughout
             col = next((c for c in self.cols if (v := _values(df, c)).size == len(df) > 1 and np.all(np.diff(v) > 0)),
