@@ -88,6 +88,7 @@ def test_same_seed_same_run_other_seed_other_noise(tmp_path):
         (["excite", "sine-set", "--out", "{tmp}/r", "--amplitude", "40"], ["--amplitude sets amplitude_deg",
                                                                           "amplitudes_deg"]),
         (["info", "{tmp}/noversion"], ["records no run format version"]),
+        (["excite", "random", "--out", "{tmp}/r", "--seed", "-1"], ["--seed must be a non-negative integer"]),
         (["info", "{tmp}/missing.parquet"], ["does not exist"]),
         (["info", "{tmp}/nocols.csv"], ["_cmd_deg"]),
         (["info", "{tmp}/nan.csv"], ["NaN", "row 2"]),

@@ -37,11 +37,15 @@ def cli_errors(func: F) -> F:
     (hardware faults: exit code 3).
 
     :class:`~endocal.errors.EndocalError` (and OS errors on paths the user named) are the
-    user's to fix; anything else is a bug and keeps its traceback.
+    user's to fix; anything else is a bug and keeps its traceback. Every command's ``--seed``
+    is checked here, before any work: numpy's generators take no negative seed.
     """
 
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
+        seed = kwargs.get("seed")
+        if isinstance(seed, int) and seed < 0:
+            fail(f"--seed must be a non-negative integer, got {seed}")
         try:
             return func(*args, **kwargs)
         except HardwareError as exc:  # a device failed or is missing: exit code 3, not the user's input
@@ -82,8 +86,10 @@ def slow_clock_warning(n_samples: int, span_s: float) -> str | None:
     Knob loops are logged at tens of Hz or more; a clock in ms written as ``t_s`` reads 1000x
     too slow and would make every time-based effect (delay, creep, drift) meaningless.
     """
+    from endocal.runs.format import LOG_RATE_RANGE_HZ
+
     rate = n_samples / span_s if span_s > 0 else 0.0
-    if not 0 < rate < 1.0:
+    if not 0 < rate < LOG_RATE_RANGE_HZ[0]:
         return None
     return (f"warning: {rate:.3g} samples per second: is t_s in seconds? (a clock in ms reads 1000x too slow; "
             "endocal import csv converts units)")

@@ -64,7 +64,7 @@ def dynamixel(
     unplug_after: Optional[float] = typer.Option(None, "--unplug-after", help="Fault: the bus goes silent this many seconds after the first packet."),
     hardware_error: list[str] = typer.Option([], "--hardware-error", help="Fault: ID=overload or ID=overheating (repeatable), raised --hardware-error-after seconds in."),
     hardware_error_after: float = typer.Option(5.0, "--hardware-error-after", help="Seconds after the first packet."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the lost and corrupted replies."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the lost and corrupted replies."),
 ) -> None:
     """An emulated bus of Dynamixel XM430-W350 servos on a pseudo-terminal (Protocol 2.0).
 
@@ -92,7 +92,7 @@ def rig(
     config_out: Path = typer.Option(..., "--config-out", help="Rig TOML to write, pointing at the emulated devices (for --hardware-config)."),
     probe: str = typer.Option("tee", "--probe", help="Probe preset or .toml (as for excite)."),
     sim_config: Optional[Path] = typer.Option(None, "--sim-config", help="Simulator TOML: the probe's physics behind the emulated devices."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the simulator's noise."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the simulator's noise."),
     drop: float = typer.Option(0.0, "--drop", help="Fault: probability of losing each servo reply."),
     corrupt: float = typer.Option(0.0, "--corrupt", help="Fault: probability of a wrong CRC on each servo reply."),
     unplug_after: Optional[float] = typer.Option(None, "--unplug-after", help="Fault: the servo bus goes silent this many seconds after its first packet."),
@@ -170,7 +170,7 @@ def stage(
     drop: float = typer.Option(0.0, "--drop", help="Fault: probability of losing each reply."),
     delay_ms: float = typer.Option(0.0, "--delay-ms", help="Fault: hold every reply back this long."),
     silent_after: Optional[float] = typer.Option(None, "--silent-after", help="Fault: stop answering this many seconds after the first request."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the lost replies."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the lost replies."),
 ) -> None:
     """An emulated translation/rotation stage on loopback UDP (endocal's stage protocol, version 1).
 

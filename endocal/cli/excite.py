@@ -28,7 +28,7 @@ def excite(
     probe: str = typer.Option("tee", "--probe", help="Probe preset (`tee`: ap/ml, `duodenoscope`: ud/lr) or a probe .toml."),
     sim_config: Optional[Path] = typer.Option(None, "--sim-config", help="Simulator TOML (effects and physics); see configs/sim-default.toml."),
     hardware_config: Optional[Path] = typer.Option(None, "--hardware-config", help="Rig TOML for --backend hardware; see configs/hardware-example.toml."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Seed of every random draw (simulator noise, random protocols)."),
+    seed: int = typer.Option(0, "--seed", help="Seed of every random draw (simulator noise, random protocols)."),
     realtime: bool = typer.Option(False, "--realtime", help="Pace the simulator to the wall clock (hardware always is)."),
     force: bool = typer.Option(False, "--force", help="Replace --out if it exists."),
     sets: list[str] = typer.Option([], "--set", help="Override a protocol parameter, e.g. --set frequency_hz=0.1 (repeatable)."),

@@ -21,7 +21,7 @@ def planes(
     out_path: Path = typer.Option(..., "--out", "-o", help="planes.json to write (versioned JSON)."),
     after: list[Path] = typer.Option([], "--after", help="Runs recorded with the compensator on: measured residual deviations."),
     bootstrap: int = typer.Option(200, "--bootstrap", help="Bootstrap replicates over sweeps for the 95 % CIs."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the bootstrap."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the bootstrap."),
     force: bool = typer.Option(False, "--force", help="Overwrite --out."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (deviation_deg, residual_deviation_deg, delta_deg, ...)."),
 ) -> None:

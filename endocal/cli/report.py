@@ -41,7 +41,7 @@ def report(
                                           "for a model's planes file that was moved (same SHA-256)."),
     bootstrap: int = typer.Option(400, "--bootstrap", help="Block-bootstrap replicates for the 95 % intervals "
                                   "(the default matches `endocal validate`)."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the bootstrap."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the bootstrap."),
     force: bool = typer.Option(False, "--force", help="Overwrite the report files."),
     as_json: bool = typer.Option(False, "--json", help="Print the summary and metrics as one JSON object."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),

@@ -178,7 +178,7 @@ def validate(
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (metrics, regimes, residuals, suspects, notes)."),
     json_out: Optional[Path] = typer.Option(None, "--json-out", help="Also write that JSON object to this file (the terminal view still prints)."),
     folds: int = typer.Option(5, "--folds", help="Held-out blocks of the blocked cross-validation (2 or more)."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the bootstrap intervals (and of the backend with --protocol)."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the bootstrap intervals (and of the backend with --protocol)."),
     compare: list[Path] = typer.Option([], "--compare", help="A previous model: show its error beside this one's. With --trajectory: other models to walk the path with, one per axis per set (repeatable), compared with paired tests."),
     train: list[Path] = typer.Option([], "--train", help="Estimation data (repeatable): candidate effects are fitted on it and scored on DATA. Default: the records the model file names, when found and unchanged."),
     cv: str = typer.Option("auto", "--cv", help="How effects are tested: `auto` (estimation/validation split when there is estimation data, else rolling origin), `rolling` (rolling-origin cross-validation on DATA alone), `split` (require estimation data)."),

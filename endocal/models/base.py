@@ -42,6 +42,15 @@ OUT_OF_RANGE_CHOICES = ("error", "clamp")
 _OUT_OF_RANGE_MODES = OUT_OF_RANGE_CHOICES + ("extrapolate",)
 
 
+def min_fit_samples(n_free: int) -> int:
+    """The fewest samples a fit of ``n_free`` parameters accepts: two per parameter and 20 spare.
+
+    Only what cannot be fitted with any confidence is refused; below ten per parameter the fit
+    runs and its report warns.
+    """
+    return 2 * n_free + 20
+
+
 class OutOfRangeWarning(UserWarning):
     """Commands beyond the fitted range were clamped (``out_of_range="clamp"``)."""
 
@@ -371,9 +380,7 @@ class HysteresisModel(ABC):
         names = list(owners)
         free = [n for n in names if n not in fixed]
         n_free = len(free)
-        # Refuse only what cannot be fitted with any confidence: at least two samples per free
-        # parameter (and 20 spare); below ten per parameter the fit runs and its report warns.
-        need = 2 * n_free + 20
+        need = min_fit_samples(n_free)
         if d.n_samples < need:
             raise ModelError(f"too few samples to fit {n_free} parameters: got {d.n_samples}, need at least {need} "
                              "(record longer, or a model with fewer parameters: bspline --set n_knots=3, pi "

@@ -56,7 +56,9 @@ import pandas as pd
 from endocal.errors import OutputExistsError, OutputPathError, RunFormatError
 from endocal.probe import TRANSLATION, ProbeConfig, load_probe
 from endocal.runs.aligned import CMD, CSV_SUFFIXES, MEAS, check_aligned, load_aligned, measured_at
-from endocal.runs.format import atomic_write_bytes, check_parent, parquet_bytes, prepare_output, software_versions
+from endocal.models.base import min_fit_samples
+from endocal.runs.format import (LOG_RATE_RANGE_HZ, atomic_write_bytes, check_parent, parquet_bytes, prepare_output,
+                                 software_versions)
 from endocal.runs.imported import tracker_stream, write_imported_run
 from endocal.runs.textable import read_csv_table
 
@@ -88,16 +90,8 @@ KNOB_MARGIN_SPANS = 1.0
 #: A unit mistake moves every sample; a servo answering garbage once moves one. More than 1 %
 #: of the motor rows beyond the band is a mistake.
 MAX_BEYOND_FRACTION = 0.01
-#: Motor sample rates a lab log can have, Hz. The slowest device of these rigs, the EM tracker,
-#: reports at 40 Hz and servo loops run at 100-1000 Hz: a motor stream under 1 Hz follows no
-#: hysteresis loop, and is what a clock in ms read as s makes of 100 Hz (0.1 Hz). 10 kHz is ten
-#: times the fastest servo loop (a 1 kHz Dynamixel sync read) and a tenth of what a clock in ms
-#: read as us makes of 100 Hz (100 kHz).
-RATE_RANGE_HZ = (1.0, 10_000.0)
-#: The fewest aligned rows worth importing: a fit refuses fewer than two samples per free
-#: parameter plus 20 spare (endocal/models/base.py), so no model, even of one parameter, fits
-#: fewer than 22.
-MIN_ALIGNED_ROWS = 22
+#: The fewest aligned rows worth importing: what a fit of one free parameter needs; no model fits fewer.
+MIN_ALIGNED_ROWS = min_fit_samples(1)
 #: Tip-to-base sensor distances a log can show, in bending lengths of the probe: the sensors
 #: sit at the ends of the bending section, give or take a mounting offset or a base sensor
 #: further back on the shaft (a few lengths; the NDI Aurora's field is 0.5 m across), while a
@@ -696,14 +690,14 @@ def _check_knobs(motor: dict, cmap: CsvMap, where: str) -> None:
 
 
 def _check_rate(motor_t_s: np.ndarray, cmap: CsvMap, where: str) -> None:
-    """Refuse a motor sample rate no lab log has (:data:`RATE_RANGE_HZ`): a clock unit mistake,
+    """Refuse a motor sample rate no lab log has (:data:`~endocal.runs.format.LOG_RATE_RANGE_HZ`): a clock unit mistake,
     named with the unit that would give a usual rate."""
     dt = np.diff(motor_t_s)
     if cmap.time_factor is None or not dt.size:  # date-time text carries its unit; one sample: no rate
         return
     step_s = float(np.median(dt))
     rate = 1.0 / step_s
-    lo, hi = RATE_RANGE_HZ
+    lo, hi = LOG_RATE_RANGE_HZ
     if lo <= rate <= hi:
         return
     unit = next(u for u, f in TIME_UNITS.items() if f == cmap.time_factor)
@@ -778,7 +772,7 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
         A bad map, a column the map names that the log lacks (listing those it has), a
         non-numeric column, time that does not increase, duplicated stamps, and numbers no rig
         logs (a unit mistake: knob positions far beyond the probe's limits, a sample rate
-        outside :data:`RATE_RANGE_HZ`, sensors too near or too far apart, fewer aligned rows
+        outside :data:`~endocal.runs.format.LOG_RATE_RANGE_HZ`, sensors too near or too far apart, fewer aligned rows
         than a fit can use); before anything is written. Whatever fails while writing, nothing
         is left at ``out``.
     """

@@ -40,6 +40,13 @@ from endocal.errors import OutputExistsError, OutputPathError, RunFormatError
 
 FORMAT_NAME = "endocal-run"
 FORMAT_VERSION = 1
+#: Sample rates a knob log can have, Hz. The slowest device of these rigs, the EM tracker,
+#: reports at 40 Hz and servo loops run at 100-1000 Hz: a record under 1 Hz follows no
+#: hysteresis loop, and is what a clock in ms read as s makes of 100 Hz (0.1 Hz). 10 kHz is ten
+#: times the fastest servo loop (a 1 kHz Dynamixel sync read) and a tenth of what a clock in ms
+#: read as us makes of 100 Hz (100 kHz). Import refuses a rate outside it, its map draft reads a
+#: clock's unit by it, fit and validate question a record below it.
+LOG_RATE_RANGE_HZ = (1.0, 10_000.0)
 RUN_JSON = "run.json"
 MOTOR = "motor"
 TRACKER = "tracker"

@@ -36,6 +36,7 @@ import pandas as pd
 
 from endocal.probe import load_probe
 from endocal.runs.csvlog import UNFILLED as FILL, read_log_table
+from endocal.runs.format import LOG_RATE_RANGE_HZ
 
 _TIME = {"t", "time", "stamp", "timestamp", "ts", "clock", "datetime", "date", "sec", "secs", "seconds", "elapsed"}
 _TIME_UNIT = {"s": "s", "sec": "s", "secs": "s", "seconds": "s", "ms": "ms", "msec": "ms", "millis": "ms",
@@ -126,8 +127,9 @@ def _time_unit(df: pd.DataFrame, col: str) -> tuple[str, str]:
             return unit, f"epoch-sized stamps ({mag:.3g}) read as {unit} since 1970"
     steps = np.diff(v)
     step = float(np.median(steps[steps > 0])) if np.any(steps > 0) else 0.0
+    lo_hz, hi_hz = LOG_RATE_RANGE_HZ
     for unit, scale in (("s", 1.0), ("ms", 1e-3), ("us", 1e-6), ("ns", 1e-9)):
-        if step and 1e-4 <= step * scale <= 1.0:
+        if step and 1 / hi_hz <= step * scale <= 1 / lo_hz:
             return unit, f"median step {step:.3g} {unit} = {1.0 / (step * scale):.0f} Hz"
     return "s", f"median step {step:.3g}: unit not recognised, seconds assumed"
 

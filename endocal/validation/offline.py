@@ -17,8 +17,8 @@ from endocal.models.base import HysteresisModel
 from endocal.runs.aligned import AlignedData
 from endocal.validation.data import axis_data, check_columns, load_candidates
 from endocal.validation.metrics import ErrorMetrics, error_metrics
-from endocal.validation.regimes import RegimeBreakdown, error_by_regime, turning_points
-from endocal.validation.residuals import ResidualTests, residual_tests
+from endocal.validation.regimes import RegimeBreakdown, error_by_regime
+from endocal.validation.residuals import ResidualTests, residual_tests, unexplained_shape
 from endocal.validation.suspects import (
     MAX_SCAN_SAMPLES,
     ScanResult,
@@ -107,7 +107,8 @@ class ValidationResult:
         A zero shift and a friction change fitted on the validation data with the model held
         (:mod:`endocal.validation.shift`; estimation/validation scheme only).
     unexplained : str
-        When the residual is a shape rather than noise (:func:`unexplained_shape`), what it says.
+        When the residual is a shape rather than noise, what it says
+        (:func:`~endocal.validation.residuals.unexplained_shape`).
     beyond_samples : int
         Samples whose command lies beyond the model's fitted range (predicted by extrapolation).
     """
@@ -377,23 +378,3 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
                             residuals=resid, scan=scan, notes=tuple(notes), compare=comp, pointers=tuple(pointers),
                             estimation=est_info, shift=shift, unexplained=unexplained_shape(data, resid),
                             beyond_samples=beyond)
-
-
-def unexplained_shape(data: HysteresisData, resid: ResidualTests, frac: float = 0.1) -> str:
-    """What a residual that is a shape rather than noise says, or ``""``.
-
-    Tracker noise interpolated onto the motor clock stays correlated for a few frames (tens of
-    ms); a residual that stays correlated for a tenth of a half-cycle (the time between two
-    reversals) or longer is an error that follows the loop: a shape the model lacks, whether or
-    not a catalog term captures it. Then "nothing is missing" would contradict the residual.
-    """
-    w = resid.whiteness
-    if w.white or data.t_s is None:
-        return ""
-    duration = sum(float(np.ptp(data.t_s[sl])) for sl in data.run_slices())
-    half = duration / (turning_points(data).size + 1)
-    if not half > 0 or w.correlation_time_s < frac * half:
-        return ""
-    return (f"the residual is not noise: it stays correlated for {w.correlation_time_s:.3g} s, "
-            f"{100 * w.correlation_time_s / half:.0f} % of a half-cycle ({half:.3g} s), so the model misses a shape that "
-            "follows the loop; look at the loop (endocal report) and at another base (--model)")

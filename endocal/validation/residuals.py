@@ -26,6 +26,7 @@ from scipy.stats import chi2, norm
 
 from endocal.models.data import OTHER_CMD, HysteresisData
 from endocal.validation.data import is_constant, speed_dps
+from endocal.validation.regimes import turning_points
 from endocal.validation.shift import direction_of_motion
 
 
@@ -211,3 +212,23 @@ def residual_tests(data: HysteresisData, resid_deg: np.ndarray, *, max_lag_s: fl
             signal=name, corr_at_zero=float(r[max_lag]), max_abs_corr=float(abs(r[i])),
             lag_s=float((i - max_lag) * dt), bound=bound, significant=bool(abs(r[i]) > bound), hint=_hint(name)))
     return ResidualTests(white, tuple(cross))
+
+
+def unexplained_shape(data: HysteresisData, resid: ResidualTests, frac: float = 0.1) -> str:
+    """What a residual that is a shape rather than noise says, or ``""``.
+
+    Tracker noise interpolated onto the motor clock stays correlated for a few frames (tens of
+    ms); a residual that stays correlated for a tenth of a half-cycle (the time between two
+    reversals) or longer is an error that follows the loop: a shape the model lacks, whether or
+    not a catalog term captures it. Then "nothing is missing" would contradict the residual.
+    """
+    w = resid.whiteness
+    if w.white or data.t_s is None:
+        return ""
+    duration = sum(float(np.ptp(data.t_s[sl])) for sl in data.run_slices())
+    half = duration / (turning_points(data).size + 1)
+    if not half > 0 or w.correlation_time_s < frac * half:
+        return ""
+    return (f"the residual is not noise: it stays correlated for {w.correlation_time_s:.3g} s, "
+            f"{100 * w.correlation_time_s / half:.0f} % of a half-cycle ({half:.3g} s), so the model misses a shape that "
+            "follows the loop; look at the loop (endocal report) and at another base (--model)")
