@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -9,10 +10,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def endocal(*args, timeout: float = 600):
-    """``python -m endocal ARGS`` from the project root; the CompletedProcess (text)."""
+def endocal(*args, timeout: float = 600, env: dict | None = None):
+    """``python -m endocal ARGS`` from the project root; the CompletedProcess (text).
+
+    ``env`` adds to (or overrides) this process's environment.
+    """
     return subprocess.run([sys.executable, "-m", "endocal", *map(str, args)], capture_output=True, text=True,
-                          cwd=ROOT, timeout=timeout)
+                          cwd=ROOT, timeout=timeout, env={**os.environ, **env} if env else None)
 
 
 def one_line_exit_2(proc, *fragments):

@@ -31,8 +31,8 @@ ROOT = Path(__file__).resolve().parents[1]
 TEE = PRESETS["tee"]
 
 
-def endocal(*args, ok=True):
-    proc = run_endocal(*args)
+def endocal(*args, ok=True, env=None):
+    proc = run_endocal(*args, env=env)
     if ok:
         assert proc.returncode == 0, (args, proc.stdout, proc.stderr)
     return proc
@@ -153,9 +153,12 @@ def test_circles_within_a_millimetre_with_the_loops_models(calibrated, name):
     meta = json.loads((tmp / f"walks-{name}" / "walk-1" / "run.json").read_text())
     assert meta["protocol"]["tip_path"]["name"] == name
     if name == "circle-1":  # without --planes the models' recorded planes are played: the same walk
-        same = tmp / "same.json"
-        endocal("validate", ap_best, ml_best, "--trajectory", name, "--json-out", same)
+        same, scratch = tmp / "same.json", tmp / "scratch"
+        scratch.mkdir()
+        endocal("validate", ap_best, ml_best, "--trajectory", name, "--json-out", same, env={"TMPDIR": str(scratch)})
         assert json.loads(same.read_text())["metrics"] == best
+        # without --runs-out the walk is logged to a temporary folder and nothing is left behind
+        assert not list(scratch.glob("endocal-path-*")) and json.loads(same.read_text())["walks"][0]["run"] is None
     # the report draws desired and reached path and the error along it, with the same median
     html = tmp / f"report-{name}" / "report.html"
     html.parent.mkdir()

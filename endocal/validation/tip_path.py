@@ -18,7 +18,7 @@ a percentage of the path length (the thesis: about 2.5 %).
 from __future__ import annotations
 
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -214,7 +214,7 @@ def walk_tip_path(
     planes : PlanesCalibration, optional
         Orthogonal compensation between inverse kinematics and the hysteresis inverse.
     out : Path, optional
-        Run folder to write (a temporary one when omitted).
+        Run folder to write (when omitted the walk is logged to a temporary folder, removed after).
     guard : ForceGuard, optional
         Contact-force guard for the run.
 
@@ -235,13 +235,20 @@ def walk_tip_path(
     traj.check_limits(probe)  # before anything moves
     seg = next(s for s in desired.segments if s.label == "path")
     walk_s = (seg.start_s + PREROLL_S, seg.stop_s + PREROLL_S)
-    run = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="endocal-path-")) / "run"
     info = {"name": path.name, "tip_path": path.to_dict(), "walk_s": list(walk_s), "preroll_s": PREROLL_S,
             "hysteresis_compensation": {a: str((model_files or {}).get(a, type(m).__name__)) for a, m in models.items()},
             "orthogonal_compensation": planes is not None}
-    run_excitation(traj, backend_factory(), probe, run, protocol_info=info, seed=seed, force=True, progress=progress,
-                   guard=guard)
-    return evaluate_tip_run(run, label=label, models=model_files or {a: type(m).__name__ for a, m in models.items()})
+    described = model_files or {a: type(m).__name__ for a, m in models.items()}
+
+    def walk(run: Path) -> TipPathResult:
+        run_excitation(traj, backend_factory(), probe, run, protocol_info=info, seed=seed, force=True,
+                       progress=progress, guard=guard)
+        return evaluate_tip_run(run, label=label, models=described)
+
+    if out is not None:
+        return walk(Path(out))
+    with tempfile.TemporaryDirectory(prefix="endocal-path-") as tmp:  # nothing kept when no run folder is asked for
+        return replace(walk(Path(tmp) / "run"), run=None)
 
 
 def tip_error_units(results: list[TipPathResult]) -> tuple[Units, list[np.ndarray]]:
