@@ -480,12 +480,36 @@ def _no_tick_keys(text: str) -> str:
      .replace('position = ["base_x_m", "base_y_m", "base_z_m"]\nunit = "m"',
               'position = ["base_x_m", "base_y_m", "base_z_m"]\nunit = "mm"'),
      ('[tip] unit = "mm"', "bends over 60 mm", "metres need unit")),
+    # NDI's scalar-first quaternions declared scalar-last (ROS): the base frame is another
+    # rotation and the tip, straight ahead at neutral, never comes near its axis
+    (lambda t: t.replace('order = "wxyz"', 'order = "xyzw"'),
+     ('[base] order = "xyzw"', "deg or more off the base sensor's z axis in 95 % of the frames",
+      'with order = "wxyz" 5 % come within', "scalar-first",
+      'set [base] order = "wxyz" (and [tip] order')),
 ])
 def test_numbers_no_rig_logs_are_refused_as_a_unit_mistake(sim_log, tmp_path, edit, fragments):
     (tmp_path / "map.toml").write_text(edit(MAP.read_text()))
     one_line_exit_2(endocal("import", "csv", sim_log / "log.csv", "--map", tmp_path / "map.toml", "--out",
                             tmp_path / "run"), *fragments)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["map.toml"]
+
+
+def test_a_knob_in_radians_read_as_degrees_is_refused_by_its_gain(sim_log, tmp_path):
+    # within the probe's limits (+-1.6 "deg"), so only the bend it drives gives it away: 57 deg
+    # of bend per knob degree; the ml knob, logged right, passes
+    log = pd.read_csv(sim_log / "log.csv")
+    log["ap_present_rad"] = np.radians((log["ap_present_ticks"] - 2048) / TICKS_PER_DEG)
+    log.to_csv(tmp_path / "log.csv", index=False)
+    text = _no_tick_keys(MAP.read_text()).replace('position = "ap_present_ticks"', 'position = "ap_present_rad"')
+    text = text.replace('unit = "ticks"                # deg', 'unit = "deg" # deg').replace('goal = "ap_goal_ticks"', "")
+    (tmp_path / "map.toml").write_text(text)
+    one_line_exit_2(endocal("import", "csv", tmp_path / "log.csv", "--map", tmp_path / "map.toml", "--out",
+                            tmp_path / "run"), "read as deg, column 'ap_present_rad'", "deg of bend per knob degree",
+                    '[knobs.ap] unit right? (radians need unit = "rad")')
+    assert not (tmp_path / "run").exists()
+    (tmp_path / "map.toml").write_text(text.replace('unit = "deg" # deg', 'unit = "rad" # deg'))
+    proc = endocal("import", "csv", tmp_path / "log.csv", "--map", tmp_path / "map.toml", "--out", tmp_path / "run")
+    assert proc.returncode == 0, proc.stderr
 
 
 def test_too_few_aligned_rows_for_any_fit_are_refused(sim_log, tmp_path):

@@ -54,9 +54,10 @@ import numpy as np
 import pandas as pd
 
 from endocal.errors import OutputExistsError, OutputPathError, RunFormatError
+from endocal.kinematics.bending import bending_angles_deg, tip_in_base_mm
+from endocal.models.base import min_fit_samples
 from endocal.probe import TRANSLATION, ProbeConfig, load_probe
 from endocal.runs.aligned import CMD, CSV_SUFFIXES, MEAS, check_aligned, load_aligned, measured_at
-from endocal.models.base import min_fit_samples
 from endocal.runs.format import (LOG_RATE_RANGE_HZ, atomic_write_bytes, check_parent, parquet_bytes, prepare_output,
                                  software_versions)
 from endocal.runs.imported import tracker_stream, write_imported_run
@@ -103,6 +104,28 @@ DISTANCE_RANGE_LENGTHS = (0.05, 20.0)
 #: or ROS bridge writes for a sensor out of the field. A unit quaternion logged to even three
 #: decimals has norm 1 within 2e-3; below 0.5 the reading is invalid.
 QUAT_MIN_NORM = 0.5
+#: Thesis eq. 1 measures the bend from the base sensor's z axis, so a recording that passes
+#: through the neutral bend brings the tip near that axis in some frames (a sensor mounted a few
+#: degrees askew, or a knob never quite at neutral, keeps it within about 10 deg). Read in the
+#: wrong order, the base quaternion is another rotation, which turns the whole recording away
+#: from the axis (90 to 180 deg for the sims' and a typical bench's poses). The frames nearest the
+#: axis are the :data:`NEAR_AXIS_QUANTILE` quantile of the off-axis angle; the map's order is
+#: called a mistake when they stay :data:`OFF_AXIS_WRONG_DEG` off and the other order brings
+#: them within :data:`OFF_AXIS_RIGHT_DEG` (a recording that never nears neutral, or a sensor
+#: mounted across the probe, is off in both orders and imported as it is).
+NEAR_AXIS_QUANTILE = 0.05
+OFF_AXIS_WRONG_DEG = 30.0
+OFF_AXIS_RIGHT_DEG = 15.0
+#: Degrees of bend per knob degree beyond which the knob's unit is called a mistake: a tendon
+#: drive turns the knob about as far as the tip bends (the thesis's TEE probe: knob and bend
+#: both about +-90 deg; a duodenoscope's knob gear at most a few times), while a knob in
+#: radians read as degrees shows 57 times its real gain.
+BEND_PER_KNOB_MAX = 10.0
+#: The least knob travel (deg, 1st to 99th percentile) and correlation with its bend over which
+#: that gain is measured: a knob that stays put (the other one moves in a sine-set, and twisted
+#: planes move this bend too) has no gain to measure.
+KNOB_SPAN_MIN_DEG = 0.5
+KNOB_BEND_MIN_CORR = 0.8
 
 
 @dataclass(frozen=True)
@@ -727,6 +750,57 @@ def _check_distance(tip: np.ndarray, base: np.ndarray, good: np.ndarray, cmap: C
                          f"over {length:g} mm: is the length unit right (metres need unit = \"m\", millimetres \"mm\")?")
 
 
+def _off_axis_deg(tip: np.ndarray, base: np.ndarray, q_wxyz: np.ndarray) -> np.ndarray:
+    """Angle (deg) of the tip, in the base sensor's frame, from that frame's z axis (the bend of eq. 1)."""
+    p = tip_in_base_mm(tip[:, 1:4], base[:, 1:4], q_wxyz)
+    return np.degrees(np.arctan2(np.hypot(p[:, 0], p[:, 1]), p[:, 2]))
+
+
+def _check_base_order(tip: np.ndarray, base: np.ndarray, good: np.ndarray, cmap: CsvMap, where: str) -> None:
+    """Refuse a base quaternion order that turns the recording away from the base axis when the
+    other order does not (:data:`OFF_AXIS_WRONG_DEG`), naming ``[base] order``."""
+    q = base[good, 4:]  # scalar first, as the map's order reads the logged columns
+    other = "wxyz" if cmap.base.order == "xyzw" else "xyzw"
+    q_other = q[:, [1, 2, 3, 0]] if other == "wxyz" else q[:, [3, 0, 1, 2]]
+    near = [float(np.quantile(_off_axis_deg(tip[good], base[good], qq), NEAR_AXIS_QUANTILE)) for qq in (q, q_other)]
+    if near[0] >= OFF_AXIS_WRONG_DEG and near[1] <= OFF_AXIS_RIGHT_DEG:
+        tip_too = " (and [tip] order, if it is logged the same way)" if cmap.tip.order == cmap.base.order else ""
+        raise RunFormatError(
+            f"{where}: with [base] order = \"{cmap.base.order}\" the tip stays {near[0]:.0f} deg or more off the base "
+            f"sensor's z axis in {100 * (1 - NEAR_AXIS_QUANTILE):g} % of the frames (the bend of thesis eq. 1, near 0 "
+            f"at neutral), with order = \"{other}\" {100 * NEAR_AXIS_QUANTILE:g} % come within {near[1]:.1f} deg: the "
+            f"log's quaternions are {'scalar-first' if other == 'wxyz' else 'scalar-last'}; set [base] order = "
+            f"\"{other}\"{tip_too}")
+
+
+def _check_knob_gain(motor: dict, tip: np.ndarray, base: np.ndarray, good: np.ndarray, cmap: CsvMap,
+                     where: str) -> None:
+    """Refuse a knob whose bend moves more than :data:`BEND_PER_KNOB_MAX` degrees per knob degree:
+    a unit mistake (radians read as degrees, a wrong ``ticks_per_rev``), naming ``[knobs.AXIS] unit``."""
+    probe = cmap.probe
+    bends = dict(zip(probe.bending_axes, bending_angles_deg(tip_in_base_mm(tip[good, 1:4], base[good, 1:4],
+                                                                           base[good, 4:]))))
+    t_frame = tip[good, 0]
+    inside = (t_frame >= motor["t_s"][0]) & (t_frame <= motor["t_s"][-1])
+    hints = {"deg": 'radians need unit = "rad"', "rad": "check the column holds this knob's angle",
+             "ticks": "check ticks_per_rev"}
+    for dof, k in cmap.knobs.items():
+        if dof not in bends or inside.sum() < MIN_ALIGNED_ROWS:
+            continue
+        knob = np.interp(t_frame[inside], motor["t_s"], motor[f"{dof}_pos_{probe.unit(dof)}"])
+        bend = bends[dof][inside]
+        lo, hi = np.quantile(knob, [0.01, 0.99])
+        if hi - lo < KNOB_SPAN_MIN_DEG or abs(np.corrcoef(knob, bend)[0, 1]) < KNOB_BEND_MIN_CORR:
+            continue
+        gain = abs(float(np.polyfit(knob, bend, 1)[0]))
+        if gain > BEND_PER_KNOB_MAX:
+            b_lo, b_hi = np.quantile(bend, [0.01, 0.99])
+            raise RunFormatError(
+                f"{where}: read as {k.unit}, column '{k.position}' turns the {dof} knob over {hi - lo:.3g} deg while "
+                f"the tip bends over {b_hi - b_lo:.3g} deg: {gain:.0f} deg of bend per knob degree, where a tendon "
+                f"drive gives about 1 (at most {BEND_PER_KNOB_MAX:g}): is [knobs.{dof}] unit right? ({hints[k.unit]})")
+
+
 def _check_aligned(n_aligned: int, t_motor: np.ndarray, t_read: np.ndarray, what: str, cmap: CsvMap, where: str) -> None:
     """Refuse an import no fit could use: fewer than :data:`MIN_ALIGNED_ROWS` aligned rows
     (motor samples within :data:`MAX_GAP_S` of a ``what``: tracker frame, angle reading)."""
@@ -772,8 +846,9 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
         A bad map, a column the map names that the log lacks (listing those it has), a
         non-numeric column, time that does not increase, duplicated stamps, and numbers no rig
         logs (a unit mistake: knob positions far beyond the probe's limits, a sample rate
-        outside :data:`~endocal.runs.format.LOG_RATE_RANGE_HZ`, sensors too near or too far apart, fewer aligned rows
-        than a fit can use); before anything is written. Whatever fails while writing, nothing
+        outside :data:`~endocal.runs.format.LOG_RATE_RANGE_HZ`, sensors too near or too far apart, a base
+        quaternion read in the wrong order, a knob whose bend moves many times as far as it does, fewer
+        aligned rows than a fit can use); before anything is written. Whatever fails while writing, nothing
         is left at ``out``.
     """
     log, out = Path(log), Path(out)
@@ -837,6 +912,8 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
                "quaternion that is no rotation)" if is_frame.any() else "")
         raise RunFormatError(f"{where}: no row has both the tip and the base pose{why}")
     _check_distance(tip, base, good, cmap, where)
+    _check_base_order(tip, base, good, cmap, where)
+    _check_knob_gain(motor, tip, base, good, cmap, where)
     # the aligned rows align() will make: motor samples within MAX_GAP_S of a frame with both sensors
     _check_aligned(int(measured_at(t[good], motor["t_s"], MAX_GAP_S).sum()), motor["t_s"], t[good],
                    "tracker frame", cmap, where)
