@@ -583,6 +583,7 @@ def ros_log(sim_log):
     for i, axis in enumerate(("ap", "ml")):
         ros[f"field.position{i}"] = np.round(log[f"{axis}_present_ticks"])  # a servo reports whole ticks
         ros[f"field.goal{i}"] = np.round(log[f"{axis}_goal_ticks"])
+    ros["field.effort0"] = log["ap_current_ma"]  # dynamixel_workbench publishes the present current (mA) as effort
     for sensor in ("tip", "base"):
         for a in "xyz":
             ros[f"field.{sensor}.pose.position.{a}"] = log[f"{sensor}_{a}_m"]
@@ -598,6 +599,7 @@ def test_a_drafted_map_of_a_ros_log_maps_its_numbered_motors_and_never_a_pose_as
     assert "knob ml <- field.position1 (goal field.goal1)" in stdout, stdout
     assert "CHECK [knobs.ap] position: motor 0 read as the ap knob" in stdout
     assert "CHECK [knobs.ap] unit: whole numbers" in stdout and "FILL IN" not in stdout
+    assert "CHECK [knobs.ap] current: a JointState's effort read as the servo's current" in stdout, stdout
     assert "extras <-" not in stdout  # a ROS header's stamp and seq are no covariates
     # the clock is when the devices measured (the header stamp), not when the bridge got the message
     assert "time <- field.header.stamp (ns)" in stdout, stdout
@@ -609,6 +611,8 @@ def test_a_drafted_map_of_a_ros_log_maps_its_numbered_motors_and_never_a_pose_as
     # same poses, on a clock read from ns stamps to 2.4e-7 s (< 1e-4 deg at < 100 deg/s)
     np.testing.assert_allclose(b["ap_cmd_deg"], a["ap_cmd_deg"], atol=0.5 * 360 / 4096 + 1e-9)
     np.testing.assert_allclose(b["ml_meas_deg"], a["ml_meas_deg"], atol=1e-3)
+    np.testing.assert_allclose(read_stream(tmp_path / "r", "motor")["ap_current_ma"],
+                               read_stream(sim_log / "run", "motor")["ap_current_ma"], rtol=1e-6)
 
 
 def test_a_draft_that_found_one_numbered_motor_leaves_the_other_knob_to_fill_in(ros_log, tmp_path):

@@ -12,7 +12,8 @@ one, else by the numbers:
   date-times; no clock gives ``sample_rate_hz``;
 - knob positions: a column named for a probe axis (``ap_present_ticks``), else per-motor columns
   numbered by a suffix as ROS writes a JointState (``position0``, ``goal1``: motor 0 is the
-  probe's first axis, marked CHECK); whole numbers within one servo turn are ticks (zero at
+  probe's first axis, marked CHECK; a numbered `effort` is its current, as Dynamixel drivers
+  publish it, marked CHECK); whole numbers within one servo turn are ticks (zero at
   mid-turn, 4096 per turn, as the XM430 the thesis uses), values within +-2 pi are radians, else
   degrees; a column of an EM pose is never a knob;
 - EM positions: below 2 in magnitude are metres, else millimetres;
@@ -43,7 +44,7 @@ _TIME_UNIT = {"s": "s", "sec": "s", "secs": "s", "seconds": "s", "ms": "ms", "ms
               "milliseconds": "ms", "us": "us", "usec": "us", "micros": "us", "ns": "ns", "nsec": "ns",
               "nanos": "ns", "nanoseconds": "ns"}
 _GOAL = {"goal", "cmd", "command", "commanded", "target", "setpoint", "sp", "desired", "demand"}
-_CURRENT = {"current", "cur", "ma", "amp", "amps"}
+_CURRENT = {"current", "cur", "ma", "amp", "amps", "effort"}  # a JointState's effort: a servo's current
 #: words of a knob's position: those that name the driving side outright, then generic ones
 _DRIVE = {"knob", "motor", "pulley", "input", "drive", "actuator", "servo", "present", "in"}
 _POSITION = _DRIVE | {"pos", "position", "actual", "angle", "enc", "encoder"}
@@ -165,11 +166,12 @@ def _numbered(cols: list[str], taken: set[str]) -> dict[int, dict[str, str]]:
     out: dict[int, dict[str, str]] = {}
     for c in cols:
         ws = words(c)
-        if c in taken or set(ws) & (_POSE_WORDS | _CURRENT):
+        if c in taken or set(ws) & _POSE_WORDS:
             continue
         for w in ws:
             m = _NUMBERED.fullmatch(w)
-            role = m and ("goal" if m.group(1) in _GOAL else "position" if m.group(1) in _POSITION else None)
+            role = m and ("goal" if m.group(1) in _GOAL else "position" if m.group(1) in _POSITION else
+                          "current" if m.group(1) in _CURRENT else None)
             if role:
                 out.setdefault(int(m.group(2)), {}).setdefault(role, c)
     return out
@@ -274,7 +276,9 @@ class _Drafter:
         if goal:
             w.key("goal", goal, "the goal sent to the motor, same unit")
         if cur:
-            w.key("current", cur, "motor current")
+            w.key("current", cur, "motor current", where=f"[knobs.{axis}] ",
+                  check="a JointState's effort read as the servo's current (Dynamixel drivers publish mA there); "
+                        "delete the line if it is a torque" if "effort" in cur.lower() else "")
             w.key("current_unit", "A" if words(cur)[-1:] == ["a"] or "amp" in words(cur) else "mA", "mA or A")
         self.roles[f"knob {axis}"] = pos + (f" (goal {goal})" if goal else "")
 
@@ -299,8 +303,10 @@ class _Drafter:
             numbered = _numbered(self.cols, self.taken)
             for axis, n in zip(axes, sorted(numbered)):
                 pos, goal = numbered[n].get("position"), numbered[n].get("goal")
+                if pos is None and goal is None:  # a motor that logged only its current is no knob
+                    continue
                 self.w.table(f"knobs.{axis}")
-                self._knob(axis, pos or goal, goal if pos else None, None,
+                self._knob(axis, pos or goal, goal if pos else None, numbered[n].get("current"),
                            "the knob's measured position (the command when there is no goal)",
                            check=f"motor {n} read as the {axis} knob (numbered motors in the order of the probe's "
                                  f"axes: {', '.join(axes)})")
