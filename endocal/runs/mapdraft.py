@@ -12,7 +12,7 @@ one, else by the numbers:
   date-times; no clock gives ``sample_rate_hz``;
 - knob positions: a column named for a probe axis (``ap_present_ticks``), else per-motor columns
   numbered by a suffix as ROS writes a JointState (``position0``, ``goal1``: motor 0 is the
-  probe's first axis, marked CHECK; a numbered `effort` is its current, as Dynamixel drivers
+  probe's first axis, marked CHECK; a numbered ``effort`` is its current, as Dynamixel drivers
   publish it, marked CHECK); whole numbers within one servo turn are ticks (zero at
   mid-turn, 4096 per turn, as the XM430 the thesis uses), values within +-2 pi are radians, else
   degrees; a column of an EM pose is never a knob;
