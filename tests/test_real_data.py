@@ -1,6 +1,7 @@
 """Real measured hysteresis nobody here generated: the piezo slice in data_samples/piezo."""
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -131,3 +132,32 @@ def test_a_residual_that_follows_the_loop_is_never_called_nothing_missing():
     res = validate_offline(model, [_cycle(data, 4)], train=train, model_path="m.json")
     assert not res.suspects and not res.clean
     assert res.unexplained.startswith("the residual is not noise") and "of a half-cycle" in res.unexplained
+
+
+def test_a_record_cut_mid_swing_is_said_to_measure_its_cut():
+    """Cut from the continuous recording at 1.8 V on the way down, a cycle starts where the stack's
+    history left it, not where a model starts (as if the drive came from 0): `pi` fitted on
+    another cycle is off by 6.2 until the first reversal and 0.87 after it (0.59 on a cycle cut
+    on the way up, where its start from 0 is the stack's own). validate says so with those
+    numbers; the cycle cut at the drive's 0 starts where a homed knob would and is not called cut."""
+    from endocal.models import make_model
+    from endocal.runs.aligned import AlignedData
+    from endocal.validation.data import axis_data
+    from endocal.validation.offline import validate_offline
+
+    data = load_aligned(PIEZO)
+
+    def cut(a):
+        part = data.table.iloc[a: a + 200].copy()
+        part["t_s"] -= part["t_s"].iloc[0]
+        return AlignedData(part.reset_index(drop=True), ["piezo"], Path(f"from{a}.csv"), str(a) * 16, {})
+
+    train = [cut(1400)]
+    model = make_model("pi", axis="piezo").fit(axis_data(train, "piezo"))
+    down = validate_offline(model, [cut(3700)], train=train, model_path="m.json")
+    said = [n for n in down.notes if n.startswith("the validation record starts mid-swing")]
+    assert len(said) == 1 and "(command 1.8 deg within 0..3.6, moving down)" in said[0], down.notes
+    before, after = (float(x) for x in re.findall(r"is ([\d.]+) deg RMS, [\d.]+x the ([\d.]+) deg", said[0])[0])
+    assert before >= 5 * after  # the stretch before the first reversal carries the error
+    at_zero = validate_offline(model, [cut(3750)], train=train, model_path="m.json")
+    assert not any("starts" in n for n in at_zero.notes), at_zero.notes

@@ -18,7 +18,7 @@ from endocal.runs.aligned import AlignedData
 from endocal.validation.data import axis_data, check_columns, load_candidates
 from endocal.validation.metrics import ErrorMetrics, error_metrics
 from endocal.validation.regimes import RegimeBreakdown, error_by_regime
-from endocal.validation.residuals import ResidualTests, residual_tests, unexplained_shape
+from endocal.validation.residuals import ResidualTests, cut_start, residual_tests, unexplained_shape
 from endocal.validation.suspects import (
     MAX_SCAN_SAMPLES,
     ScanResult,
@@ -317,7 +317,7 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     regimes = error_by_regime(data, pred, seed=seed)
     load_cols = list(dict.fromkeys([*(load_columns or []), *load_candidates(data, axes_all)[0]]))
     resid = residual_tests(data, data.meas_deg - pred, alpha=alpha, load_columns=load_cols)
-    notes = []
+    notes = [cut_start(data, data.meas_deg - pred)]
     if est is not None:
         same = {d["sha256"] for d in est_info if d["sha256"]} & {d["sha256"] for d in info if d["sha256"]}
         if same:
@@ -353,7 +353,9 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
         speeds = (moving_speed_dps(est), moving_speed_dps(data))
         pointers += [p for p in shift_pointers(shift, scan, covariate_changes(est, data), speeds)
                      if p.effect not in named]
-    notes += list(scan.notes)
+    if est is not None:
+        notes.append(cut_start(est, est.meas_deg - predict_extrapolated(model, est)[0], "estimation record"))
+    notes = [n for n in notes if n] + list(scan.notes)
     comp = None
     if compare is not None and scan.scheme != "none":
         compare._require_fitted()

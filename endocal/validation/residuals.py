@@ -232,3 +232,53 @@ def unexplained_shape(data: HysteresisData, resid: ResidualTests, frac: float = 
     return (f"the residual is not noise: it stays correlated for {w.correlation_time_s:.3g} s, "
             f"{100 * w.correlation_time_s / half:.0f} % of a half-cycle ({half:.3g} s), so the model misses a shape that "
             "follows the loop; look at the loop (endocal report) and at another base (--model)")
+
+
+
+#: A record's error before its first reversal this many times its error after it is the start,
+#: not the physics (see :func:`cut_start`).
+START_ERROR_RATIO = 2.0
+#: A record starting within this fraction of its command span from 0 starts where a homed knob
+#: rests, in the state every model assumes; a larger error before its first reversal is
+#: something else (a drift, the virgin loading of the first sweep), not the cut.
+NEUTRAL_FRAC = 0.05
+
+
+def cut_start(data: HysteresisData, resid_deg: np.ndarray, what: str = "validation record") -> str:
+    """What cutting a record from a longer one does to its error, or ``""``.
+
+    Every model starts each record in an assumed internal state: its operators as if the knob
+    had come straight from 0 (the PI's eq. 5 start), or on the mid-line between its branches (the
+    B-spline). A knob homed to 0 before an acquisition has that state; a record cut from a
+    longer one away from 0 has the state its history left, and until the first reversal (longer,
+    for a wide play) the model follows the wrong branch: an error that measures the cut, not the
+    physics, and that a time-dependent candidate (drift, creep) can fit. Said when a record that
+    does not start at 0 (:data:`NEUTRAL_FRAC`) has an RMSE before its first reversal
+    :data:`START_ERROR_RATIO` times that after it.
+    """
+    tp = turning_points(data)
+    found = []
+    for sl in data.run_slices():
+        u = data.cmd_deg[sl]
+        first = tp[(tp >= sl.start) & (tp < sl.stop)]
+        span = float(np.ptp(u))
+        if not first.size or not span > 0 or abs(u[0]) <= NEUTRAL_FRAC * span:
+            continue
+        k = int(first[0])
+        before, after = resid_deg[sl.start:k], resid_deg[k:sl.stop]
+        if before.size < 2 or after.size < 2:
+            continue
+        rb, ra = float(np.sqrt(np.mean(before**2))), float(np.sqrt(np.mean(after**2)))
+        if rb >= START_ERROR_RATIO * ra:
+            moved = u[np.argmax(np.abs(u - u[0]) > 0.01 * span)] - u[0]
+            found.append((rb / max(ra, 1e-12), rb, ra, float(u[0]), float(u.min()), float(u.max()), moved))
+    if not found:
+        return ""
+    _, rb, ra, u0, lo, hi, moved = max(found)
+    which = f"the {what}" if data.n_runs == 1 else f"{len(found)} of {data.n_runs} {what}s (the worst)"
+    where = "mid-swing" if lo < u0 < hi else "at a turning point"
+    return (f"{which} starts {where} (command {u0:.3g} deg within {lo:.3g}..{hi:.3g}, moving "
+            f"{'up' if moved > 0 else 'down'}): its error before the first reversal is {rb:.3g} deg RMS, "
+            f"{rb / ra:.1f}x the {ra:.3g} deg after it. Every model starts a record in an assumed state (as if the "
+            "knob came from 0), which a record cut from a longer one does not have: that stretch measures the cut, "
+            "not the physics, and a candidate may fit it; record from the knob at rest at 0, or cut records there")
