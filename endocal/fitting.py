@@ -12,6 +12,7 @@ from endocal.models import make_model
 from endocal.models.base import HysteresisModel
 from endocal.runs.aligned import load_aligned
 from endocal.validation.data import axis_data
+from endocal.validation.residuals import cut_start
 
 
 @dataclass
@@ -23,6 +24,7 @@ class HysteresisFit:
     hashes: list[str]
     samples: int
     duration_s: float = 0.0  # summed over the records: with ``samples``, the rate a user can check
+    cut_start: str = ""  # what a record cut away from 0 did to the fit (validation.residuals.cut_start)
 
     @property
     def rate_hz(self) -> float:
@@ -72,4 +74,5 @@ def fit_hysteresis(
     data = axis_data(datas, axis, planes)
     model = make_model(base, effects=effects or (), axis=axis, **settings).fit(data, warm_start=warm)
     span = sum(float(np.ptp(d.table["t_s"])) for d in datas)
-    return HysteresisFit(model, [d.source for d in datas], [d.sha256 for d in datas], len(data.cmd_deg), span)
+    cut = cut_start(data, model.predict(data) - data.meas_deg, "fitted record")
+    return HysteresisFit(model, [d.source for d in datas], [d.sha256 for d in datas], len(data.cmd_deg), span, cut)

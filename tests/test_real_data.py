@@ -161,3 +161,18 @@ def test_a_record_cut_mid_swing_is_said_to_measure_its_cut():
     assert before >= 5 * after  # the stretch before the first reversal carries the error
     at_zero = validate_offline(model, [cut(3750)], train=train, model_path="m.json")
     assert not any("starts" in n for n in at_zero.notes), at_zero.notes
+
+
+def test_fit_warns_when_its_record_was_cut_mid_swing(tmp_path):
+    """The B-spline starts a record on the mid-line between its branches; the cycle cut at 1.8 V
+    on the way up was on the rising branch: off by 1.03 before the first reversal, 0.25 after."""
+    from tests._cli import endocal
+
+    data = load_aligned(PIEZO)
+    part = data.table.iloc[1400:1600].copy()
+    part["t_s"] -= part["t_s"].iloc[0]
+    part.to_csv(tmp_path / "cut.csv", index=False)
+    proc = endocal("fit", "hysteresis", tmp_path / "cut.csv", "--axis", "piezo", "--model", "bspline",
+                   "--out", tmp_path / "m.json")
+    assert proc.returncode == 0, proc.stderr
+    assert "warning: the fitted record starts mid-swing (command 1.8 deg within 0..3.6, moving up)" in proc.stdout
