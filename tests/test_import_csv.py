@@ -486,6 +486,11 @@ def _no_tick_keys(text: str) -> str:
      ('[base] order = "xyzw"', "deg or more off the base sensor's z axis in 95 % of the frames",
       'with order = "wxyz" 5 % come within', "scalar-first",
       'set [base] order = "wxyz" (and [tip] order')),
+    # a zero_ticks a quarter turn off: the knob reads 90 deg where the probe is straight (within
+    # a limit span of the limits, so only the bend gives it away: bent -58 deg at "knob 0")
+    (lambda t: t.replace("zero_ticks = 2048             #", "zero_ticks = 1024             #"),
+     ("at ap knob 0 as the map reads it the tip is bent -", "column 'ap_present_ticks' reads 20",
+      "is [knobs.ap] zero_ticks right?")),
 ])
 def test_numbers_no_rig_logs_are_refused_as_a_unit_mistake(sim_log, tmp_path, edit, fragments):
     (tmp_path / "map.toml").write_text(edit(MAP.read_text()))
@@ -510,6 +515,23 @@ def test_a_knob_in_radians_read_as_degrees_is_refused_by_its_gain(sim_log, tmp_p
     (tmp_path / "map.toml").write_text(text.replace('unit = "deg" # deg', 'unit = "rad" # deg'))
     proc = endocal("import", "csv", tmp_path / "log.csv", "--map", tmp_path / "map.toml", "--out", tmp_path / "run")
     assert proc.returncode == 0, proc.stderr
+
+
+def test_a_knob_logged_in_degrees_from_another_zero_takes_zero(tmp_path, sim_log):
+    # a servo's absolute angle: 180 deg where the probe is straight
+    log = pd.read_csv(sim_log / "log.csv")
+    log["ap_abs_deg"] = 180.0 + (log["ap_present_ticks"] - 2048) / TICKS_PER_DEG
+    log.to_csv(tmp_path / "log.csv", index=False)
+    text = _no_tick_keys(MAP.read_text()).replace('position = "ap_present_ticks"', 'position = "ap_abs_deg"')
+    text = text.replace('unit = "ticks"                # deg', 'unit = "deg" # deg').replace('goal = "ap_goal_ticks"', "")
+    (tmp_path / "map.toml").write_text(text)
+    one_line_exit_2(endocal("import", "csv", tmp_path / "log.csv", "--map", tmp_path / "map.toml", "--out",
+                            tmp_path / "run"), "is [knobs.ap] zero right?", "column 'ap_abs_deg' reads 1")
+    (tmp_path / "map.toml").write_text(text.replace('unit = "deg" # deg', 'zero = 180.0\nunit = "deg" # deg'))
+    proc = endocal("import", "csv", tmp_path / "log.csv", "--map", tmp_path / "map.toml", "--out", tmp_path / "run")
+    assert proc.returncode == 0, proc.stderr
+    np.testing.assert_allclose(read_stream(tmp_path / "run", "motor")["ap_pos_deg"],
+                               read_stream(sim_log / "run", "motor")["ap_pos_deg"], atol=1e-9)
 
 
 def test_too_few_aligned_rows_for_any_fit_are_refused(sim_log, tmp_path):

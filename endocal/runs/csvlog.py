@@ -76,7 +76,7 @@ _ANGLE_KEYS = {"column", "unit", "direction", "zero"}
 TABLE_SUFFIXES = (".parquet", ".csv")
 MAX_GAP_S = 0.2  # longest gap between angle readings to interpolate across, as align() for tracker frames
 _TIME_KEYS = {"column", "unit", "sample_rate_hz"}
-_KNOB_KEYS = {"position", "goal", "current", "unit", "zero_ticks", "ticks_per_rev", "direction", "current_unit"}
+_KNOB_KEYS = {"position", "goal", "current", "unit", "zero", "zero_ticks", "ticks_per_rev", "direction", "current_unit"}
 _POSE_KEYS = {"position", "unit", "quaternion", "order", "valid", "fixed_position", "fixed_quaternion"}
 
 # Plausibility of what a map makes of a log: a wrong unit gives numbers no rig produces, which
@@ -126,6 +126,11 @@ BEND_PER_KNOB_MAX = 10.0
 #: planes move this bend too) has no gain to measure.
 KNOB_SPAN_MIN_DEG = 0.5
 KNOB_BEND_MIN_CORR = 0.8
+#: The most the tip may be bent at knob 0 (deg, on the straight line through the bend against
+#: the knob) before the knob's zero is called a mistake: the knob's zero is where the probe is
+#: straight; a loop's width, a dead band and twisted planes move that line by 10 to 15 deg at
+#: most, while a zero a quarter turn off bends it by the gain times 90 deg (60 deg on the sims).
+ZERO_BEND_MAX_DEG = 30.0
 
 
 @dataclass(frozen=True)
@@ -166,16 +171,19 @@ class _Knob:
     unit: str
     goal: str | None
     current: str | None
-    zero_ticks: float
+    zero: float  # the reading with the knob at 0 (probe straight), in ``unit`` (zero_ticks for ticks)
     ticks_per_rev: float
     direction: float
     current_factor: float
 
+    @property
+    def per_unit(self) -> float:
+        """Run units (deg or mm) per unit of the column, signed by ``direction``."""
+        return (360.0 / self.ticks_per_rev if self.unit == "ticks" else _SCALE[self.unit]) * self.direction
+
     def convert(self, v: np.ndarray) -> np.ndarray:
         """Raw column values in the run's unit: deg (knobs, rotation) or mm (translation)."""
-        if self.unit == "ticks":
-            return (v - self.zero_ticks) * 360.0 / self.ticks_per_rev * self.direction
-        return v * _SCALE[self.unit] * self.direction
+        return (v - self.zero) * self.per_unit
 
 
 @dataclass(frozen=True)
@@ -425,6 +433,8 @@ def read_map(path: str | Path) -> CsvMap:
         unit = _choice(k.get("unit", "deg"), ANGLE_UNITS if dof != TRANSLATION else ("mm", "m"), "unit", w)
         if unit == "ticks" and ("zero_ticks" not in k or "ticks_per_rev" not in k):
             raise RunFormatError(f"{w}: unit 'ticks' needs zero_ticks and ticks_per_rev (e.g. 2048 and 4096)")
+        if unit == "ticks" and "zero" in k:
+            raise RunFormatError(f"{w}: a knob in ticks takes its zero as zero_ticks, not zero")
         if unit != "ticks" and ("zero_ticks" in k or "ticks_per_rev" in k):
             # nothing is silently ignored: a map with tick keys but another unit was most likely
             # meant for ticks (a drafted map's unit edited, or the keys copied from the example)
@@ -435,7 +445,8 @@ def read_map(path: str | Path) -> CsvMap:
         goal = _column(k, "goal", w, "the goal sent to the motor", required=False)
         current = _column(k, "current", w, "the motor current", required=False)
         cur_unit = _choice(k.get("current_unit", "mA"), CURRENT_UNITS, "current unit", w)
-        zero = _number(k, "zero_ticks", w, 0.0, "the tick count with the knob at 0 deg")
+        zero = (_number(k, "zero_ticks", w, 0.0, "the tick count with the knob at 0 deg") if unit == "ticks" else
+                _number(k, "zero", w, 0.0, "the reading with the knob at 0 (probe straight)"))
         per_rev = _number(k, "ticks_per_rev", w, 4096.0, "ticks per knob revolution, 4096 for an XM430", positive=True)
         knobs[dof] = _Knob(position, unit, goal, current, zero, per_rev, float(direction), CURRENT_UNITS[cur_unit])
     angles = _angles(d, probe, where)
@@ -773,10 +784,15 @@ def _check_base_order(tip: np.ndarray, base: np.ndarray, good: np.ndarray, cmap:
             f"\"{other}\"{tip_too}")
 
 
-def _check_knob_gain(motor: dict, tip: np.ndarray, base: np.ndarray, good: np.ndarray, cmap: CsvMap,
-                     where: str) -> None:
-    """Refuse a knob whose bend moves more than :data:`BEND_PER_KNOB_MAX` degrees per knob degree:
-    a unit mistake (radians read as degrees, a wrong ``ticks_per_rev``), naming ``[knobs.AXIS] unit``."""
+def _check_knob_to_bend(motor: dict, tip: np.ndarray, base: np.ndarray, good: np.ndarray, cmap: CsvMap,
+                        where: str) -> None:
+    """Refuse a knob whose bend moves more than :data:`BEND_PER_KNOB_MAX` degrees per knob degree
+    (radians read as degrees, a wrong ``ticks_per_rev``), or that is bent more than
+    :data:`ZERO_BEND_MAX_DEG` at knob 0 (a wrong ``zero_ticks`` or ``zero``), naming the map key.
+
+    Both read the straight line through the bend against the knob (hysteresis makes it a loop
+    around that line), where the knob moves enough and the bend follows it.
+    """
     probe = cmap.probe
     bends = dict(zip(probe.bending_axes, bending_angles_deg(tip_in_base_mm(tip[good, 1:4], base[good, 1:4],
                                                                            base[good, 4:]))))
@@ -792,13 +808,22 @@ def _check_knob_gain(motor: dict, tip: np.ndarray, base: np.ndarray, good: np.nd
         lo, hi = np.quantile(knob, [0.01, 0.99])
         if hi - lo < KNOB_SPAN_MIN_DEG or abs(np.corrcoef(knob, bend)[0, 1]) < KNOB_BEND_MIN_CORR:
             continue
-        gain = abs(float(np.polyfit(knob, bend, 1)[0]))
-        if gain > BEND_PER_KNOB_MAX:
+        gain, at_zero = (float(c) for c in np.polyfit(knob, bend, 1))
+        if abs(gain) > BEND_PER_KNOB_MAX:
             b_lo, b_hi = np.quantile(bend, [0.01, 0.99])
             raise RunFormatError(
                 f"{where}: read as {k.unit}, column '{k.position}' turns the {dof} knob over {hi - lo:.3g} deg while "
-                f"the tip bends over {b_hi - b_lo:.3g} deg: {gain:.0f} deg of bend per knob degree, where a tendon "
-                f"drive gives about 1 (at most {BEND_PER_KNOB_MAX:g}): is [knobs.{dof}] unit right? ({hints[k.unit]})")
+                f"the tip bends over {b_hi - b_lo:.3g} deg: {abs(gain):.0f} deg of bend per knob degree, where a "
+                f"tendon drive gives about 1 (at most {BEND_PER_KNOB_MAX:g}): is [knobs.{dof}] unit right? "
+                f"({hints[k.unit]})")
+        if abs(at_zero) > ZERO_BEND_MAX_DEG:
+            straight = -at_zero / gain
+            key = "zero_ticks" if k.unit == "ticks" else "zero"
+            raise RunFormatError(
+                f"{where}: at {dof} knob 0 as the map reads it the tip is bent {at_zero:.0f} deg (a straight line "
+                f"through the bend against the knob); it is straight at knob {straight:.3g} deg, where column "
+                f"'{k.position}' reads {k.zero + straight / k.per_unit:.6g}: is [knobs.{dof}] {key} right? (the "
+                "reading with the knob at 0, probe straight)")
 
 
 def _check_aligned(n_aligned: int, t_motor: np.ndarray, t_read: np.ndarray, what: str, cmap: CsvMap, where: str) -> None:
@@ -913,7 +938,7 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
         raise RunFormatError(f"{where}: no row has both the tip and the base pose{why}")
     _check_distance(tip, base, good, cmap, where)
     _check_base_order(tip, base, good, cmap, where)
-    _check_knob_gain(motor, tip, base, good, cmap, where)
+    _check_knob_to_bend(motor, tip, base, good, cmap, where)
     # the aligned rows align() will make: motor samples within MAX_GAP_S of a frame with both sensors
     _check_aligned(int(measured_at(t[good], motor["t_s"], MAX_GAP_S).sum()), motor["t_s"], t[good],
                    "tracker frame", cmap, where)
