@@ -176,3 +176,19 @@ def test_fit_warns_when_its_record_was_cut_mid_swing(tmp_path):
                    "--out", tmp_path / "m.json")
     assert proc.returncode == 0, proc.stderr
     assert "warning: the fitted record starts mid-swing (command 1.8 deg within 0..3.6, moving up)" in proc.stdout
+
+
+def test_the_verdict_that_the_residual_contradicts_prints_as_text(tmp_path):
+    """The verdict line of an unexplained residual is styled like the others (no literal markup)."""
+    from tests._cli import endocal
+
+    data = load_aligned(PIEZO)
+    for name, k in (("est", 0), ("val", 4)):
+        _cycle(data, k).table.to_csv(tmp_path / f"{name}.csv", index=False)
+    fit = endocal("fit", "hysteresis", tmp_path / "est.csv", "--axis", "piezo", "--model", "pi", "--out",
+                  tmp_path / "m.json")
+    assert fit.returncode == 0, fit.stderr
+    val = endocal("validate", tmp_path / "m.json", tmp_path / "val.csv")
+    assert val.returncode == 0, val.stderr
+    assert "Which effect is missing: no catalog effect lowers the validation RMSE" in val.stdout, val.stdout
+    assert "[bold]" not in val.stdout and "[/]" not in val.stdout

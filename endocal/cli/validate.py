@@ -150,12 +150,12 @@ def render(result) -> None:
                   "point at effects it could not settle (below).")
     elif result.unexplained:
         out.print(f"[bold]Which effect is missing:[/] no catalog effect lowers the {what} RMSE by {scan.min_gain_pct:g} % "
-                  f"or more, but {result.unexplained}.", markup=False)
+                  f"or more, but {escape(result.unexplained)}.")
     elif scan.tested and scan.tested[0].gain_pct >= scan.min_gain_pct:
         best = scan.tested[0]
-        out.print(f"[bold]Which effect is missing:[/] nothing significant: the best candidate, {best.effect}, lowers the "
-                  f"{what} RMSE by {best.gain_pct:.0f} % but not consistently (Holm-corrected p = {best.p_value:.2g}); "
-                  "the residual points at nothing the scan could not test.", markup=False)
+        out.print(f"[bold]Which effect is missing:[/] nothing significant: the best candidate, {escape(best.effect)}, "
+                  f"lowers the {what} RMSE by {best.gain_pct:.0f} % but not consistently (Holm-corrected p = "
+                  f"{best.p_value:.2g}); the residual points at nothing the scan could not test.")
     else:
         rests = (f" But {scan.still_blocks} of its {scan.folds} held-out blocks hold no motion of this axis: "
                  "this says little (see the notes)." if scan.still_blocks else "")
