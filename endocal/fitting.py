@@ -11,7 +11,7 @@ from endocal.errors import ModelError
 from endocal.models import make_model
 from endocal.models.base import HysteresisModel
 from endocal.runs.aligned import load_aligned
-from endocal.validation.data import axis_data
+from endocal.validation.data import axis_data, spike_note
 from endocal.validation.residuals import cut_start
 
 
@@ -25,6 +25,7 @@ class HysteresisFit:
     samples: int
     duration_s: float = 0.0  # summed over the records: with ``samples``, the rate a user can check
     cut_start: str = ""  # what a record cut away from 0 did to the fit (validation.residuals.cut_start)
+    spikes: str = ""  # samples left out as glitches (validation.data.spike_note)
 
     @property
     def rate_hz(self) -> float:
@@ -71,8 +72,10 @@ def fit_hysteresis(
                              "model of the same axis and base model, or drop --start-from")
         warm = dict(start_from.params_)
     datas = [load_aligned(p) for p in paths]
-    data = axis_data(datas, axis, planes)
+    dropped: list = []
+    data = axis_data(datas, axis, planes, dropped)
     model = make_model(base, effects=effects or (), axis=axis, **settings).fit(data, warm_start=warm)
     span = sum(float(np.ptp(d.table["t_s"])) for d in datas)
     cut = cut_start(data, model.predict(data) - data.meas_deg, "fitted record")
-    return HysteresisFit(model, [d.source for d in datas], [d.sha256 for d in datas], len(data.cmd_deg), span, cut)
+    return HysteresisFit(model, [d.source for d in datas], [d.sha256 for d in datas], len(data.cmd_deg), span, cut,
+                         spike_note(dropped, axis))

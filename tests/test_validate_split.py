@@ -458,3 +458,33 @@ def test_the_refit_folds_the_validation_data_in_only_when_asked(sine_sweeps):
     assert cmd[3:5] == [str(tmp / "est"), str(tmp / "val")], cmd
     _one_line_exit_2(_run("validate", tmp / "pe.json", tmp / "val", "--refit-on", "both", ok=False),
                      "--refit-on must be one of")
+
+
+def test_tracker_glitches_are_left_out_of_the_fit_and_the_scores(sine_sweeps, tmp_path):
+    """An EM tracker's wild reading (1000 deg, a flipped frame at 180) or a logger's corrupt
+    command cell, a few samples in thousands: they are left out and said, so the diagnosis is
+    the clean record's (one such reading made the RMSE 5.9 deg and the verdict "nothing")."""
+    from endocal.runs.aligned import load_aligned
+
+    tmp = sine_sweeps
+    for name in ("est", "val"):
+        table = load_aligned(tmp / name).table.copy()
+        table.to_csv(tmp_path / f"{name}-clean.csv", index=False)
+        table.loc[[300, 700, 1100], "ap_meas_deg"] = 1000.0
+        table.loc[[900, 1300], "ap_meas_deg"] = 180.0
+        table.loc[500, "ap_cmd_deg"] = 4000.0
+        table.to_csv(tmp_path / f"{name}.csv", index=False)
+    fits = {}
+    for name in ("est-clean", "est"):
+        res = _run("fit", "hysteresis", tmp_path / f"{name}.csv", "--axis", "ap", "--model", "pi", "--effects",
+                   "envelope", "--out", tmp_path / f"{name}.json")
+        fits[name] = float(res.output.split("RMSE ")[1].split(" deg")[0])
+    assert "warning: left out 5 measured ap angle(s) and 1 ap command(s)" in res.output, res.output
+    assert fits["est"] == pytest.approx(fits["est-clean"], rel=0.02), fits
+    clean = _validate_json(tmp_path, tmp_path / "est-clean.json", tmp_path / "val-clean.csv")
+    spiky = _validate_json(tmp_path, tmp_path / "est.json", tmp_path / "val.csv")
+    assert spiky["suspects"][0]["effect"] == clean["suspects"][0]["effect"] == "deadzone"
+    assert spiky["metrics"]["rmse_deg"] == pytest.approx(clean["metrics"]["rmse_deg"], rel=0.05)
+    said = [n for n in spiky["notes"] if n.startswith("left out 5 measured ap angle(s) and 1 ap command(s)")]
+    assert len(said) == 2 and "at t = 3.000 s" in said[0], spiky["notes"]  # the validation and the estimation record
+    assert spiky["data"][0]["spikes_left_out"] == {"command": 1, "measured": 5, "first_t_s": 3.0}

@@ -22,6 +22,7 @@ from dataclasses import replace
 
 import numpy as np
 import pandas as pd
+from scipy.ndimage import median_filter
 
 from endocal.errors import ModelError
 from endocal.models.data import OTHER_CMD, HysteresisData
@@ -40,7 +41,44 @@ def _as_list(aligned) -> list[AlignedData]:
     return out
 
 
-def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str, planes=None) -> HysteresisData:
+#: Spikes (:func:`spikes`): a sample further from the median of its 3 neighbours on each side than
+#: 8 robust standard deviations of those distances and a tenth of the signal's span (1st to 99th
+#: percentile). A tip has inertia and a servo a speed limit: neither jumps away for a few samples
+#: and back, while an EM tracker's glitch (a wild reading, a flipped frame) or a corrupt logger
+#: cell does. The median keeps a step and a turning point (at the apex of a triangle it sits two
+#: samples' travel below, past a tenth of the span only at under 20 samples a half-cycle).
+SPIKE_HALF_WINDOW = 3
+SPIKE_SIGMAS = 8.0
+SPIKE_SPAN_FRAC = 0.1
+
+
+def spikes(values: np.ndarray) -> np.ndarray:
+    """Samples of one record that jump away from their neighbours and back (a Hampel filter,
+    thresholds above), shape (n,) bool."""
+    v = np.asarray(values, float)
+    size = 2 * SPIKE_HALF_WINDOW + 1
+    if v.size < size:
+        return np.zeros(v.size, bool)
+    dev = np.abs(v - median_filter(v, size=size, mode="nearest"))
+    lo, hi = np.quantile(v, [0.01, 0.99])
+    return dev > max(SPIKE_SIGMAS * 1.4826 * float(np.median(dev)), SPIKE_SPAN_FRAC * float(hi - lo))
+
+
+def spike_note(dropped: list[tuple[str, int, int, float]], axis: str) -> str:
+    """One line for the spikes :func:`axis_data` left out (its ``dropped`` list), or ``""``."""
+    if not dropped:
+        return ""
+    n_cmd, n_meas = sum(d[1] for d in dropped), sum(d[2] for d in dropped)
+    where = " and ".join(x for x in (f"{n_meas} measured {axis} angle(s)" if n_meas else "",
+                                     f"{n_cmd} {axis} command(s)" if n_cmd else "") if x)
+    src, _, _, t0 = dropped[0]
+    return (f"left out {where} that jump away from their neighbours and back by over a tenth of the signal's span "
+            f"(a tracker or logger glitch; the first in {src} at t = {t0:.3f} s): the fit and the scores use the "
+            "samples around them")
+
+
+def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str, planes=None,
+              dropped: list | None = None) -> HysteresisData:
     """The command, measurement, time and extra columns of ``axis``, one run per table.
 
     ``fit hysteresis``, ``validate`` and ``report`` all read data through this function, so a
@@ -71,6 +109,10 @@ def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str, planes=No
     ModelError
         A table lacks ``axis`` (the message names the table and the axes it has), or
         ``planes`` is given for a table without both bending axes.
+
+    Samples where the command or the measured angle spikes (:func:`spikes`) are left out; with
+    ``dropped`` a list, one ``(source, n_command, n_measured, first_t_s)`` per table with any
+    is appended to it (:func:`spike_note` words them).
     """
     tables = _as_list(aligned)
     for a in tables:
@@ -95,7 +137,16 @@ def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str, planes=No
             # also under their own names, for effects that name them (``coupling:ml_meas_deg``)
             extras[f"{other}_cmd_deg"] = extras[OTHER_CMD]
             extras[f"{other}_meas_deg"] = extras[OTHER_MEAS]
-        runs.append(HysteresisData(cmd_deg=a.cmd_deg(axis), meas_deg=a.meas_deg(axis), t_s=a.t_s, extras=extras))
+        cmd, meas, t = a.cmd_deg(axis), a.meas_deg(axis), np.asarray(a.t_s, float)
+        bad_cmd, bad_meas = spikes(cmd), spikes(meas)
+        keep = ~(bad_cmd | bad_meas)
+        if not keep.all() and keep.any():
+            if dropped is not None:
+                dropped.append((str(a.source), int(bad_cmd.sum()), int((bad_meas & ~bad_cmd).sum()),
+                                float(t[np.argmax(~keep)])))
+            cmd, meas, t = cmd[keep], meas[keep], t[keep]
+            extras = {k: v[keep] for k, v in extras.items()}
+        runs.append(HysteresisData(cmd_deg=cmd, meas_deg=meas, t_s=t, extras=extras))
     return runs[0] if len(runs) == 1 else HysteresisData.from_runs(runs)
 
 
