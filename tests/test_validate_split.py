@@ -488,3 +488,15 @@ def test_tracker_glitches_are_left_out_of_the_fit_and_the_scores(sine_sweeps, tm
     said = [n for n in spiky["notes"] if n.startswith("left out 5 measured ap angle(s) and 1 ap command(s)")]
     assert len(said) == 2 and "at t = 3.000 s" in said[0], spiky["notes"]  # the validation and the estimation record
     assert spiky["data"][0]["spikes_left_out"] == {"command": 1, "measured": 5, "first_t_s": 3.0}
+
+
+def test_a_record_that_never_moves_the_knob_is_refused_as_report_refuses_it(sine_sweeps, tmp_path):
+    """A knob held at +25 deg: every candidate would fit the start, not hysteresis (a `delay`
+    was suggested at -24 %); validate refuses it in one line, as report does."""
+    from endocal.runs.aligned import load_aligned
+
+    table = load_aligned(sine_sweeps / "val").table.copy()
+    table["ap_cmd_deg"] = 25.0
+    table.to_csv(tmp_path / "held.csv", index=False)
+    _one_line_exit_2(_run("validate", sine_sweeps / "pe.json", tmp_path / "held.csv", ok=False),
+                     "the ap command spans only 0.00 deg: the record does not excite this axis")

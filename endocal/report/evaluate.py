@@ -23,10 +23,9 @@ from endocal.report.adapters import RegimeBreakdown, axis_data, error_by_regime,
 from endocal.report.stats import Comparison, Units, compare_models, make_units, unit_rmse
 from endocal.runs.aligned import AlignedData, load_aligned
 from endocal.runs.format import sha256_of
+from endocal.validation.data import MIN_SPAN_DEG
 from endocal.validation.metrics import ErrorMetrics, error_metrics
 
-#: A command that spans less than this never excites its axis (deg).
-MIN_SPAN_DEG = 1.0
 
 Progress = Callable[[str, int, int], None]
 

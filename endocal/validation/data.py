@@ -30,6 +30,8 @@ from endocal.runs.aligned import AlignedData
 
 #: Extra column holding the other bending axis's measured angle (deg).
 OTHER_MEAS = "other_meas_deg"
+#: A command that spans less than this never excites its axis (deg): nothing to validate or report.
+MIN_SPAN_DEG = 1.0
 
 
 def _as_list(aligned) -> list[AlignedData]:

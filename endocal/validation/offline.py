@@ -15,7 +15,7 @@ from endocal.errors import ModelError
 from endocal.models import HysteresisData
 from endocal.models.base import HysteresisModel
 from endocal.runs.aligned import AlignedData
-from endocal.validation.data import axis_data, check_columns, load_candidates, spike_note
+from endocal.validation.data import MIN_SPAN_DEG, axis_data, check_columns, load_candidates, spike_note
 from endocal.validation.metrics import ErrorMetrics, error_metrics
 from endocal.validation.regimes import RegimeBreakdown, error_by_regime
 from endocal.validation.residuals import ResidualTests, cut_start, residual_tests, unexplained_shape
@@ -303,6 +303,11 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
         raise ModelError(f"{where}: {data.n_samples} sample(s) of axis {ax}; validation needs at least "
                          f"{MIN_VALIDATION_SAMPLES} (the residual's autocorrelation is tested at lag 1 and more): "
                          "validate on a record of the knob moving, e.g. one back-and-forth sweep")
+    span = float(np.ptp(data.cmd_deg))
+    if span < MIN_SPAN_DEG:
+        where = ", ".join(map(str, val_paths or data_paths or ["the validation data"]))
+        raise ModelError(f"{where}: the {ax} command spans only {span:.2f} deg: the record does not excite this axis, "
+                         f"so there is no hysteresis to judge; validate on a record that moves the {ax} knob")
     paths = list(data_paths) if data_paths is not None else (val_paths or ["DATA"])
     est, est_info = None, []
     if train is not None:
