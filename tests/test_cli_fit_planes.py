@@ -55,6 +55,17 @@ def test_too_little_excursion_and_missing_sweeps_are_named(tmp_path):
     assert not any((tmp_path / n).exists() for n in ("a.json", "b.json", "c.json"))
 
 
+def test_a_missing_path_is_said_not_to_exist(planes_run, tmp_path):
+    # a typo in a run folder or in --after: one line saying so, as every other command does, and no file written
+    line = one_line_error(endocal("fit", "planes", tmp_path / "does-not-exist", "--out", tmp_path / "p.json"),
+                          "does-not-exist does not exist")
+    assert "aligned table" not in line
+    line = one_line_error(endocal("fit", "planes", planes_run, "--after", tmp_path / "does-not-exist", "--out",
+                                  tmp_path / "p.json"), "does-not-exist (--after) does not exist")
+    assert "aligned table" not in line
+    assert not (tmp_path / "p.json").exists()
+
+
 def test_invalid_frames_dropped_and_counted_missing_base_named(tmp_path):
     cfg = tmp_path / "flaky.toml"
     cfg.write_text("[tracker]\ninvalid_rate = 0.05\n")  # 5 % of sensor frames flagged invalid

@@ -73,3 +73,27 @@ def test_a_port_handle_not_on_the_unit_is_named():
                                                 r"10 \(0x0a\), 12 \(0x0c\)"):
             tr.open()
         tr.close()
+
+
+@pytest.mark.parametrize("firmware", ["AURORA Rev 008", "AURORA Rev 009"])  # TX and BX frames
+def test_every_session_on_one_unit_finds_the_tools_and_reads_frames(firmware):
+    # a real unit serves any number of sessions: each opens with INIT and sets its port handles
+    # up again; one that left tracking on (a killed host: no TSTOP) does not block the next
+    import ndicapy
+    from sksurgerynditracker.nditracker import NDITracker
+
+    with AuroraEmulator(0x0A, 0x0B, firmware=firmware) as emu:
+        emu.set_poses({"tip": TIP, "base": BASE})
+        for session in range(3):
+            tr = _tracker(emu)
+            tr.open()
+            assert tr.info["port_handles"] == [10, 11], session
+            tr.start(time.monotonic)
+            time.sleep(0.15)
+            frames = tr.drain()
+            tr.close()
+            assert (frames["sensor"] == "tip").sum() >= 3 and frames["valid"].all(), session
+            if session == 1:  # a host that dies while tracking: the port closes without TSTOP
+                dead = NDITracker({"tracker type": "aurora", "serial port": emu.port})
+                dead.start_tracking()
+                ndicapy.ndiClose(dead._device)

@@ -104,3 +104,25 @@ def test_the_rig_with_its_udp_stage_plays_and_records_it(tmp_path):
     assert meta["backend"]["stage"]["mode"] == "udp"
     motor = read_stream(tmp_path / "rig-run", "motor")
     assert np.abs(motor["translation_pos_mm"]).max() < 1e-6  # a bending protocol holds the stage at 0
+
+
+def test_one_emulated_rig_serves_run_after_run(tmp_path):
+    # the rehearsal of docs/hardware.md, repeated against one `endocal emulate rig`: every run
+    # re-initialises the tracker, switches torque on and off again and drives the stage
+    short = ["sine", "--set", "frequency_hz=1.0", "--set", "cycles=1", "--amplitude", "10", "--seed", "1"]
+    events = []
+    with EmulatedRig(TEE, seed=1, on_event=events.append, stage=True) as rig:
+        cfg = rig.write_config(tmp_path / "rig.toml")
+        procs = [endocal("excite", *short, "--backend", "hardware", "--hardware-config", cfg, "--out",
+                         tmp_path / f"run{k}", "-q", timeout=120) for k in range(2)]
+        torque = rig.bus.torque()
+    for proc in procs:
+        assert proc.returncode == 0, proc.stderr
+    once = ["servo 1 torque on", "servo 2 torque on", "servo 1 torque off", "servo 2 torque off", "stage stopped"]
+    assert events == once + once and torque == {1: False, 2: False}
+    for k in range(2):
+        meta = json.loads((tmp_path / f"run{k}" / "run.json").read_text())
+        assert meta["status"] == "complete" and meta["backend"]["tracker"]["tools_seen"]["port_handles"] == [10, 11]
+        tracker = read_stream(tmp_path / f"run{k}", "tracker")
+        assert len(tracker) > 40 and tracker["valid"].all()  # 1 s at 40 Hz, two sensors
+        assert len(read_stream(tmp_path / f"run{k}", "motor")) > 90  # 1 s at 100 Hz

@@ -16,11 +16,11 @@ import pandas as pd
 import pytest
 
 from endocal.runs.aligned import load_aligned, read_stream
+from scripts.make_example_logs import TICKS_PER_DEG, lab_log
 from tests._cli import endocal, one_line_exit_2
 
 ROOT = Path(__file__).resolve().parents[1]
 MAP = ROOT / "configs" / "csv-map.example.toml"
-TICKS_PER_DEG = 4096 / 360.0
 
 
 @pytest.fixture(scope="module")
@@ -29,23 +29,8 @@ def sim_log(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("csv")
     proc = endocal("excite", "lissajous", "--set", "duration_s=20", "--out", tmp / "run", "--seed", "4", "-q")
     assert proc.returncode == 0, proc.stderr
-    motor, tracker = read_stream(tmp / "run", "motor"), read_stream(tmp / "run", "tracker")
-    rows = pd.DataFrame({"stamp_ms": 1000.0 * (motor["t_s"] + 12.5)})  # a clock that does not start at 0
-    for axis in ("ap", "ml"):
-        rows[f"{axis}_present_ticks"] = 2048 + motor[f"{axis}_pos_deg"] * TICKS_PER_DEG
-        rows[f"{axis}_goal_ticks"] = 2048 + motor[f"{axis}_goal_deg"] * TICKS_PER_DEG
-    rows["ap_current_ma"] = motor["ap_current_ma"]
-    frames = []
-    for sensor in ("tip", "base"):
-        f = tracker[tracker["sensor"] == sensor].set_index("t_s")
-        frames.append(pd.DataFrame({f"{sensor}_x_m": f["x_mm"] / 1000, f"{sensor}_y_m": f["y_mm"] / 1000,
-                                    f"{sensor}_z_m": f["z_mm"] / 1000, f"{sensor}_qw": f["qw"],
-                                    f"{sensor}_qx": f["qx"], f"{sensor}_qy": f["qy"], f"{sensor}_qz": f["qz"]}))
-    poses = pd.concat(frames, axis=1).reset_index()
-    poses.insert(0, "stamp_ms", 1000.0 * (poses.pop("t_s") + 12.5))
-    log = pd.concat([rows, poses], ignore_index=True).sort_values("stamp_ms", kind="stable")
-    # a motor tick and a frame at the same instant are one row, as a logger would write them
-    log = log.groupby("stamp_ms", as_index=False, sort=True).first()
+    # the README's lab log (scripts/make_example_logs.py) with exact ticks, for a round trip
+    log = lab_log(read_stream(tmp / "run", "motor"), read_stream(tmp / "run", "tracker"), whole_ticks=False)
     log.to_csv(tmp / "log.csv", index=False)
     return tmp
 
@@ -324,6 +309,8 @@ def test_a_drafted_map_imports_a_log_named_as_labs_name_columns(sim_log, tmp_pat
     draft, stdout = _draft(sim_log / "log.csv", tmp_path)
     assert "knob ap <- ap_present_ticks (goal ap_goal_ticks)" in stdout and "tip <- tip_x_m" in stdout
     assert "CHECK [knobs.ap] zero_ticks" in stdout and "FILL IN" not in stdout
+    assert "time <- stamp_ms\n" in stdout  # the name says ms: not repeated
+    assert _then(stdout)[-2:] == ["--out", str(sim_log / "log")]  # poses: a run folder
     proc = endocal("import", "csv", sim_log / "log.csv", "--map", draft, "--out", tmp_path / "imported")
     assert proc.returncode == 0, proc.stderr
     a, b = load_aligned(sim_log / "run").table, load_aligned(tmp_path / "imported").table
@@ -354,6 +341,36 @@ def test_a_drafted_map_reads_units_off_the_numbers_when_names_do_not_say(bench_l
     n = len(b)
     np.testing.assert_allclose(b["ap_cmd_deg"], a["ap_cmd_deg"][:n], atol=1e-9)
     assert (b["sheath"] == 180.0).all()
+
+
+def _then(stdout: str) -> list[str]:
+    """The import command a draft prints on its `then:` line, split as a shell would (without `endocal`)."""
+    import shlex
+
+    line = next(ln for ln in stdout.splitlines() if ln.startswith("then: "))
+    argv = shlex.split(line[len("then: "):])
+    assert argv[0] == "endocal", line
+    return argv[1:]
+
+
+def test_the_command_a_draft_prints_for_an_angles_log_runs_as_printed(bench_log, tmp_path):
+    """A bench log whose clock names its unit in brackets, `Time (s)`: the roles line says the
+    unit once, and the `then:` command imports through the draft to an aligned table, as an
+    [angles] map needs (`--out RUN`, a folder, is refused for one)."""
+    log, a = bench_log
+    src = pd.read_csv(log)
+    pd.DataFrame({"Time (s)": (src["time_ms"] - 250.0) / 1000, "knob": src["motor_rad"],
+                  "TipAngle": src["joint_deg"] - 5.0, "sheath": src["sheath_deg"]}).to_csv(tmp_path / "rig log.csv",
+                                                                                          index=False)
+    draft, stdout = _draft(tmp_path / "rig log.csv", tmp_path, "rig map.toml")
+    assert "  time <- Time (s)\n" in stdout, stdout
+    argv = _then(stdout)
+    assert argv[-2:] == ["--out", str(tmp_path / "rig log.parquet")], argv
+    assert "--out 'rig log.parquet'" in draft.read_text()  # the map's own header says the same
+    proc = endocal(*argv)
+    assert proc.returncode == 0, proc.stderr
+    b = load_aligned(tmp_path / "rig log.parquet").table
+    np.testing.assert_allclose(b["ap_cmd_deg"], a["ap_cmd_deg"][:len(b)], atol=1e-9)
 
 
 def test_a_draft_that_could_not_place_a_role_says_so_and_the_import_refuses_it(tmp_path):

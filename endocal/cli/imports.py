@@ -81,7 +81,7 @@ def import_csv_cmd(
 
 
 def _draft(log: Path, path: Path, force: bool) -> None:
-    from endocal.runs.mapdraft import write_draft
+    from endocal.runs.mapdraft import import_out, write_draft
 
     d = write_draft(log, path, force=force)
     out.print(f"drafted {path} for {log}:", markup=False)
@@ -91,4 +91,6 @@ def _draft(log: Path, path: Path, force: bool) -> None:
         out.print(f"  CHECK {c}", markup=False)
     for u in d.unmatched:
         out.print(f"  FILL IN {u}: no column looked like it", markup=False)
-    out.print(f"then: endocal import csv {shlex.quote(str(log))} --map {shlex.quote(str(path))} --out RUN", markup=False)
+    # an [angles] map imports to an aligned table (a .parquet or .csv file), a map of EM poses to a run folder
+    target = shlex.quote(str(import_out(log, d.angles)))
+    out.print(f"then: endocal import csv {shlex.quote(str(log))} --map {shlex.quote(str(path))} --out {target}", markup=False)

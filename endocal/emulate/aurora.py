@@ -10,6 +10,8 @@ come as ``TX:0801`` (ASCII: per port handle the rotation quaternion, 4 x 6 chara
 1e-4, the position, 3 x 7 characters at 0.01 mm, the RMS error, the port status and the frame
 number, or ``MISSING``) or ``BX:0801`` (binary: the same as float32 and uint32 with a header,
 a header CRC and a final CRC), whichever the firmware ``VER`` reports makes the driver ask for.
+Like the real unit it serves session after session: each ``INIT`` (every connection opens
+with one) stops tracking and offers every port handle again for ``PINIT`` and ``PENA``.
 
 It runs in a process of its own: ndicapi holds Python's interpreter lock while it waits
 for a reply, so an emulator thread in the host's process could never answer. The sensor
@@ -96,6 +98,16 @@ class _Unit:
         self.shared = shared
         self.faults = faults
         self.rate_hz = rate_hz
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to setup mode with every port handle offered again, as after power-up.
+
+        Every session opens with ``INIT`` (ndicapi's ``ndiOpen`` sends it, after a serial
+        break if the unit does not answer), so a unit that kept the last session's
+        initialised and enabled handles would list none to the next one (``PHSR:02`` and
+        ``PHSR:03`` empty) and the host would find no tools.
+        """
         self.initialised: set[int] = set()
         self.enabled: set[int] = set()
         self.t_start: float | None = None
@@ -113,7 +125,10 @@ class _Unit:
         if len(rest) < 4 or ndi_crc16(body) != int(rest[-4:], 16):
             return reply("ERROR04")  # bad CRC
         arg = rest[:-4]
-        if name in ("INIT", "COMM", "TSTOP"):
+        if name == "INIT":  # a new session: nothing of the previous one's set-up survives
+            self.reset()
+            return reply("OKAY")
+        if name in ("COMM", "TSTOP"):
             if name == "TSTOP":
                 self.t_start = None
             return reply("OKAY")

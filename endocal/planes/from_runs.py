@@ -20,11 +20,13 @@ def segment_runs(runs: list[Path], *, compensated: bool = False) -> tuple[Segmen
     Raises
     ------
     RunFormatError
-        A path that is not a run folder (a bare aligned table has no tracker poses, and the
-        plane fit needs the tip direction), or runs recorded on different probes.
+        A path that does not exist, a path that is not a run folder (a bare aligned table has
+        no tracker poses, and the plane fit needs the tip direction), or runs recorded on
+        different probes.
     """
     total: Segmentation | None = None
     probe: ProbeConfig | None = None
+    _check_exist(runs)
     for run in map(Path, runs):
         if not run.is_dir():
             raise RunFormatError(
@@ -50,6 +52,16 @@ def segment_runs(runs: list[Path], *, compensated: bool = False) -> tuple[Segmen
     return total, probe
 
 
+def _check_exist(runs, *, after: bool = False) -> None:
+    """Every path named exists (a typo is said as such, as every other command says it)."""
+    for run in map(Path, runs):
+        if not run.exists():
+            what = ("(--after) does not exist: give a run folder of the planes protocol played through the "
+                    "compensator (`endocal excite planes --planes planes.json --out RUN`)" if after else
+                    "does not exist: give a run folder of the planes protocol (`endocal excite planes --out RUN`)")
+            raise RunFormatError(f"{run} {what}")
+
+
 def calibrate_planes(
     runs: list[Path], *, after: list[Path] | None = None, n_bootstrap: int = 200, seed: int = 0
 ) -> tuple[PlanesCalibration, ProbeConfig]:
@@ -66,6 +78,8 @@ def calibrate_planes(
     seed : int
         Seed of the bootstrap.
     """
+    _check_exist(runs)  # both lists before the first is segmented: a missing --after fails at once
+    _check_exist(after or [], after=True)
     seg, probe = segment_runs(runs)
     comp = segment_runs(after, compensated=True)[0] if after else None
     return fit_planes(seg, n_bootstrap=n_bootstrap, seed=seed, compensated=comp), probe

@@ -29,6 +29,7 @@ that fill every row, but for clocks and counters (a ROS header's ``stamp`` and `
 from __future__ import annotations
 
 import re
+import shlex
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -79,6 +80,17 @@ class Draft:
     roles: dict[str, str] = field(default_factory=dict)
     checks: list[str] = field(default_factory=list)
     unmatched: list[str] = field(default_factory=list)
+    #: the map gives measured ``[angles]`` (the import writes an aligned table), not EM poses (a run folder)
+    angles: bool = False
+
+
+def import_out(log: str | Path, angles: bool) -> Path:
+    """What ``--out`` the import of ``log`` through its drafted map can take: beside the log and
+    named after it, an aligned table (``.parquet``) for an ``[angles]`` map, else a run folder."""
+    log = Path(log)
+    if angles:
+        return log.with_suffix(".parquet")
+    return log.with_suffix("") if log.suffix else log.with_name(log.name + "-run")
 
 
 def _values(df: pd.DataFrame, col: str) -> np.ndarray:
@@ -224,13 +236,15 @@ class _Drafter:
 
     def draft(self) -> Draft:
         w = self.w
-        w.lines += [f"# Column map drafted by `endocal import csv {self.log_name} --draft-map`: read every line marked",
-                    "# CHECK (guessed from the numbers, not the names) and every FILL IN, then import with",
-                    f"# `endocal import csv {self.log_name} --map THIS.toml --out RUN`. Keys: "
-                    "configs/csv-map.example.toml.", ""]
-        w.key("probe", self.probe.name, "names the bending axes: tee has ap and ml, duodenoscope ud and lr")
         tip, base = _pose_columns(self.cols, "tip", self.taken), _pose_columns(self.cols, "base", self.taken)
         poses = tip[0] is not None and tip[1] is not None
+        log, out = shlex.quote(self.log_name), shlex.quote(str(import_out(self.log_name, angles=not poses)))
+        w.lines += [f"# Column map drafted by `endocal import csv {log} --draft-map`: read every line marked",
+                    "# CHECK (guessed from the numbers, not the names) and every FILL IN, then import with",
+                    f"# `endocal import csv {log} --map THIS.toml --out {out}` ("
+                    + ("measured angles give an aligned table" if not poses else "a run folder")
+                    + "). Keys: configs/csv-map.example.toml.", ""]
+        w.key("probe", self.probe.name, "names the bending axes: tee has ap and ml, duodenoscope ud and lr")
         if poses:  # a pose's columns are taken before any other role can claim one
             self.taken |= {c for part in (*tip, *base) if part for c in part}
         self._time()
@@ -245,7 +259,7 @@ class _Drafter:
             w.lines[5:5] = ["# further numeric columns, carried into the table (covariates for load:COLUMN): drop "
                             "what is not one", "extras = [" + "".join(f"\n    {_toml(c)}," for c in extras) + "\n]"]
             self.roles["extras"] = ", ".join(extras)
-        return Draft("\n".join(w.lines) + "\n", self.roles, w.checks, self.unmatched)
+        return Draft("\n".join(w.lines) + "\n", self.roles, w.checks, self.unmatched, angles=not poses)
 
     def _time(self) -> None:
         df, w = self.df, self.w
@@ -266,7 +280,8 @@ class _Drafter:
         unit, why = _time_unit(df, col)
         w.key("column", col, "the clock column", check=rising, where="[time] ")
         w.key("unit", unit, "s, ms, us, ns or datetime", check=why, where="[time] ")
-        self.roles["time"] = f"{col} ({unit})"
+        # the unit in brackets only when the name does not say it (`Time (s)` is not `Time (s) (s)`)
+        self.roles["time"] = f"{col} ({unit})" if why else col
 
     def _knob(self, axis: str, pos: str, goal: str | None, cur: str | None, what: str, check: str = "") -> None:
         w = self.w
