@@ -456,6 +456,8 @@ def test_the_refit_folds_the_validation_data_in_only_when_asked(sine_sweeps):
     _run("validate", tmp / "pe.json", tmp / "val", "--refit-on", "all", "--json-out", out)
     cmd = shlex.split(json.loads(out.read_text())["suspects"][0]["command"])
     assert cmd[3:5] == [str(tmp / "est"), str(tmp / "val")], cmd
+    # another model than the one the scan scored: not written under that one's name
+    assert cmd[cmd.index("--out") + 1] == str(tmp / "pe-deadzone-all.json") != default[default.index("--out") + 1]
     _one_line_exit_2(_run("validate", tmp / "pe.json", tmp / "val", "--refit-on", "both", ok=False),
                      "--refit-on must be one of")
 

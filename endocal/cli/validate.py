@@ -29,11 +29,12 @@ _UNITS = {"rmse_deg": "deg", "mae_deg": "deg", "max_deg": "deg", "median_deg": "
 
 
 def previous_model_path(model_path: Path, effects: list[str]) -> Path | None:
-    """The model this one was refitted from, by the naming of the refit command (``M-EFFECT.json`` from ``M.json``)."""
+    """The model this one was refitted from, by the naming of the refit command (``M-EFFECT.json``, or
+    ``M-EFFECT-all.json`` under ``--refit-on all``, from ``M.json``)."""
     name = model_path.name
     if not name.endswith(".json"):
         return None
-    stem = name[:-5]
+    stem = name[:-5].removesuffix("-all")
     for e in effects:
         tag = "-" + e.replace(":", "-")
         if stem.endswith(tag):
@@ -256,13 +257,14 @@ def validate(
     effects = [e.label for e in model.effects_]
     old_path = compare_path if compare_path is not None else previous_model_path(model_path, effects)
     old = load_model(old_path) if old_path is not None else None
-    refit_paths = plan.train_paths
+    refit_paths, suffix = plan.train_paths, ""
     if refit_on == "all" and plan.train is not None:  # asked for: the validation data folded into the refits
         refit_paths = list(dict.fromkeys([*plan.train_paths, *(str(p) for p in data)]))
+        suffix = "-all"  # another model than the one scored: not under its name
     result = validate_offline(model, tables, train=plan.train, train_paths=refit_paths, planes=plan.planes,
                               refit_args=plan.refit_args, scheme_reason=plan.reason, folds=folds, seed=seed,
                               compare=old, model_path=str(model_path), data_paths=[str(p) for p in data],
-                              load_columns=load_column or None)
+                              load_columns=load_column or None, refit_suffix=suffix)
     d = result.to_dict()
     if old_path is not None and d["compare"] is not None:
         d["compare"]["path"] = str(old_path)

@@ -383,8 +383,8 @@ class HysteresisModel(ABC):
         need = min_fit_samples(n_free)
         if d.n_samples < need:
             raise ModelError(f"too few samples to fit {n_free} parameters: got {d.n_samples}, need at least {need} "
-                             "(record longer, or a model with fewer parameters: bspline --set n_knots=3, pi "
-                             "n_operators=8, or linear)")
+                             "(record longer, or a model with fewer parameters: --model bspline --set n_knots=3, "
+                             "--model pi --set n_operators=8, or --model linear)")
 
         self._owner_map_ = owners
         x0 = np.array([start[n].clipped_start() for n in free])

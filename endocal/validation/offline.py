@@ -228,7 +228,8 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
                      data_paths: Sequence[str] | None = None, train_paths: Sequence[str] | None = None,
                      planes=None, refit_args: Sequence[str] = (), scheme_reason: str | None = None,
                      load_columns: Sequence[str] | None = None, bending_axes: Sequence[str] | None = None,
-                     max_scan_samples: int = MAX_SCAN_SAMPLES, n_boot: int = 400) -> ValidationResult:
+                     max_scan_samples: int = MAX_SCAN_SAMPLES, n_boot: int = 400,
+                     refit_suffix: str = "") -> ValidationResult:
     """Validate a fitted model on measured data: metrics, regimes, residual tests, missing effects.
 
     Two schemes test the candidate effects (:mod:`endocal.validation.suspects`):
@@ -283,6 +284,8 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
         Decimate longer records for the scan (see :func:`~endocal.validation.suspects.scan_effects`).
     n_boot : int
         Bootstrap replicates of the metrics' intervals.
+    refit_suffix : str
+        Ends the refit commands' file names (``-all`` when ``train_paths`` hold the validation data).
 
     Returns
     -------
@@ -338,7 +341,7 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
         scan = scan_split(model, est, data, alpha=alpha, min_gain_pct=min_gain_pct, load_columns=load_columns,
                           bending_axes=axes_all, max_samples=max_scan_samples, data_paths=list(train_paths),
                           model_path=model_path, refit_args=refit_args,
-                          scheme_reason=scheme_reason or "estimation data given")
+                          scheme_reason=scheme_reason or "estimation data given", refit_suffix=refit_suffix)
     else:
         reason = scheme_reason or "no separate estimation data"
         try:

@@ -538,9 +538,10 @@ def refit_command(data_paths: Sequence[str], axis: str | None, base: str, effect
     return "endocal fit hysteresis " + shlex.join(parts[1:])
 
 
-def refit_path(model_path: str | None, effect: str) -> str:
-    """``MODEL-EFFECT.json`` beside ``MODEL.json`` (``load:col`` becomes ``load-col``)."""
-    tag = effect.replace(":", "-")
+def refit_path(model_path: str | None, effect: str, suffix: str = "") -> str:
+    """``MODEL-EFFECT.json`` beside ``MODEL.json`` (``load:col`` becomes ``load-col``), with
+    ``suffix`` before ``.json`` (``-all`` for a refit on more data than the scan scored)."""
+    tag = effect.replace(":", "-") + suffix
     if not model_path:
         return f"model-{tag}.json"
     p = str(model_path)
@@ -761,7 +762,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
                load_columns: Sequence[str] | None = None, bending_axes: Sequence[str] = (),
                max_samples: int = MAX_SCAN_SAMPLES, data_paths: Sequence[str] = ("DATA",),
                model_path: str | None = None, refit_args: Sequence[str] = (),
-               scheme_reason: str = "", jobs: int | None = None) -> ScanResult:
+               scheme_reason: str = "", jobs: int | None = None, refit_suffix: str = "") -> ScanResult:
     """Test every catalog effect the model lacks: fitted on estimation data, scored on validation data.
 
     The estimation/validation split of system identification (Ljung, *System
@@ -793,6 +794,9 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
         Why this scheme runs, recorded in the result.
     jobs : int, optional
         Processes for the fits (:func:`endocal.validation.parallel.n_jobs`).
+    refit_suffix : str
+        Ends the refit's file name (:func:`refit_path`): ``-all`` when ``data_paths`` fold the
+        validation data in, so that model does not take the name of the one the scan scored.
 
     Returns
     -------
@@ -847,8 +851,9 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
         significant = bool(pa < alpha and gain >= min_gain_pct)
         evidence = (f"not enough evidence ({units.n} units, {need} needed)" if thin else
                     "significant" if significant else f"not significant (p = {pa:.2g} over {units.n} {units.kind}s)")
-        cmd = refit_command(data_paths, model.axis, model.base_name, have + [c], refit_path(model_path, c),
-                            [*refit_args, *settings_args(model)], start_from=model_path)
+        cmd = refit_command(data_paths, model.axis, model.base_name, have + [c],
+                            refit_path(model_path, c, refit_suffix), [*refit_args, *settings_args(model)],
+                            start_from=model_path)
         tested.append(Suspect(effect=c, column=col or None, gain_pct=gain, p_value=float(pa), p_raw=float(p),
                               rmse_heldout_deg=rmse, base_rmse_heldout_deg=rmse_base, significant=significant,
                               command=cmd, cause=cls.cause, signature=cls.signature, protocol=cls.protocol,
