@@ -21,6 +21,7 @@ import shlex
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -489,7 +490,7 @@ def test_tracker_glitches_are_left_out_of_the_fit_and_the_scores(sine_sweeps, tm
     assert spiky["metrics"]["rmse_deg"] == pytest.approx(clean["metrics"]["rmse_deg"], rel=0.05)
     said = [n for n in spiky["notes"] if n.startswith("left out 5 measured ap angle(s) and 1 ap command(s)")]
     assert len(said) == 2 and "at t = 3.000 s" in said[0], spiky["notes"]  # the validation and the estimation record
-    assert spiky["data"][0]["spikes_left_out"] == {"command": 1, "measured": 5, "first_t_s": 3.0}
+    assert spiky["data"][0]["spikes_left_out"] == {"command": 1, "measured": 5, "held": 0, "first_t_s": 3.0}
 
 
 def test_a_record_that_never_moves_the_knob_is_refused_as_report_refuses_it(sine_sweeps, tmp_path):
@@ -502,3 +503,22 @@ def test_a_record_that_never_moves_the_knob_is_refused_as_report_refuses_it(sine
     table.to_csv(tmp_path / "held.csv", index=False)
     _one_line_exit_2(_run("validate", sine_sweeps / "pe.json", tmp_path / "held.csv", ok=False),
                      "the ap command spans only 0.00 deg: the record does not excite this axis")
+
+
+def test_a_frozen_tracker_is_left_out_and_said(sine_sweeps, tmp_path):
+    """The tracker repeating its last frame for 0.5 s while the knob sweeps on (a sensor out of
+    the field, a stalled driver): 49 repeats of one reading, left out; a record whose readings
+    repeat anyway (a table holding a 40 Hz tracker's frames at 100 Hz) is left alone."""
+    from endocal.runs.aligned import load_aligned
+    from endocal.validation.data import held
+
+    table = load_aligned(sine_sweeps / "val").table.copy()
+    table.loc[400:449, "ap_meas_deg"] = table.loc[400, "ap_meas_deg"]
+    table.to_csv(tmp_path / "frozen.csv", index=False)
+    d = _validate_json(tmp_path, sine_sweeps / "pe.json", tmp_path / "frozen.csv")
+    assert d["data"][0]["spikes_left_out"] == {"command": 0, "measured": 0, "held": 49, "first_t_s": 4.01}
+    assert any(n.startswith("left out 49 measured ap angle(s) repeating one reading exactly") for n in d["notes"])
+    assert d["suspects"][0]["effect"] == "deadzone"  # as on the clean record
+    meas, cmd = table["ap_meas_deg"].to_numpy(), table["ap_cmd_deg"].to_numpy()
+    sampled_and_held = np.repeat(meas[::5], 5)[: meas.size]  # every reading repeated 4 times
+    assert held(meas, cmd).sum() == 49 and not held(sampled_and_held, cmd).any()

@@ -66,17 +66,52 @@ def spikes(values: np.ndarray) -> np.ndarray:
     return dev > max(SPIKE_SIGMAS * 1.4826 * float(np.median(dev)), SPIKE_SPAN_FRAC * float(hi - lo))
 
 
-def spike_note(dropped: list[tuple[str, int, int, float]], axis: str) -> str:
-    """One line for the spikes :func:`axis_data` left out (its ``dropped`` list), or ``""``."""
+#: A held reading (:func:`held`): a measured angle that repeats exactly for at least
+#: HELD_MIN_SAMPLES samples while the command moves by more than HELD_MIN_MOVE_FRAC of its span,
+#: in a record whose readings otherwise repeat in under HELD_MAX_REPEAT_FRAC of consecutive
+#: pairs. An EM tracker's noise never gives one number twice, so a run of one value is the
+#: tracker or its bridge repeating its last frame (a sensor out of the field, a stalled driver);
+#: a quantised encoder, or a table that holds a slower tracker's frame until the next, repeats
+#: throughout and is left alone, as is a tip resting while the knob rests.
+HELD_MIN_SAMPLES = 10
+HELD_MIN_MOVE_FRAC = 0.01
+HELD_MAX_REPEAT_FRAC = 0.01
+
+
+def held(meas: np.ndarray, cmd: np.ndarray) -> np.ndarray:
+    """Samples of one record whose measured angle repeats the one before while the command moves
+    (a frozen reading; thresholds above), shape (n,) bool: every repeat, not the reading held."""
+    v, u = np.asarray(meas, float), np.asarray(cmd, float)
+    out = np.zeros(v.size, bool)
+    same = np.diff(v) == 0
+    if not same.any():
+        return out
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], same.astype(np.int8), [0]])))
+    runs = [(a, b) for a, b in zip(edges[::2], edges[1::2]) if b - a + 1 >= HELD_MIN_SAMPLES]  # pairs a..b-1
+    elsewhere = same.sum() - sum(b - a for a, b in runs)
+    if elsewhere > HELD_MAX_REPEAT_FRAC * same.size:
+        return out  # readings repeat anyway: quantised, or held between a slower sensor's frames
+    span = float(np.ptp(u))
+    for a, b in runs:
+        if np.ptp(u[a:b + 1]) > HELD_MIN_MOVE_FRAC * span:
+            out[a + 1:b + 1] = True
+    return out
+
+
+def spike_note(dropped: list[tuple[str, int, int, int, float]], axis: str) -> str:
+    """One line for the glitches :func:`axis_data` left out (its ``dropped`` list), or ``""``."""
     if not dropped:
         return ""
-    n_cmd, n_meas = sum(d[1] for d in dropped), sum(d[2] for d in dropped)
-    where = " and ".join(x for x in (f"{n_meas} measured {axis} angle(s)" if n_meas else "",
+    n_cmd, n_meas, n_held = (sum(d[i] for d in dropped) for i in (1, 2, 3))
+    jumps = " and ".join(x for x in (f"{n_meas} measured {axis} angle(s)" if n_meas else "",
                                      f"{n_cmd} {axis} command(s)" if n_cmd else "") if x)
-    src, _, _, t0 = dropped[0]
-    return (f"left out {where} that jump away from their neighbours and back by over a tenth of the signal's span "
-            f"(a tracker or logger glitch; the first in {src} at t = {t0:.3f} s): the fit and the scores use the "
-            "samples around them")
+    parts = [f"{jumps} that jump away from their neighbours and back by over a tenth of the signal's span"
+             if jumps else "",
+             f"{n_held} measured {axis} angle(s) repeating one reading exactly while the knob moved (a frozen "
+             "tracker)" if n_held else ""]
+    src, t0 = dropped[0][0], dropped[0][-1]
+    return (f"left out {'; and '.join(x for x in parts if x)} (a tracker or logger glitch; the first in {src} at "
+            f"t = {t0:.3f} s): the fit and the scores use the samples around them")
 
 
 def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str, planes=None,
@@ -112,9 +147,10 @@ def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str, planes=No
         A table lacks ``axis`` (the message names the table and the axes it has), or
         ``planes`` is given for a table without both bending axes.
 
-    Samples where the command or the measured angle spikes (:func:`spikes`) are left out; with
-    ``dropped`` a list, one ``(source, n_command, n_measured, first_t_s)`` per table with any
-    is appended to it (:func:`spike_note` words them).
+    Samples where the command or the measured angle spikes (:func:`spikes`), or the measured
+    angle is a reading held while the knob moved (:func:`held`), are left out; with ``dropped`` a
+    list, one ``(source, n_command, n_measured, n_held, first_t_s)`` per table with any is
+    appended to it (:func:`spike_note` words them).
     """
     tables = _as_list(aligned)
     for a in tables:
@@ -141,11 +177,12 @@ def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str, planes=No
             extras[f"{other}_meas_deg"] = extras[OTHER_MEAS]
         cmd, meas, t = a.cmd_deg(axis), a.meas_deg(axis), np.asarray(a.t_s, float)
         bad_cmd, bad_meas = spikes(cmd), spikes(meas)
-        keep = ~(bad_cmd | bad_meas)
+        frozen = held(meas, cmd) & ~bad_cmd & ~bad_meas
+        keep = ~(bad_cmd | bad_meas | frozen)
         if not keep.all() and keep.any():
             if dropped is not None:
                 dropped.append((str(a.source), int(bad_cmd.sum()), int((bad_meas & ~bad_cmd).sum()),
-                                float(t[np.argmax(~keep)])))
+                                int(frozen.sum()), float(t[np.argmax(~keep)])))
             cmd, meas, t = cmd[keep], meas[keep], t[keep]
             extras = {k: v[keep] for k, v in extras.items()}
         runs.append(HysteresisData(cmd_deg=cmd, meas_deg=meas, t_s=t, extras=extras))

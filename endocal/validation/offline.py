@@ -205,9 +205,9 @@ def _axis_of(datas, model: HysteresisModel, axis: str | None, planes, bending_ax
     data = axis_data(tables, ax, planes, dropped)
     info = [{"source": str(a.source), "sha256": a.sha256, "n_samples": len(a.table),
              "duration_s": float(np.ptp(a.table["t_s"].to_numpy()))} for a in tables]
-    for src, n_cmd, n_meas, t0 in dropped:
+    for src, n_cmd, n_meas, n_held, t0 in dropped:
         next(d for d in info if d["source"] == src)["spikes_left_out"] = {"command": n_cmd, "measured": n_meas,
-                                                                          "first_t_s": t0}
+                                                                          "held": n_held, "first_t_s": t0}
     axes_all = list(bending_axes) if bending_axes is not None else sorted(set().union(*(a.axes for a in tables)))
     return data, ax, info, axes_all, [str(a.source) for a in tables], spike_note(dropped, ax)
 
