@@ -93,4 +93,5 @@ def _draft(log: Path, path: Path, force: bool) -> None:
         out.print(f"  FILL IN {u}: no column looked like it", markup=False)
     # an [angles] map imports to an aligned table (a .parquet or .csv file), a map of EM poses to a run folder
     target = shlex.quote(str(import_out(log, d.angles)))
-    out.print(f"then: endocal import csv {shlex.quote(str(log))} --map {shlex.quote(str(path))} --out {target}", markup=False)
+    out.print(f"then: endocal import csv {shlex.quote(str(log))} --map {shlex.quote(str(path))} --out {target}",
+              markup=False)
