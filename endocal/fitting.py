@@ -11,7 +11,7 @@ from endocal.errors import ModelError
 from endocal.models import make_model
 from endocal.models.base import HysteresisModel
 from endocal.runs.aligned import load_aligned
-from endocal.validation.data import axis_data, spike_note
+from endocal.validation.data import axis_data, glitch_note
 from endocal.validation.residuals import cut_start
 
 
@@ -25,7 +25,7 @@ class HysteresisFit:
     samples: int
     duration_s: float = 0.0  # summed over the records: with ``samples``, the rate a user can check
     cut_start: str = ""  # what a record cut away from 0 did to the fit (validation.residuals.cut_start)
-    spikes: str = ""  # samples left out as glitches (validation.data.spike_note)
+    glitches: str = ""  # samples left out as glitches (validation.data.glitch_note)
 
     @property
     def rate_hz(self) -> float:
@@ -78,4 +78,4 @@ def fit_hysteresis(
     span = sum(float(np.ptp(d.table["t_s"])) for d in datas)
     cut = cut_start(data, model.predict(data) - data.meas_deg, "fitted record")
     return HysteresisFit(model, [d.source for d in datas], [d.sha256 for d in datas], len(data.cmd_deg), span, cut,
-                         spike_note(dropped, axis))
+                         glitch_note(dropped, axis))

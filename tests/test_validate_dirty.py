@@ -38,7 +38,7 @@ def test_tracker_glitches_are_left_out_of_the_fit_and_the_scores(sine_sweeps, tm
     assert spiky["metrics"]["rmse_deg"] == pytest.approx(clean["metrics"]["rmse_deg"], rel=0.05)
     said = [n for n in spiky["notes"] if n.startswith("left out 5 measured ap angle(s) and 1 ap command(s)")]
     assert len(said) == 2 and "at t = 3.000 s" in said[0], spiky["notes"]  # the validation and the estimation record
-    assert spiky["data"][0]["spikes_left_out"] == {"command": 1, "measured": 5, "held": 0, "first_t_s": 3.0}
+    assert spiky["data"][0]["glitches_left_out"] == {"command": 1, "measured": 5, "held": 0, "first_t_s": 3.0}
 
 
 def test_a_record_that_never_moves_the_knob_is_refused_as_report_refuses_it(sine_sweeps, tmp_path):
@@ -64,7 +64,7 @@ def test_a_frozen_tracker_is_left_out_and_said(sine_sweeps, tmp_path):
     table.loc[400:449, "ap_meas_deg"] = table.loc[400, "ap_meas_deg"]
     table.to_csv(tmp_path / "frozen.csv", index=False)
     d = _validate_json(tmp_path, sine_sweeps / "pe.json", tmp_path / "frozen.csv")
-    assert d["data"][0]["spikes_left_out"] == {"command": 0, "measured": 0, "held": 49, "first_t_s": 4.01}
+    assert d["data"][0]["glitches_left_out"] == {"command": 0, "measured": 0, "held": 49, "first_t_s": 4.01}
     assert any(n.startswith("left out 49 measured ap angle(s) repeating one reading exactly") for n in d["notes"])
     assert d["suspects"][0]["effect"] == "deadzone"  # as on the clean record
     meas, cmd = table["ap_meas_deg"].to_numpy(), table["ap_cmd_deg"].to_numpy()

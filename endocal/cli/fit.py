@@ -123,7 +123,7 @@ def hysteresis(
     slow = slow_clock_warning(result.samples, result.duration_s)
     if slow:
         out.print(slow, markup=False)
-    for w in [*rep.warnings, *(n for n in (result.spikes, result.cut_start) if n)]:
+    for w in [*rep.warnings, *(n for n in (result.glitches, result.cut_start) if n)]:
         out.print(f"warning: {w}", markup=False)
     err.print(f"wrote {out_path}")
 

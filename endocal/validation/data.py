@@ -98,7 +98,7 @@ def held(meas: np.ndarray, cmd: np.ndarray) -> np.ndarray:
     return out
 
 
-def spike_note(dropped: list[tuple[str, int, int, int, float]], axis: str) -> str:
+def glitch_note(dropped: list[tuple[str, int, int, int, float]], axis: str) -> str:
     """One line for the glitches :func:`axis_data` left out (its ``dropped`` list), or ``""``."""
     if not dropped:
         return ""
@@ -150,7 +150,7 @@ def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str, planes=No
     Samples where the command or the measured angle spikes (:func:`spikes`), or the measured
     angle is a reading held while the knob moved (:func:`held`), are left out; with ``dropped`` a
     list, one ``(source, n_command, n_measured, n_held, first_t_s)`` per table with any is
-    appended to it (:func:`spike_note` words them).
+    appended to it (:func:`glitch_note` words them).
     """
     tables = _as_list(aligned)
     for a in tables:

@@ -15,7 +15,7 @@ from endocal.errors import ModelError
 from endocal.models import HysteresisData
 from endocal.models.base import HysteresisModel
 from endocal.runs.aligned import AlignedData
-from endocal.validation.data import MIN_SPAN_DEG, axis_data, check_columns, load_candidates, spike_note
+from endocal.validation.data import MIN_SPAN_DEG, axis_data, check_columns, glitch_note, load_candidates
 from endocal.validation.metrics import ErrorMetrics, error_metrics
 from endocal.validation.regimes import RegimeBreakdown, error_by_regime
 from endocal.validation.residuals import ResidualTests, cut_start, residual_tests, unexplained_shape
@@ -191,7 +191,7 @@ def _resolve_axis(model: HysteresisModel, datas: list[AlignedData], what: str = 
 
 
 def _axis_of(datas, model: HysteresisModel, axis: str | None, planes, bending_axes, what: str = "validation data"):
-    """(HysteresisData, axis, per-table info, bending axes, paths, spikes left out) of loaded tables or one
+    """(HysteresisData, axis, per-table info, bending axes, paths, glitches left out) of loaded tables or one
     HysteresisData."""
     if isinstance(datas, HysteresisData):
         ax = axis or model.axis or "axis"
@@ -206,10 +206,10 @@ def _axis_of(datas, model: HysteresisModel, axis: str | None, planes, bending_ax
     info = [{"source": str(a.source), "sha256": a.sha256, "n_samples": len(a.table),
              "duration_s": float(np.ptp(a.table["t_s"].to_numpy()))} for a in tables]
     for src, n_cmd, n_meas, n_held, t0 in dropped:
-        next(d for d in info if d["source"] == src)["spikes_left_out"] = {"command": n_cmd, "measured": n_meas,
-                                                                          "held": n_held, "first_t_s": t0}
+        entry = next(d for d in info if d["source"] == src)
+        entry["glitches_left_out"] = {"command": n_cmd, "measured": n_meas, "held": n_held, "first_t_s": t0}
     axes_all = list(bending_axes) if bending_axes is not None else sorted(set().union(*(a.axes for a in tables)))
-    return data, ax, info, axes_all, [str(a.source) for a in tables], spike_note(dropped, ax)
+    return data, ax, info, axes_all, [str(a.source) for a in tables], glitch_note(dropped, ax)
 
 
 def _no_scan(reason: str, alpha: float, min_gain_pct: float) -> ScanResult:
@@ -298,7 +298,7 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
         constant column, estimation data no model can be fitted on.
     """
     model._require_fitted()
-    data, ax, info, axes_all, val_paths, val_spikes = _axis_of(datas, model, axis, planes, bending_axes)
+    data, ax, info, axes_all, val_paths, val_glitches = _axis_of(datas, model, axis, planes, bending_axes)
     if data.meas_deg is None:
         raise ModelError("validation needs measured angles")
     if data.n_samples < MIN_VALIDATION_SAMPLES:
@@ -314,7 +314,7 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     paths = list(data_paths) if data_paths is not None else (val_paths or ["DATA"])
     est, est_info = None, []
     if train is not None:
-        est, _, est_info, est_axes, est_paths, est_spikes = _axis_of(train, model, ax, planes, bending_axes,
+        est, _, est_info, est_axes, est_paths, est_glitches = _axis_of(train, model, ax, planes, bending_axes,
                                                                      "estimation data")
         axes_all = sorted(set(axes_all) | set(est_axes))
         if train_paths is None:
@@ -332,7 +332,7 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     regimes = error_by_regime(data, pred, seed=seed)
     load_cols = list(dict.fromkeys([*(load_columns or []), *load_candidates(data, axes_all)[0]]))
     resid = residual_tests(data, data.meas_deg - pred, alpha=alpha, load_columns=load_cols)
-    notes = [val_spikes, cut_start(data, data.meas_deg - pred)]
+    notes = [val_glitches, cut_start(data, data.meas_deg - pred)]
     if est is not None:
         same = {d["sha256"] for d in est_info if d["sha256"]} & {d["sha256"] for d in info if d["sha256"]}
         if same:
@@ -369,7 +369,7 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
         pointers += [p for p in shift_pointers(shift, scan, covariate_changes(est, data), speeds)
                      if p.effect not in named]
     if est is not None:
-        notes += [est_spikes, cut_start(est, est.meas_deg - predict_extrapolated(model, est)[0], "estimation record")]
+        notes += [est_glitches, cut_start(est, est.meas_deg - predict_extrapolated(model, est)[0], "estimation record")]
     notes = [n for n in notes if n] + list(scan.notes)
     comp = None
     if compare is not None and scan.scheme != "none":
