@@ -1,4 +1,4 @@
-"""`endocal import csv` (endocal/runs/csvlog.py): a lab's CSV log into a run folder.
+"""`endocal import csv` (endocal/runs/csvlog.py, its checks in csvchecks.py): a lab's CSV log into a run folder.
 
 Round trip: a simulated run is written out as a lab would log it, through the documented
 example map (time in ms, knob positions and goals in servo ticks, poses in metres with
@@ -678,3 +678,105 @@ def test_a_log_holding_the_latest_pose_on_every_row_reads_each_frame_at_its_own_
     a, b = load_aligned(sim_log / "run").table, load_aligned(tmp_path / "r").table
     assert len(a) == len(b)
     np.testing.assert_allclose(b["ap_meas_deg"], a["ap_meas_deg"], atol=1e-9)
+
+
+def test_a_gap_in_the_poses_is_warned_with_its_rows_first_line_and_length(sim_log, tmp_path):
+    # the tracker lost both sensors for a second (a bridge writes empty cells): the motor samples
+    # in that gap have no bend to interpolate and are left out of the aligned table, which the
+    # import counts, with the first one's line and the gap's length, for a warning
+    import endocal.runs.csvlog as csvlog
+
+    clean = csvlog.import_csv(sim_log / "log.csv", MAP, tmp_path / "clean")
+    assert clean.motor_rows_unaligned == 0 and clean.gap_warning is None
+    log = pd.read_csv(sim_log / "log.csv")
+    pose = [c for c in log.columns if c.startswith(("tip_", "base_"))]
+    stamp = log["stamp_ms"].to_numpy()
+    lost = (stamp >= stamp[0] + 5000) & (stamp < stamp[0] + 6000)
+    log.loc[lost, pose] = np.nan
+    log.to_csv(tmp_path / "gap.csv", index=False)
+    frames = stamp[log["tip_x_m"].notna().to_numpy()]
+    before, after = frames[frames < stamp[0] + 5000].max(), frames[frames >= stamp[0] + 6000].min()
+    # align()'s rule: a gap over 0.2 s leaves out the motor samples from the frame before it up to
+    # the one after it
+    left = log["ap_present_ticks"].notna().to_numpy() & (stamp >= before) & (stamp < after)
+    line = int(np.flatnonzero(left)[0]) + 2  # data row k is on line k + 2
+    res = csvlog.import_csv(tmp_path / "gap.csv", MAP, tmp_path / "r")
+    assert res.motor_rows_unaligned == left.sum() >= 100  # a gap of a second or more at 100 Hz
+    assert res.motor_rows_unaligned_line == line
+    assert res.longest_gap_s == pytest.approx((after - before) / 1000.0, abs=1e-9)
+    assert res.aligned_rows == clean.aligned_rows - left.sum()
+    assert res.gap_warning == (f"{left.sum()} motor sample(s) were left out of the aligned table, with no tracker "
+                               "frame to interpolate (a gap over 0.2 s, or outside the tracker frames' span; the "
+                               f"longest gap {(after - before) / 1000.0:.2f} s); the first at line {line}")
+    meta = _run_json(tmp_path / "r")
+    assert meta["backend"]["motor_rows_unaligned"] == left.sum() == meta["counts"]["motor_ticks_without_tracking"]
+    assert meta["backend"]["motor_rows_unaligned_line"] == line
+    assert meta["backend"]["longest_gap_s"] == pytest.approx((after - before) / 1000.0, abs=1e-9)
+
+
+def test_a_gap_in_the_angle_readings_is_counted_in_the_table_metadata(bench_log, tmp_path):
+    # the encoder, read at every other motor sample, stops for half a second: the motor samples from
+    # the reading before it up to the one after are left out (the every-other-row gaps are interpolated)
+    import json
+
+    import pyarrow.parquet as pq
+
+    import endocal.runs.csvlog as csvlog
+
+    log = pd.read_csv(bench_log[0])
+    lost = (log["time_ms"] >= 5250.0) & (log["time_ms"] < 5750.0)  # 5.0 to 5.5 s after the first row
+    log.loc[lost, "joint_deg"] = np.nan
+    log.to_csv(tmp_path / "gap.csv", index=False)
+    read = np.flatnonzero(log["joint_deg"].notna().to_numpy())
+    k0, k1 = read[read < np.flatnonzero(lost)[0]].max(), read[read > np.flatnonzero(lost)[-1]].min()
+    (tmp_path / "map.toml").write_text(ANGLES_MAP.read_text().replace("zero = 0.0 ", "zero = 5.0 "))
+    res = csvlog.import_csv(tmp_path / "gap.csv", tmp_path / "map.toml", tmp_path / "gap.parquet")
+    assert (res.motor_rows_unaligned, res.motor_rows_unaligned_line) == (k1 - k0, k0 + 2)  # every row a motor sample
+    assert res.longest_gap_s == pytest.approx((log["time_ms"][k1] - log["time_ms"][k0]) / 1000.0, abs=1e-9)
+    assert "with no angle reading to interpolate" in res.gap_warning and res.aligned_rows == len(log) - (k1 - k0)
+    backend = json.loads(pq.read_schema(tmp_path / "gap.parquet").metadata[b"endocal"])["backend"]
+    assert (backend["motor_rows_unaligned"], backend["motor_rows_unaligned_line"]) == (k1 - k0, k0 + 2)
+
+
+@pytest.mark.parametrize("spoil, fragment", [
+    (lambda cells, cols: cells.__setitem__(cols.index("ap_present_ticks"), "ERR"),
+     "column 'ap_present_ticks' is not numeric (line {line}: 'ERR')"),
+    (lambda cells, cols: cells.__setitem__(cols.index("stamp_ms"), ""),
+     "time column 'stamp_ms' is empty or not a number at line {line}"),
+    (lambda cells, cols: cells.__setitem__(cols.index("ap_goal_ticks"), ""),
+     "goal column 'ap_goal_ticks' is empty on a motor row (line {line})"),
+])
+def test_a_bad_cell_is_named_by_its_line_in_the_file_past_blank_lines(sim_log, tmp_path, spoil, fragment):
+    # an editor counts the blank lines a logger left (a restart, a hand edit), which pandas skips
+    text = (sim_log / "log.csv").read_text().splitlines()
+    cols = text[0].split(",")
+    k = next(i for i in range(100, len(text)) if text[i + 1].split(",")[cols.index("ap_present_ticks")])  # a motor row
+    cells = text[k + 1].split(",")  # data row k is on line k + 2, index k + 1
+    spoil(cells, cols)
+    text[k + 1] = ",".join(cells)
+    text[60:60] = [""]  # empty, and spaces only: two lines no row is read from
+    text[30:30] = ["   "]
+    (tmp_path / "blank.csv").write_text("\n".join(text) + "\n")
+    one_line_exit_2(endocal("import", "csv", tmp_path / "blank.csv", "--map", MAP, "--out", tmp_path / "r"),
+                    fragment.format(line=k + 4))
+
+
+@pytest.mark.parametrize("time, fragments", [
+    # a log without a clock: its rows per second are the map's, and no lab logs 0.5 or 20 000
+    ("sample_rate_hz = 0.5", ("[time] sample_rate_hz = 0.5", "2 s apart (0.5 Hz), slower than any lab log",
+                              "set sample_rate_hz to the rows the logger wrote per second")),
+    ("sample_rate_hz = 20000.0", ("[time] sample_rate_hz = 20000", "faster than any lab log (1 Hz to 10000 Hz)")),
+    # the clock's unit left beside a rate would be ignored
+    ('sample_rate_hz = 100.0\nunit = "ms"', ("[time]: unit applies to a time column, not to sample_rate_hz",
+                                             "delete unit = 'ms'")),
+])
+def test_a_fixed_sample_rate_is_checked_as_a_clock_is(bench_log, tmp_path, time, fragments):
+    text = ANGLES_MAP.read_text()
+    clock = text[text.index('column = "time_ms"'):text.index("[knobs.ap]")]
+    (tmp_path / "map.toml").write_text(text.replace(clock, time + "\n\n"))
+    one_line_exit_2(endocal("import", "csv", bench_log[0], "--map", tmp_path / "map.toml", "--out",
+                            tmp_path / "t.parquet"), *fragments)
+    assert not (tmp_path / "t.parquet").exists()
+    (tmp_path / "map.toml").write_text(text.replace(clock, "sample_rate_hz = 100.0\n\n"))
+    ok = endocal("import", "csv", bench_log[0], "--map", tmp_path / "map.toml", "--out", tmp_path / "t.parquet")
+    assert ok.returncode == 0 and "(100.0 Hz)" in ok.stdout, ok.stderr

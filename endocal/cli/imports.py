@@ -76,6 +76,8 @@ def import_csv_cmd(
         err.print(f"note: {res.rows_unused} row(s) held neither a motor sample nor a "
                   f"{'reading' if res.angles_measured else 'pose'} in the mapped columns; the first at line "
                   f"{res.rows_unused_line}", markup=False)
+    if res.gap_warning:
+        err.print(f"warning: {res.gap_warning}", markup=False)
     if res.alignment_error:
         err.print(f"warning: no aligned table: {res.alignment_error}", markup=False)
 

@@ -15,14 +15,15 @@ is read as it is; a log with separate motor and tracker rows (empty cells where 
 not report) is read exactly. A frame whose sensor has an empty cell or a quaternion that is no
 rotation (zeros, for a sensor out of the field) is invalid: kept in the tracker stream as a
 dropout (NaN, ``valid`` false), left out of the aligned table and counted; rows with some knob
-cells but not every position are no motor sample, and are counted too.
+cells but not every position are no motor sample, and are counted too. Motor samples in a gap
+of the readings longer than :data:`~endocal.runs.csvchecks.MAX_GAP_S` (or outside their span)
+have nothing to interpolate and are left out of the aligned table: counted, with the first one's
+line and the longest gap, for a warning.
 
 Plausibility
 ------------
 A unit mistake in a map gives numbers no rig produces, refused in one line naming the map key
-before anything is written: knob positions far beyond the probe's limits (with poses), a
-motor sample rate under 1 Hz or over 10 kHz, tip and base sensors nowhere near a bending
-length apart, fewer aligned rows than any fit can use. The run folder is written beside
+before anything is written (:mod:`endocal.runs.csvchecks`). The run folder is written beside
 ``out`` and renamed into place, so a failure while writing leaves nothing behind.
 
 Measured angles instead of poses
@@ -54,14 +55,13 @@ import numpy as np
 import pandas as pd
 
 from endocal.errors import OutputExistsError, OutputPathError, RunFormatError
-from endocal.kinematics.bending import bending_angles_deg, tip_in_base_mm
-from endocal.models.base import min_fit_samples
 from endocal.probe import TRANSLATION, ProbeConfig, load_probe
 from endocal.runs.aligned import CMD, CSV_SUFFIXES, MEAS, check_aligned, load_aligned, measured_at
-from endocal.runs.format import (LOG_RATE_RANGE_HZ, atomic_write_bytes, check_parent, parquet_bytes, prepare_output,
-                                 software_versions)
+from endocal.runs.csvchecks import (MAX_GAP_S, ReadingGaps, check_aligned_rows, check_base_order, check_distance,
+                                    check_knob_to_bend, check_knobs, check_rate, reading_gaps)
+from endocal.runs.format import atomic_write_bytes, check_parent, parquet_bytes, prepare_output, software_versions
 from endocal.runs.imported import tracker_stream, write_imported_run
-from endocal.runs.textable import read_csv_table
+from endocal.runs.textable import read_csv_table, sniff_delimiter
 
 #: What a drafted map (:mod:`endocal.runs.mapdraft`) writes where it could not place a column.
 UNFILLED = "FILL IN"
@@ -74,63 +74,16 @@ QUAT_ORDERS = ("xyzw", "wxyz")
 _MAP_KEYS = {"probe", "time", "knobs", "tip", "base", "angles", "extras"}
 _ANGLE_KEYS = {"column", "unit", "direction", "zero"}
 TABLE_SUFFIXES = (".parquet", ".csv")
-MAX_GAP_S = 0.2  # longest gap between angle readings to interpolate across, as align() for tracker frames
 _TIME_KEYS = {"column", "unit", "sample_rate_hz"}
 _KNOB_KEYS = {"position", "goal", "current", "unit", "zero", "zero_ticks", "ticks_per_rev", "direction", "current_unit"}
 _POSE_KEYS = {"position", "unit", "quaternion", "order", "valid", "fixed_position", "fixed_quaternion"}
 
-# Plausibility of what a map makes of a log: a wrong unit gives numbers no rig produces, which
-# are refused (naming the map key to fix) before anything is written.
-#: Knob positions and goals may lie beyond the probe's limits by up to one limit span on each
-#: side (-270..270 deg for the tee's -90..90 deg) before the import calls them a unit mistake:
-#: a real log exceeds a preset's limits a little (overshoot, a zero_ticks a quarter turn off,
-#: another probe logged under this preset), while the mistakes this catches scale the values
-#: by 11.4 (servo ticks read as deg: 4096 a turn, the mid-turn 2048 read as 2048 deg), 57.3
-#: (deg read as rad) or 652 (ticks read as rad), many spans out.
-KNOB_MARGIN_SPANS = 1.0
-#: A unit mistake moves every sample; a servo answering garbage once moves one. More than 1 %
-#: of the motor rows beyond the band is a mistake.
-MAX_BEYOND_FRACTION = 0.01
-#: The fewest aligned rows worth importing: what a fit of one free parameter needs; no model fits fewer.
-MIN_ALIGNED_ROWS = min_fit_samples(1)
-#: Tip-to-base sensor distances a log can show, in bending lengths of the probe: the sensors
-#: sit at the ends of the bending section, give or take a mounting offset or a base sensor
-#: further back on the shaft (a few lengths; the NDI Aurora's field is 0.5 m across), while a
-#: length unit read wrongly (m for mm) scales the distance by 1000.
-DISTANCE_RANGE_LENGTHS = (0.05, 20.0)
 #: The smallest quaternion norm of a valid tracker reading. Every reader normalises the
 #: quaternion (scipy's Rotation), so its norm carries no rotation and a log scaled throughout
 #: still reads right; only one too short to have a direction is no rotation: the zeros a tracker
 #: or ROS bridge writes for a sensor out of the field. A unit quaternion logged to even three
 #: decimals has norm 1 within 2e-3; below 0.5 the reading is invalid.
 QUAT_MIN_NORM = 0.5
-#: Thesis eq. 1 measures the bend from the base sensor's z axis, so a recording that passes
-#: through the neutral bend brings the tip near that axis in some frames (a sensor mounted a few
-#: degrees askew, or a knob never quite at neutral, keeps it within about 10 deg). Read in the
-#: wrong order, the base quaternion is another rotation, which turns the whole recording away
-#: from the axis (90 to 180 deg for the sims' and a typical bench's poses). The frames nearest the
-#: axis are the :data:`NEAR_AXIS_QUANTILE` quantile of the off-axis angle; the map's order is
-#: called a mistake when they stay :data:`OFF_AXIS_WRONG_DEG` off and the other order brings
-#: them within :data:`OFF_AXIS_RIGHT_DEG` (a recording that never nears neutral, or a sensor
-#: mounted across the probe, is off in both orders and imported as it is).
-NEAR_AXIS_QUANTILE = 0.05
-OFF_AXIS_WRONG_DEG = 30.0
-OFF_AXIS_RIGHT_DEG = 15.0
-#: Degrees of bend per knob degree beyond which the knob's unit is called a mistake: a tendon
-#: drive turns the knob about as far as the tip bends (the thesis's TEE probe: knob and bend
-#: both about +-90 deg; a duodenoscope's knob gear at most a few times), while a knob in
-#: radians read as degrees shows 57 times its real gain.
-BEND_PER_KNOB_MAX = 10.0
-#: The least knob travel (deg, 1st to 99th percentile) and correlation with its bend over which
-#: that gain is measured: a knob that stays put (the other one moves in a sine-set, and twisted
-#: planes move this bend too) has no gain to measure.
-KNOB_SPAN_MIN_DEG = 0.5
-KNOB_BEND_MIN_CORR = 0.8
-#: The most the tip may be bent at knob 0 (deg, on the straight line through the bend against
-#: the knob) before the knob's zero is called a mistake: the knob's zero is where the probe is
-#: straight; a loop's width, a dead band and twisted planes move that line by 10 to 15 deg at
-#: most, while a zero a quarter turn off bends it by the gain times 90 deg (60 deg on the sims).
-ZERO_BEND_MAX_DEG = 30.0
 
 
 @dataclass(frozen=True)
@@ -141,8 +94,10 @@ class CsvImportResult:
     or not; ``tracker_invalid`` those left out of the aligned table (a sensor flagged, missing,
     or with a quaternion that is no rotation). ``motor_rows_incomplete`` counts rows with some
     knob cells but not every knob position (not motor samples), ``rows_unused`` rows that are
-    neither a motor sample nor a frame; each ``*_line`` is the first such row's line in the log
-    (None when there is none).
+    neither a motor sample nor a frame; ``motor_rows_unaligned`` motor samples left out of the
+    aligned table for want of a reading (in a gap of the readings over :data:`MAX_GAP_S`, or
+    outside their span), ``longest_gap_s`` the longest such gap (s); each ``*_line`` is the first
+    such row's line in the log (None when there is none).
     """
 
     run_dir: Path
@@ -163,6 +118,20 @@ class CsvImportResult:
     tracker_invalid_line: int | None = None
     rows_unused: int = 0
     rows_unused_line: int | None = None
+    motor_rows_unaligned: int = 0
+    motor_rows_unaligned_line: int | None = None
+    longest_gap_s: float = 0.0
+
+    @property
+    def gap_warning(self) -> str | None:
+        """One line saying which motor samples the aligned table left out for want of a reading
+        (None when it kept them all)."""
+        if not self.motor_rows_unaligned:
+            return None
+        what = "angle reading" if self.angles_measured else "tracker frame"
+        return (f"{self.motor_rows_unaligned} motor sample(s) were left out of the aligned table, with no {what} to "
+                f"interpolate (a gap over {MAX_GAP_S:g} s, or outside the {what}s' span; the longest gap "
+                f"{self.longest_gap_s:.2f} s); the first at line {self.motor_rows_unaligned_line}")
 
 
 @dataclass(frozen=True)
@@ -392,7 +361,8 @@ def read_map(path: str | Path) -> CsvMap:
         Unreadable TOML, a missing or unknown key, an unknown unit or quaternion order, a
         bending axis of the probe without a knob table, ticks without ``zero_ticks`` and
         ``ticks_per_rev`` (or those keys with another unit), a number that is not finite (or
-        not positive: ``ticks_per_rev``, ``sample_rate_hz``), a column name that is not text,
+        not positive: ``ticks_per_rev``, ``sample_rate_hz``), a time ``unit`` with ``sample_rate_hz``
+        (it would be ignored), a column name that is not text,
         a role still ``FILL IN`` or a column named for two roles (each naming the map key).
     """
     path = Path(path)
@@ -415,6 +385,10 @@ def read_map(path: str | Path) -> CsvMap:
     factor = TIME_UNITS[_choice(t.get("unit", "s"), TIME_UNITS, "time unit", f"{where} [time]")]
     if rate is not None:
         rate = _number(t, "sample_rate_hz", f"{where} [time]", 0.0, "rows per second", positive=True)
+        if "unit" in t:  # it would be ignored: rows are 1/rate s apart whatever it says
+            raise RunFormatError(f"{where} [time]: unit applies to a time column, not to sample_rate_hz (rows "
+                                 f"1/sample_rate_hz s apart): delete unit = {t['unit']!r}, or give column instead of "
+                                 "sample_rate_hz")
     if column is not None:
         column = _column(t, "column", f"{where} [time]", "the clock")
     knobs_d = d.get("knobs")
@@ -481,8 +455,22 @@ def _read_csv(raw: bytes, where: str) -> pd.DataFrame:
     if df.shape[1] < 2 or df.empty:
         raise RunFormatError(f"{where}: not a CSV table of a log (found {df.shape[1]} column(s), {len(df)} row(s))")
     # rows keep their line numbers in the file as the index, for messages (line 1 is the header)
-    df.index = np.arange(len(df)) + (1 if df.attrs.get("headerless") else 2)
+    df.index = _line_numbers(raw, len(df), df.attrs.get("headerless", False))
     return df
+
+
+def _line_numbers(raw: bytes, n: int, headerless: bool) -> np.ndarray:
+    """The lines (1 the first, as an editor numbers them) of a table's first ``n`` rows.
+
+    pandas skips blank lines (spaces only; tabs too, unless they separate the cells), so the
+    rows after one are not at their count; a quoted cell that spans lines is not followed (a
+    logger writes none).
+    """
+    blank = b" \r" if sniff_delimiter(raw) == "\t" else b" \t\r"
+    filled = np.array([i + 1 for i, text in enumerate(raw.split(b"\n")) if text.strip(blank)], dtype=int)
+    rows = filled if headerless else filled[1:]
+    # lines ended by a lone \r (old Mac files) are one line here: count the rows instead
+    return rows[:n] if rows.size >= n else np.arange(n) + (1 if headerless else 2)
 
 
 def read_log_table(log: Path) -> tuple[pd.DataFrame, bytes]:
@@ -693,153 +681,6 @@ def _frames(df: pd.DataFrame, t: np.ndarray, cmap: CsvMap, where: str) -> tuple[
     return rows[0], rows[1], valid, present
 
 
-def _check_knobs(motor: dict, cmap: CsvMap, where: str) -> None:
-    """Refuse knob positions or goals far beyond the probe's limits: a unit mistake in the map.
-
-    Raises
-    ------
-    RunFormatError
-        More than :data:`MAX_BEYOND_FRACTION` of the samples beyond the limits widened by
-        :data:`KNOB_MARGIN_SPANS` limit spans on each side, naming ``[knobs.AXIS] unit``.
-    """
-    probe = cmap.probe
-    hints = {"deg": 'servo ticks need unit = "ticks" with zero_ticks and ticks_per_rev',
-             "rad": 'degrees need unit = "deg", servo ticks unit = "ticks"',
-             "ticks": "check zero_ticks and ticks_per_rev",
-             "m": 'millimetres need unit = "mm"', "mm": 'metres need unit = "m"'}
-    for dof, k in cmap.knobs.items():
-        u = probe.unit(dof)
-        lo, hi = probe.limits(dof)
-        margin = KNOB_MARGIN_SPANS * (hi - lo)
-        for key, col in (("position", k.position), ("goal", k.goal)):
-            if col is None:
-                continue
-            v = motor[f"{dof}_{'pos' if key == 'position' else 'goal'}_{u}"]
-            beyond = (v < lo - margin) | (v > hi + margin)
-            if beyond.mean() > MAX_BEYOND_FRACTION:
-                raise RunFormatError(
-                    f"{where}: column '{col}' read as {k.unit} gives {dof} knob {key}s of {v.min():.4g}..{v.max():.4g} "
-                    f"{u}, far beyond the limits of probe '{probe.name}' ({lo:g}..{hi:g} {u}) in "
-                    f"{100 * beyond.mean():.0f} % of the motor rows: is [knobs.{dof}] unit right? ({hints[k.unit]})")
-
-
-def _check_rate(motor_t_s: np.ndarray, cmap: CsvMap, where: str) -> None:
-    """Refuse a motor sample rate no lab log has (:data:`~endocal.runs.format.LOG_RATE_RANGE_HZ`): a clock unit mistake,
-    named with the unit that would give a usual rate."""
-    dt = np.diff(motor_t_s)
-    if cmap.time_factor is None or not dt.size:  # date-time text carries its unit; one sample: no rate
-        return
-    step_s = float(np.median(dt))
-    rate = 1.0 / step_s
-    lo, hi = LOG_RATE_RANGE_HZ
-    if lo <= rate <= hi:
-        return
-    unit = next(u for u, f in TIME_UNITS.items() if f == cmap.time_factor)
-    step_raw = step_s / cmap.time_factor
-    # the unit that puts the rate nearest 100 Hz, a servo loop's usual rate, among plausible ones
-    fits = [(abs(np.log(100.0 * step_raw * f)), u) for u, f in TIME_UNITS.items()
-            if f and lo <= 1 / (step_raw * f) <= hi]
-    guess = min(fits)[1] if fits else None
-    then = f"; in {guess} they would be {1 / (step_raw * TIME_UNITS[guess]):.4g} Hz" if guess else ""
-    raise RunFormatError(f"{where}: with [time] unit = \"{unit}\" the motor samples are {step_s:.3g} s apart "
-                         f"({rate:.3g} Hz), {'slower' if rate < lo else 'faster'} than any lab log "
-                         f"({lo:g} Hz to {hi:g} Hz){then}: set [time] unit to the unit of column '{cmap.time_column}'")
-
-
-def _check_distance(tip: np.ndarray, base: np.ndarray, good: np.ndarray, cmap: CsvMap, where: str) -> None:
-    """Refuse a tip-to-base distance the probe cannot have (:data:`DISTANCE_RANGE_LENGTHS`): a
-    length unit mistake in ``[tip]`` or ``[base]``."""
-    dist_mm = float(np.median(np.linalg.norm(tip[good, 1:4] - base[good, 1:4], axis=1)))
-    length = cmap.probe.bending_length_mm
-    lo, hi = DISTANCE_RANGE_LENGTHS
-    if lo * length <= dist_mm <= hi * length:
-        return
-    units = {name: ("m" if pc.factor == LENGTH_UNITS["m"] else "mm")
-             for name, pc in (("tip", cmap.tip), ("base", cmap.base))}
-    raise RunFormatError(f"{where}: read with [tip] unit = \"{units['tip']}\" and [base] unit = \"{units['base']}\" the "
-                         f"tip and base sensors are {dist_mm:.3g} mm apart (median), but probe '{cmap.probe.name}' bends "
-                         f"over {length:g} mm: is the length unit right (metres need unit = \"m\", millimetres \"mm\")?")
-
-
-def _off_axis_deg(tip: np.ndarray, base: np.ndarray, q_wxyz: np.ndarray) -> np.ndarray:
-    """Angle (deg) of the tip, in the base sensor's frame, from that frame's z axis (the bend of eq. 1)."""
-    p = tip_in_base_mm(tip[:, 1:4], base[:, 1:4], q_wxyz)
-    return np.degrees(np.arctan2(np.hypot(p[:, 0], p[:, 1]), p[:, 2]))
-
-
-def _check_base_order(tip: np.ndarray, base: np.ndarray, good: np.ndarray, cmap: CsvMap, where: str) -> None:
-    """Refuse a base quaternion order that turns the recording away from the base axis when the
-    other order does not (:data:`OFF_AXIS_WRONG_DEG`), naming ``[base] order``."""
-    q = base[good, 4:]  # scalar first, as the map's order reads the logged columns
-    other = "wxyz" if cmap.base.order == "xyzw" else "xyzw"
-    q_other = q[:, [1, 2, 3, 0]] if other == "wxyz" else q[:, [3, 0, 1, 2]]
-    near = [float(np.quantile(_off_axis_deg(tip[good], base[good], qq), NEAR_AXIS_QUANTILE)) for qq in (q, q_other)]
-    if near[0] >= OFF_AXIS_WRONG_DEG and near[1] <= OFF_AXIS_RIGHT_DEG:
-        tip_too = " (and [tip] order, if it is logged the same way)" if cmap.tip.order == cmap.base.order else ""
-        raise RunFormatError(
-            f"{where}: with [base] order = \"{cmap.base.order}\" the tip stays {near[0]:.0f} deg or more off the base "
-            f"sensor's z axis in {100 * (1 - NEAR_AXIS_QUANTILE):g} % of the frames (the bend of thesis eq. 1, near 0 "
-            f"at neutral), with order = \"{other}\" {100 * NEAR_AXIS_QUANTILE:g} % come within {near[1]:.1f} deg: the "
-            f"log's quaternions are {'scalar-first' if other == 'wxyz' else 'scalar-last'}; set [base] order = "
-            f"\"{other}\"{tip_too}")
-
-
-def _check_knob_to_bend(motor: dict, tip: np.ndarray, base: np.ndarray, good: np.ndarray, cmap: CsvMap,
-                        where: str) -> None:
-    """Refuse a knob whose bend moves more than :data:`BEND_PER_KNOB_MAX` degrees per knob degree
-    (radians read as degrees, a wrong ``ticks_per_rev``), or that is bent more than
-    :data:`ZERO_BEND_MAX_DEG` at knob 0 (a wrong ``zero_ticks`` or ``zero``), naming the map key.
-
-    Both read the straight line through the bend against the knob (hysteresis makes it a loop
-    around that line), where the knob moves enough and the bend follows it.
-    """
-    probe = cmap.probe
-    bends = dict(zip(probe.bending_axes, bending_angles_deg(tip_in_base_mm(tip[good, 1:4], base[good, 1:4],
-                                                                           base[good, 4:]))))
-    t_frame = tip[good, 0]
-    inside = (t_frame >= motor["t_s"][0]) & (t_frame <= motor["t_s"][-1])
-    hints = {"deg": 'radians need unit = "rad"', "rad": "check the column holds this knob's angle",
-             "ticks": "check ticks_per_rev"}
-    for dof, k in cmap.knobs.items():
-        if dof not in bends or inside.sum() < MIN_ALIGNED_ROWS:
-            continue
-        knob = np.interp(t_frame[inside], motor["t_s"], motor[f"{dof}_pos_{probe.unit(dof)}"])
-        bend = bends[dof][inside]
-        lo, hi = np.quantile(knob, [0.01, 0.99])
-        if hi - lo < KNOB_SPAN_MIN_DEG or abs(np.corrcoef(knob, bend)[0, 1]) < KNOB_BEND_MIN_CORR:
-            continue
-        gain, at_zero = (float(c) for c in np.polyfit(knob, bend, 1))
-        if abs(gain) > BEND_PER_KNOB_MAX:
-            b_lo, b_hi = np.quantile(bend, [0.01, 0.99])
-            raise RunFormatError(
-                f"{where}: read as {k.unit}, column '{k.position}' turns the {dof} knob over {hi - lo:.3g} deg while "
-                f"the tip bends over {b_hi - b_lo:.3g} deg: {abs(gain):.0f} deg of bend per knob degree, where a "
-                f"tendon drive gives about 1 (at most {BEND_PER_KNOB_MAX:g}): is [knobs.{dof}] unit right? "
-                f"({hints[k.unit]})")
-        if abs(at_zero) > ZERO_BEND_MAX_DEG:
-            straight = -at_zero / gain
-            key = "zero_ticks" if k.unit == "ticks" else "zero"
-            raise RunFormatError(
-                f"{where}: at {dof} knob 0 as the map reads it the tip is bent {at_zero:.0f} deg (a straight line "
-                f"through the bend against the knob); it is straight at knob {straight:.3g} deg, where column "
-                f"'{k.position}' reads {k.zero + straight / k.per_unit:.6g}: is [knobs.{dof}] {key} right? (the "
-                "reading with the knob at 0, probe straight)")
-
-
-def _check_aligned(n_aligned: int, t_motor: np.ndarray, t_read: np.ndarray, what: str, cmap: CsvMap, where: str) -> None:
-    """Refuse an import no fit could use: fewer than :data:`MIN_ALIGNED_ROWS` aligned rows
-    (motor samples within :data:`MAX_GAP_S` of a ``what``: tracker frame, angle reading)."""
-    if n_aligned >= MIN_ALIGNED_ROWS:
-        return
-    span = (lambda v: f"{v.min():.3f}..{v.max():.3f} s" if v.size else "nothing")
-    clock = f"[time] column '{cmap.time_column}' and unit" if cmap.time_column else "[time] sample_rate_hz"
-    article = "an" if what[0] in "aeiou" else "a"
-    raise RunFormatError(f"{where}: only {n_aligned} motor sample(s) lie within {MAX_GAP_S:g} s of {article} {what}, "
-                         f"fewer than any fit can use ({MIN_ALIGNED_ROWS}); the motor samples span {span(t_motor)}, the "
-                         f"{what}s {span(t_read)} after the first row: check {clock}, and that every device's rows "
-                         "are on that clock")
-
-
 def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *, dedupe: bool = False,
                force: bool = False, command: str | None = None) -> CsvImportResult:
     """Convert a lab's CSV log into a run folder, through a column map.
@@ -863,18 +704,20 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
     -------
     CsvImportResult
         With what was dropped: motor rows missing a knob position, invalid tracker frames,
-        rows with neither (also recorded in ``run.json``'s ``backend``).
+        rows with neither, motor samples left out of the aligned table for want of a reading
+        (also recorded in ``run.json``'s ``backend``, or the Parquet table's metadata).
 
     Raises
     ------
     RunFormatError
         A bad map, a column the map names that the log lacks (listing those it has), a
         non-numeric column, time that does not increase, duplicated stamps, and numbers no rig
-        logs (a unit mistake: knob positions far beyond the probe's limits, a sample rate
-        outside :data:`~endocal.runs.format.LOG_RATE_RANGE_HZ`, sensors too near or too far apart, a base
-        quaternion read in the wrong order, a knob whose bend moves many times as far as it does, fewer
-        aligned rows than a fit can use); before anything is written. Whatever fails while writing, nothing
-        is left at ``out``.
+        logs (a unit mistake: knob positions far beyond the probe's limits, a sample rate (from the
+        clock or ``sample_rate_hz``) outside :data:`~endocal.runs.format.LOG_RATE_RANGE_HZ`, sensors
+        too near or too far apart, a base quaternion read in the wrong order, a knob whose bend moves
+        many times as far as it does, fewer aligned rows than a fit can use:
+        :mod:`endocal.runs.csvchecks`); before anything is written. Whatever fails while writing,
+        nothing is left at ``out``.
     """
     log, out = Path(log), Path(out)
     cmap = mapping if isinstance(mapping, CsvMap) else read_map(mapping)
@@ -896,8 +739,8 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
     if not cmap.angles:
         # with measured angles the probe only names the axes (a bench's pulley may turn past any
         # probe knob's limits): the knobs are checked against the limits of a probe's run only
-        _check_knobs(motor, cmap, where)
-    _check_rate(motor["t_s"], cmap, where)
+        check_knobs(motor, cmap, where)
+    check_rate(motor["t_s"], cmap, TIME_UNITS, where)
     probe = cmap.probe
 
     sha = hashlib.sha256(raw).hexdigest()
@@ -910,25 +753,28 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
                **{f"{a}{MEAS}": ang.column for a, ang in cmap.angles.items()}}
     first = (lambda mask: int(lines[np.argmax(mask)]) if mask.any() else None)
 
-    def backend(unused: np.ndarray, invalid: np.ndarray) -> dict:
+    def backend(unused: np.ndarray, invalid: np.ndarray, gaps: ReadingGaps) -> dict:
         return {"name": "csv-import", "map": cmap.raw, "rows": n_rows, "duplicates_dropped": dropped,
                 "rows_merged": merged, "motor_rows_incomplete": int(incomplete.sum()),
                 "tracker_frames_invalid": int(invalid.sum()), "rows_unused": int(unused.sum()),
+                "motor_rows_unaligned": gaps.rows, "motor_rows_unaligned_line": gaps.first_line,
+                "longest_gap_s": gaps.longest_s,
                 "command_source": ("goal columns" if all(k.goal for k in cmap.knobs.values()) else
                                    "knob position where no goal column is mapped (the servo's lag is not in the data)")}
 
-    def result(run_dir, n_read, n_aligned, invalid, unused, alignment_error=None) -> CsvImportResult:
+    def result(run_dir, n_read, n_aligned, invalid, unused, gaps: ReadingGaps, alignment_error=None) -> CsvImportResult:
         return CsvImportResult(run_dir, n_rows, bool(cmap.angles), len(motor["t_s"]), n_read, n_aligned, dropped,
                                merged, float(motor["t_s"][-1]), rate, columns, alignment_error,
                                int(incomplete.sum()), first(incomplete), int(invalid.sum()), first(invalid),
-                               int(unused.sum()), first(unused))
+                               int(unused.sum()), first(unused), gaps.rows, gaps.first_line, gaps.longest_s)
 
     if cmap.angles:
-        n_read, is_read, table = _angles_table(df, t, motor, cmap, where)
+        is_read, covered, table = _angles_table(df, t, motor, cmap, where)
+        gaps = reading_gaps(covered, t[is_read], motor["t_s"], lines[is_motor])
         unused, invalid = ~(is_motor | incomplete | is_read), np.zeros(len(df), bool)
-        _write_table(out, table, {"source": source, "backend": backend(unused, invalid), "command": command,
+        _write_table(out, table, {"source": source, "backend": backend(unused, invalid, gaps), "command": command,
                                   "software": software_versions()})
-        return result(out, n_read, len(table), invalid, unused)
+        return result(out, int(is_read.sum()), len(table), invalid, unused, gaps)
 
     tip, base, valid, is_frame = _frames(df, t, cmap, where)
     good = is_frame & valid.all(axis=1)
@@ -936,17 +782,18 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
         why = (f" ({int(is_frame.sum())} row(s) hold a pose, each with a sensor missing, flagged invalid or with a "
                "quaternion that is no rotation)" if is_frame.any() else "")
         raise RunFormatError(f"{where}: no row has both the tip and the base pose{why}")
-    _check_distance(tip, base, good, cmap, where)
-    _check_base_order(tip, base, good, cmap, where)
-    _check_knob_to_bend(motor, tip, base, good, cmap, where)
+    check_distance(tip, base, good, cmap, LENGTH_UNITS, where)
+    check_base_order(tip, base, good, cmap, where)
+    check_knob_to_bend(motor, tip, base, good, cmap, where)
     # the aligned rows align() will make: motor samples within MAX_GAP_S of a frame with both sensors
-    _check_aligned(int(measured_at(t[good], motor["t_s"], MAX_GAP_S).sum()), motor["t_s"], t[good],
-                   "tracker frame", cmap, where)
+    covered = measured_at(t[good], motor["t_s"], MAX_GAP_S)
+    check_aligned_rows(int(covered.sum()), motor["t_s"], t[good], "tracker frame", cmap, where)
+    gaps = reading_gaps(covered, t[good], motor["t_s"], lines[is_motor])
     invalid, unused = is_frame & ~good, ~(is_motor | incomplete | is_frame)
     tracker = tracker_stream(tip[is_frame], base[is_frame], valid[is_frame])
-    meta = write_imported_run(out, motor, tracker, probe, source=source, backend=backend(unused, invalid), command=command,
-                              wall0=wall0)
-    return result(out, int(is_frame.sum()), meta["counts"].get("aligned_rows", 0), invalid, unused,
+    meta = write_imported_run(out, motor, tracker, probe, source=source, backend=backend(unused, invalid, gaps),
+                              command=command, wall0=wall0)
+    return result(out, int(is_frame.sum()), meta["counts"].get("aligned_rows", 0), invalid, unused, gaps,
                   meta.get("alignment_error"))
 
 
@@ -985,8 +832,9 @@ def _is_aligned_table(path: Path) -> bool:
 
 
 def _angles_table(df: pd.DataFrame, t: np.ndarray, motor: dict, cmap: CsvMap,
-                  where: str) -> tuple[int, np.ndarray, pd.DataFrame]:
-    """The aligned table of a log with measured angles, how many rows held a reading, and which.
+                  where: str) -> tuple[np.ndarray, np.ndarray, pd.DataFrame]:
+    """Which rows hold every measured angle, which motor samples those readings cover, and the
+    aligned table of a log with measured angles (the covered motor samples).
 
     The readings are interpolated onto the motor samples inside their span, across gaps of
     at most :data:`MAX_GAP_S` (as tracker frames are in :func:`endocal.runs.aligned.align`).
@@ -998,7 +846,7 @@ def _angles_table(df: pd.DataFrame, t: np.ndarray, motor: dict, cmap: CsvMap,
                              f"({', '.join(a.column for a in cmap.angles.values())})")
     t_read, t_motor = t[is_read], motor["t_s"]
     ok = measured_at(t_read, t_motor, MAX_GAP_S)
-    _check_aligned(int(ok.sum()), t_motor, t_read, "angle reading", cmap, where)
+    check_aligned_rows(int(ok.sum()), t_motor, t_read, "angle reading", cmap, where)
     probe = cmap.probe
     table = {"t_s": t_motor[ok]}
     for axis in cmap.angles:
@@ -1014,7 +862,7 @@ def _angles_table(df: pd.DataFrame, t: np.ndarray, motor: dict, cmap: CsvMap,
         table[col] = motor[col][ok]
     out = pd.DataFrame(table)
     check_aligned(out, where)
-    return int(is_read.sum()), is_read, out
+    return is_read, ok, out
 
 
 def _write_table(out: Path, table: pd.DataFrame, provenance: dict) -> None:
