@@ -10,6 +10,7 @@ import numpy as np
 from endocal.errors import ModelError
 from endocal.models import make_model
 from endocal.models.base import HysteresisModel
+from endocal.models.start import RecordStart
 from endocal.runs.aligned import load_aligned
 from endocal.validation.data import axis_data, glitch_note
 from endocal.validation.residuals import cut_start
@@ -24,7 +25,7 @@ class HysteresisFit:
     hashes: list[str]
     samples: int
     duration_s: float = 0.0  # summed over the records: with ``samples``, the rate a user can check
-    cut_start: str = ""  # what a record cut away from 0 did to the fit (validation.residuals.cut_start)
+    cut_start: str = ""  # how records that did not start at rest were fitted (validation.residuals.cut_start)
     glitches: str = ""  # samples left out as glitches (validation.data.glitch_note)
 
     @property
@@ -76,6 +77,7 @@ def fit_hysteresis(
     data = axis_data(datas, axis, planes, dropped)
     model = make_model(base, effects=effects or (), axis=axis, **settings).fit(data, warm_start=warm)
     span = sum(float(np.ptp(d.table["t_s"])) for d in datas)
-    cut = cut_start(data, model.predict(data) - data.meas_deg, "fitted record")
+    starts = [RecordStart.from_dict(s) for s in model.fit_report_.estimated_starts]
+    cut = cut_start(data, model.predict(data) - data.meas_deg, "fitted record", starts)
     return HysteresisFit(model, [d.source for d in datas], [d.sha256 for d in datas], len(data.cmd_deg), span, cut,
                          glitch_note(dropped, axis))

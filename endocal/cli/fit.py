@@ -123,8 +123,10 @@ def hysteresis(
     slow = slow_clock_warning(result.samples, result.duration_s)
     if slow:
         out.print(slow, markup=False)
-    for w in [*rep.warnings, *(n for n in (result.glitches, result.cut_start) if n)]:
+    for w in [*rep.warnings, *(n for n in (result.glitches,) if n)]:
         out.print(f"warning: {w}", markup=False)
+    if result.cut_start:  # a start the fit estimated is said; one it could not is a warning
+        out.print(f"{'note' if rep.estimated_starts else 'warning'}: {result.cut_start}", markup=False)
     err.print(f"wrote {out_path}")
 
 

@@ -34,6 +34,7 @@ from endocal.models.effects import resolve_effects
 from endocal.models.effects.base import Effect, InputEffect, OutputEffect
 from endocal.models.effects.base import OutputFilter
 from endocal.models.params import Parameter
+from endocal.models.start import estimate_starts, rescored, with_lead_ins
 
 OUT_OF_RANGE_CHOICES = ("error", "clamp")
 #: ``out_of_range`` values a model accepts: the users' choices, and ``"extrapolate"``, with which
@@ -78,6 +79,9 @@ class FitReport:
     rank_deficient : bool
         The Jacobian was (numerically) singular: some parameters are not identified by
         the data, their standard errors are infinite.
+    estimated_starts : list of dict
+        The runs that were fitted from an estimated start (:mod:`endocal.models.start`, the
+        ``RecordStart.to_dict`` of each): they began away from the state every model assumes.
     method : str
         Optimiser used.
     warnings : list of str
@@ -98,6 +102,7 @@ class FitReport:
     rank_deficient: bool
     method: str = "trf"
     warnings: list = field(default_factory=list)
+    estimated_starts: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -400,6 +405,17 @@ class HysteresisModel(ABC):
             x0 = np.clip(pre.x, lo, hi)
             nfev, njev = pre.nfev, int(pre.njev or 0)
         res = least_squares(residual, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=max_nfev)
+        # A run that starts where a longer motion left the knob is fitted from its estimated start
+        # (models.start): else its stretch before the first reversal pulls the parameters.
+        starts = self._estimated_starts(d, values, free, res.x, structure, effects)
+        if starts:
+            nfev, njev = nfev + res.nfev, njev + int(res.njev or 0)
+            led, keep = with_lead_ins(d, starts)
+            residual, jac = self._residual_fns(led, values, free, structure, effects, keep)
+            res = least_squares(residual, np.clip(res.x, lo, hi), jac=jac, bounds=(lo, hi), method="trf",
+                                x_scale="jac", max_nfev=max_nfev)
+            final = {**values, **{n: float(v) for n, v in zip(free, res.x)}}
+            starts = rescored(starts, d, self._forward(d, *self._grouped(final), structure, effects), res.fun)
         res.nfev += nfev
         res.njev = int(res.njev or 0) + njev
         r = res.fun
@@ -432,7 +448,7 @@ class HysteresisModel(ABC):
             success=bool(res.success), status=int(res.status), message=str(res.message),
             nfev=int(res.nfev), njev=int(res.njev or 0), cost=float(res.cost),
             rmse_deg=float(math.sqrt(float(r @ r) / m)), n_samples=d.n_samples, n_runs=d.n_runs,
-            n_free=n_free, rank_deficient=rank_def,
+            n_free=n_free, rank_deficient=rank_def, estimated_starts=[st.to_dict() for st in starts],
             warnings=([f"{d.n_samples} samples for {n_free} free parameters (fewer than 10 per parameter): the "
                        "fit may follow the noise; check it on a record it was not fitted on (endocal validate)"]
                       if d.n_samples < 10 * n_free else []) + _loose_parameters(free, owners, values, stderr, lo, hi)
@@ -440,18 +456,28 @@ class HysteresisModel(ABC):
         )
         return self
 
+    def _estimated_starts(self, d: HysteresisData, values: dict, free: list[str], x: np.ndarray, structure: dict,
+                          effects: list[Effect]) -> list:
+        """The runs of ``d`` that the model at ``x`` predicts better from a lead-in (models.start)."""
+        trial = {**values, **{n: float(v) for n, v in zip(free, x)}}
+        return estimate_starts(lambda dd: self._forward(dd, *self._grouped(trial), structure, effects), d)[1]
+
     def _residual_fns(self, data: HysteresisData, values: dict, free: list[str], structure: dict,
-                      effects: list[Effect]):
+                      effects: list[Effect], keep: np.ndarray | None = None):
         """The fit's residual (deg) over the ``free`` parameters and its Jacobian (analytic, else "2-point").
 
         Both write the trial values into ``values`` (shared with the caller, which reads the
-        solution back from it).
+        solution back from it). With ``keep``, ``data`` carries lead-ins (models.start) and only
+        the samples at ``keep`` are residuals.
         """
+        rows = slice(None) if keep is None else keep
+        meas = data.meas_deg[rows]
+
         def residual(x):
             for n, v in zip(free, x):
                 values[n] = float(v)
             base_p, eff_p = self._grouped(values)
-            return self._forward(data, base_p, eff_p, structure, effects) - data.meas_deg
+            return self._forward(data, base_p, eff_p, structure, effects)[rows] - meas
 
         analytic = self._forward_jac(data, *self._grouped(values), structure, effects)
         if analytic is None:
@@ -463,7 +489,7 @@ class HysteresisModel(ABC):
             for n, v in zip(free, x):
                 values[n] = float(v)
             base_p, eff_p = self._grouped(values)
-            return self._forward_jac(data, base_p, eff_p, structure, effects)[1][:, free_cols]
+            return self._forward_jac(data, base_p, eff_p, structure, effects)[1][rows][:, free_cols]
 
         return residual, jac
 
@@ -618,7 +644,7 @@ class HysteresisModel(ABC):
             e.check(d)
         cmd = d.cmd_deg if self.out_of_range == "extrapolate" else self._range_check(d.cmd_deg, "command")
         if cmd is not d.cmd_deg:
-            d = HysteresisData(cmd_deg=cmd, t_s=d.t_s, extras=d.extras, run_starts=d.run_starts)
+            d = d.with_cmd(cmd)
         base_p, eff_p = self._grouped(self.params_)
         y = self._forward(d, base_p, eff_p, self.structure_, self.effects_)
         return d.split(y) if was_list else y

@@ -56,6 +56,11 @@ class HysteresisData:
     run_starts : ndarray of int, optional
         Index of the first sample of each run (starts with 0). Operator states
         restart at every run start. Default: one run.
+    lead_in : ndarray of int, optional
+        Per run, how many of its first samples are a lead-in: a path the knob is taken to have
+        come along before the record, run to set the model's state and not part of the record
+        (:mod:`endocal.models.start`). Time-based terms count the record's time from the first
+        sample after it. Default: none.
 
     Raises
     ------
@@ -69,6 +74,7 @@ class HysteresisData:
     t_s: np.ndarray | None = None
     extras: Mapping[str, np.ndarray] = field(default_factory=dict)
     run_starts: np.ndarray | None = None
+    lead_in: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         cmd = _as_1d("cmd_deg", self.cmd_deg)
@@ -85,6 +91,11 @@ class HysteresisData:
             if starts.size == 0 or starts[0] != 0 or np.any(np.diff(starts) <= 0) or starts[-1] >= n:
                 raise ModelError(f"run_starts must start at 0, increase strictly and stay below {n}; got {starts.tolist()}")
         object.__setattr__(self, "run_starts", starts)
+        lead = (np.zeros(starts.size, dtype=np.int64) if self.lead_in is None
+                else np.asarray(self.lead_in, dtype=np.int64).ravel())
+        if lead.shape != starts.shape or np.any(lead < 0) or np.any(lead >= np.diff(np.append(starts, n))):
+            raise ModelError(f"lead_in must give one count per run, each below its run's length; got {lead.tolist()}")
+        object.__setattr__(self, "lead_in", lead)
         if self.t_s is not None:
             t = _as_1d("t_s", self.t_s, n)
             dt = np.diff(t)
@@ -122,6 +133,7 @@ class HysteresisData:
             t_s=np.concatenate([r.t_s for r in runs]) if runs[0].t_s is not None else None,
             extras={k: np.concatenate([r.extras[k] for r in runs]) for k in runs[0].extras},
             run_starts=np.concatenate([r.run_starts + o for r, o in zip(runs, offsets)]),
+            lead_in=np.concatenate([r.lead_in for r in runs]),
         )
 
     # ------------------------------------------------------------------ views
@@ -138,6 +150,10 @@ class HysteresisData:
         ends = list(self.run_starts[1:]) + [self.n_samples]
         return [slice(int(a), int(b)) for a, b in zip(self.run_starts, ends)]
 
+    def record_starts(self) -> np.ndarray:
+        """Index of each run's first sample after its lead-in (its first recorded sample)."""
+        return self.run_starts + self.lead_in
+
     def split(self, values: np.ndarray) -> list[np.ndarray]:
         """Cut a concatenated (n,) array into per-run arrays."""
         return [values[s] for s in self.run_slices()]
@@ -147,7 +163,8 @@ class HysteresisData:
         return self.take([np.arange(sl.start, sl.stop, step) for sl in self.run_slices()])
 
     def take(self, parts: list[np.ndarray]) -> HysteresisData:
-        """The samples at ``parts`` (one index array per run, in order; empty ones dropped), each part a run."""
+        """The samples at ``parts`` (one index array per run, in order; empty ones dropped), each part a run
+        (without lead-in)."""
         parts = [np.asarray(p, dtype=int) for p in parts if len(p)]
         idx = np.concatenate(parts)
         starts = np.concatenate([[0], np.cumsum([p.size for p in parts])[:-1]]).astype(self.run_starts.dtype)
@@ -161,7 +178,8 @@ class HysteresisData:
 
     def with_cmd(self, cmd_deg: np.ndarray) -> HysteresisData:
         """Same time base, extras and runs, another command (and no measurement)."""
-        return HysteresisData(cmd_deg=cmd_deg, t_s=self.t_s, extras=self.extras, run_starts=self.run_starts)
+        return HysteresisData(cmd_deg=cmd_deg, t_s=self.t_s, extras=self.extras, run_starts=self.run_starts,
+                              lead_in=self.lead_in)
 
     def column(self, name: str) -> np.ndarray:
         """An extra column by name.

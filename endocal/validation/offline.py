@@ -30,6 +30,7 @@ from endocal.validation.suspects import (
     one_blas_thread,
     predict_errors,
     predict_extrapolated,
+    predict_scored,
     scan_effects,
     scan_split,
     split_errors,
@@ -327,12 +328,12 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     if est is not None:
         check_columns(est, own, what="the estimation data")
 
-    pred, beyond = predict_extrapolated(model, data)
+    pred, beyond, starts = predict_scored(model, data)
     metrics = error_metrics(data.meas_deg, pred, n_boot=n_boot, seed=seed)
     regimes = error_by_regime(data, pred, seed=seed)
     load_cols = list(dict.fromkeys([*(load_columns or []), *load_candidates(data, axes_all)[0]]))
     resid = residual_tests(data, data.meas_deg - pred, alpha=alpha, load_columns=load_cols)
-    notes = [val_glitches, cut_start(data, data.meas_deg - pred)]
+    notes = [val_glitches, cut_start(data, data.meas_deg - pred, starts=starts)]
     if est is not None:
         same = {d["sha256"] for d in est_info if d["sha256"]} & {d["sha256"] for d in info if d["sha256"]}
         if same:
@@ -369,7 +370,8 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
         pointers += [p for p in shift_pointers(shift, scan, covariate_changes(est, data), speeds)
                      if p.effect not in named]
     if est is not None:
-        notes += [est_glitches, cut_start(est, est.meas_deg - predict_extrapolated(model, est)[0], "estimation record")]
+        est_pred, _, est_starts = predict_scored(model, est)
+        notes += [est_glitches, cut_start(est, est.meas_deg - est_pred, "estimation record", est_starts)]
     notes = [n for n in notes if n] + list(scan.notes)
     comp = None
     if compare is not None and scan.scheme != "none":

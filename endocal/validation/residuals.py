@@ -25,6 +25,7 @@ import numpy as np
 from scipy.stats import chi2, norm
 
 from endocal.models.data import OTHER_CMD, HysteresisData
+from endocal.models.start import RecordStart
 from endocal.validation.data import is_constant, speed_dps
 from endocal.validation.regimes import turning_points
 from endocal.validation.shift import direction_of_motion
@@ -244,21 +245,40 @@ START_ERROR_RATIO = 2.0
 NEUTRAL_FRAC = 0.05
 
 
-def cut_start(data: HysteresisData, resid_deg: np.ndarray, what: str = "validation record") -> str:
-    """What cutting a record from a longer one does to its error, or ``""``.
+def _start_words(u: np.ndarray) -> str:
+    """``"starts mid-swing (command 1.8 deg within 0..3.6, moving down)"``."""
+    span = float(np.ptp(u))
+    moved = u[np.argmax(np.abs(u - u[0]) > 0.01 * span)] - u[0]
+    where = "mid-swing" if u.min() < u[0] < u.max() else "at a turning point"
+    return (f"starts {where} (command {u[0]:.3g} deg within {u.min():.3g}..{u.max():.3g}, moving "
+            f"{'up' if moved > 0 else 'down'})")
 
-    Every model starts each record in an assumed internal state: its operators as if the knob
-    had come straight from 0 (the PI's eq. 5 start), or on the mid-line between its branches (the
-    B-spline). A knob homed to 0 before an acquisition has that state; a record cut from a
-    longer one away from 0 has the state its history left, and until the first reversal (longer,
-    for a wide play) the model follows the wrong branch: an error that measures the cut, not the
-    physics, and that a time-dependent candidate (drift, creep) can fit. Said when a record that
-    does not start at 0 (:data:`NEUTRAL_FRAC`) has an RMSE before its first reversal
-    :data:`START_ERROR_RATIO` times that after it.
+
+def cut_start(data: HysteresisData, resid_deg: np.ndarray, what: str = "validation record",
+              starts: Sequence[RecordStart] = ()) -> str:
+    """How a record's start was taken, when it was not from rest, or what its start did to its error; or ``""``.
+
+    Every model starts each record in an assumed state: its operators as if the knob had come
+    straight from 0 (the PI's eq. 5 start), or on the mid-line between its branches (the
+    B-spline). A record cut from a longer one has the state its history left; the records in
+    ``starts`` were run from a state estimated from their first stretch
+    (:mod:`endocal.models.start`), which is said with the RMSE it saved. Of the others, one that
+    does not start at 0 (:data:`NEUTRAL_FRAC`) and is off :data:`START_ERROR_RATIO` times more
+    before its first reversal than after it started in a state neither start fits (a virgin
+    first sweep, a step from rest): that stretch measures the start, not the physics, and a
+    time-dependent candidate (drift, creep) can fit it. ``resid_deg`` is the residual of the
+    records from rest (only read when ``starts`` is empty).
     """
+    runs = data.run_slices()
+    if starts:
+        st = max(starts, key=lambda s: s.rmse_rest_deg - s.rmse_estimated_deg)
+        which = f"the {what}" if data.n_runs == 1 else f"{len(starts)} of {data.n_runs} {what}s (the largest gain)"
+        return (f"{which} {_start_words(data.cmd_deg[runs[st.run]])}: run from its estimated start, "
+                f"{st.describe()}: the model's own start (as if relaxed at 0) is not the state its history left; "
+                "every fit and score of it here uses that start")
     tp = turning_points(data)
     found = []
-    for sl in data.run_slices():
+    for sl in runs:
         u = data.cmd_deg[sl]
         first = tp[(tp >= sl.start) & (tp < sl.stop)]
         span = float(np.ptp(u))
@@ -270,15 +290,14 @@ def cut_start(data: HysteresisData, resid_deg: np.ndarray, what: str = "validati
             continue
         rb, ra = float(np.sqrt(np.mean(before**2))), float(np.sqrt(np.mean(after**2)))
         if rb >= START_ERROR_RATIO * ra:
-            moved = u[np.argmax(np.abs(u - u[0]) > 0.01 * span)] - u[0]
-            found.append((rb / max(ra, 1e-12), rb, ra, float(u[0]), float(u.min()), float(u.max()), moved))
+            found.append((rb / max(ra, 1e-12), rb, ra, sl.start))
     if not found:
         return ""
-    _, rb, ra, u0, lo, hi, moved = max(found)
+    _, rb, ra, a = max(found)
     which = f"the {what}" if data.n_runs == 1 else f"{len(found)} of {data.n_runs} {what}s (the worst)"
-    where = "mid-swing" if lo < u0 < hi else "at a turning point"
-    return (f"{which} starts {where} (command {u0:.3g} deg within {lo:.3g}..{hi:.3g}, moving "
-            f"{'up' if moved > 0 else 'down'}): its error before the first reversal is {rb:.3g} deg RMS, "
-            f"{rb / ra:.1f}x the {ra:.3g} deg after it. Every model starts a record in an assumed state (as if the "
-            "knob came from 0), which a record cut from a longer one does not have: that stretch measures the cut, "
-            "not the physics, and a candidate may fit it; record from the knob at rest at 0, or cut records there")
+    u = data.cmd_deg[next(sl for sl in runs if sl.start == a)]
+    return (f"{which} {_start_words(u)}: its error before the first reversal is {rb:.3g} deg RMS, "
+            f"{rb / ra:.1f}x the {ra:.3g} deg after it. It started in a state that neither the rest every model "
+            "assumes (as if the knob came from 0) nor a cut from a longer motion fits (a first sweep from a "
+            "relaxed sheath, a step): that stretch measures the start, not the physics, and a candidate may fit "
+            "it; cut the records at their first reversal, or move the knob through its range before each acquisition")

@@ -40,9 +40,10 @@ from scipy.optimize import minimize_scalar
 
 from endocal.models import HysteresisData
 from endocal.models.base import HysteresisModel
+from endocal.models.start import with_lead_ins
 from endocal.validation.data import speed_dps
 from endocal.validation.regimes import turning_points
-from endocal.validation.suspects import predict_extrapolated
+from endocal.validation.suspects import predict_extrapolated, predict_scored
 
 #: Largest loop change searched, as a fraction of the validation command's span per side.
 MAX_WIDTH_FRAC = 0.2
@@ -93,14 +94,15 @@ def direction_of_motion(data: HysteresisData, tol_frac: float = 0.02) -> np.ndar
 def record_shift(model: HysteresisModel, data: HysteresisData) -> RecordShift:
     """Fit a zero shift and a friction change of ``model`` on the validation ``data`` (module docstring)."""
     y = np.asarray(data.meas_deg, dtype=float)
-    p = predict_extrapolated(model, data)[0]
+    p, _, starts = predict_scored(model, data)
+    led, keep = with_lead_ins(data, starts)  # the shifted commands start where the record's estimate put it
     rmse = _rms(p - y)
     c = float(np.mean(y - p))
     span = float(np.ptp(data.cmd_deg))
-    d = direction_of_motion(data)
+    d = direction_of_motion(led)
 
     def friction(w: float):
-        q = predict_extrapolated(model, data.with_cmd(data.cmd_deg - w * d))[0]
+        q = predict_extrapolated(model, led.with_cmd(led.cmd_deg - w * d))[0][keep]
         A = np.column_stack([np.ones_like(q), q])
         coef = np.linalg.lstsq(A, y, rcond=None)[0]
         return _rms(A @ coef - y), coef

@@ -47,6 +47,7 @@ from endocal.errors import ModelError
 from endocal.models import EFFECTS, HysteresisData, make_model
 from endocal.models.base import HysteresisModel
 from endocal.models.data import OTHER_CMD
+from endocal.models.start import RecordStart, estimate_starts
 from endocal.validation.data import is_constant, load_candidates, prefix
 from endocal.validation.metrics import block_length
 from endocal.validation.parallel import map_jobs
@@ -667,21 +668,25 @@ def unit_test(err_base: np.ndarray, err_cand: np.ndarray, units: Units, n_flips:
     return float((1 + np.count_nonzero(flips >= observed * (1 - 1e-12))) / (1 + n_flips))
 
 
-def predict_extrapolated(model: HysteresisModel, data: HysteresisData) -> tuple[np.ndarray, int]:
-    """Predicted angle (deg) as ``validate`` scores a model: beyond the fitted range the model continues.
+def predict_scored(model: HysteresisModel, data: HysteresisData) -> tuple[np.ndarray, int, list[RecordStart]]:
+    """Predicted angle (deg) as ``validate`` scores a model: beyond the fitted range the model
+    continues, and each record starts in its estimated state.
 
     A command beyond the range the model was fitted on is run through the model's own
     branches continued (B-spline end tangents, straight lines, saturated plays), not clamped:
     clamping holds the predicted angle still while the tip keeps bending, so a validation
     run 10 deg wider than the estimation run would be scored on that artefact (on a
-    simulated sweep, 3.3 deg instead of the model's 0.8).
+    simulated sweep, 3.3 deg instead of the model's 0.8). A record that starts where a longer
+    motion left the knob is run from its estimated start (:mod:`endocal.models.start`), as the
+    fit runs its own records.
 
     Parameters
     ----------
     model : HysteresisModel
         A fitted model (left unchanged: a shallow copy is switched to extrapolate).
     data : HysteresisData
-        Commands (deg) and whatever else the model's effects read.
+        Commands (deg) and whatever else the model's effects read; without the measured
+        angle every record starts from rest.
 
     Returns
     -------
@@ -689,11 +694,19 @@ def predict_extrapolated(model: HysteresisModel, data: HysteresisData) -> tuple[
         Predicted bending angle, deg.
     n_beyond : int
         Samples whose command lies beyond the model's fitted range ``cmd_range_deg_``.
+    starts : list of RecordStart
+        The records run from an estimated start.
     """
     m = copy.copy(model)
     m.out_of_range = "extrapolate"
     lo, hi = model.cmd_range_deg_
-    return m.predict(data), int(np.sum((data.cmd_deg < lo) | (data.cmd_deg > hi)))
+    pred, starts = estimate_starts(m.predict, data)
+    return pred, int(np.sum((data.cmd_deg < lo) | (data.cmd_deg > hi))), starts
+
+
+def predict_extrapolated(model: HysteresisModel, data: HysteresisData) -> tuple[np.ndarray, int]:
+    """The prediction and samples beyond the fitted range of :func:`predict_scored`."""
+    return predict_scored(model, data)[:2]
 
 
 def _predict_errors(model: HysteresisModel, data: HysteresisData) -> np.ndarray:

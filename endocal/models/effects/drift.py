@@ -16,8 +16,8 @@ from endocal.models.params import Parameter, fmt_value
 def _elapsed_s(data: HysteresisData) -> np.ndarray:
     t = data.require_time("effect 'drift'")
     out = np.empty_like(t)
-    for sl in data.run_slices():
-        out[sl] = t[sl] - t[sl.start]
+    for sl, first in zip(data.run_slices(), data.record_starts()):
+        out[sl] = t[sl] - t[first]  # a lead-in (models.start) runs before the record's time 0
     return out
 
 
