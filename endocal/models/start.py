@@ -34,10 +34,11 @@ from endocal.models.data import HysteresisData
 START_GAIN_MIN = 0.05
 
 #: The estimated start must leave the record's stretch before its first reversal at most this
-#: many times the error after it. A start that leaves it far worse did not find the record's
-#: state (a step from rest, the servo catching up with a jump of the command at the first
-#: sample: 7.0 against 0.4 deg on a simulated record): both starts are wrong there, and choosing
-#: one would only trade one error for another (and pull the fit's delay from 0.15 to 0.17 s).
+#: many times the error after it, or take away all but 1/this of its error from rest. A start
+#: that leaves it far worse did not find the record's state (a step from rest, the servo
+#: catching up with a jump of the command at the first sample: 7.0 against 0.4 deg on a
+#: simulated record, 7.9 from rest): both starts are wrong there, and choosing one would only
+#: trade one error for another (and pull the fit's delay from 0.15 to 0.17 s).
 EXPLAINED_RATIO = 3.0
 
 #: A lead-in is at most this many times its record's length (a record that barely moves and
@@ -198,7 +199,8 @@ def estimate_starts(predict: Callable[[HysteresisData], np.ndarray], data: Hyste
             n = int(run.lead_in[0])
             alt = np.asarray(predict(run), dtype=float)[n:]
             est = _rms(alt - y)
-            explained = _rms(alt[:k] - y[:k]) <= EXPLAINED_RATIO * _rms(alt[k:] - y[k:])
+            first, after, first_rest = _rms(alt[:k] - y[:k]), _rms(alt[k:] - y[k:]), _rms(pred[sl][:k] - y[:k])
+            explained = first <= max(EXPLAINED_RATIO * after, first_rest / EXPLAINED_RATIO)
             if est < (1.0 - START_GAIN_MIN) * rest and est < best and explained:
                 best, pred[sl] = est, alt
                 chosen = RecordStart(r, path, n, rest, est)

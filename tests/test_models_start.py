@@ -1,0 +1,96 @@
+"""Where a record starts (models.start): ground truth on the paper's PI model, cut from a periodic run."""
+
+import numpy as np
+import pytest
+
+from endocal.errors import ModelError
+from endocal.models import HysteresisData, PIModel, make_model
+from endocal.models.start import estimate_starts, first_reversal, lead_in_paths, with_lead_in, with_lead_ins
+from tests._models_signals import PAPER_TABLE1
+
+FS_HZ = 100.0
+
+
+def truth():
+    return PIModel(effects=["envelope"]).set_parameters(PAPER_TABLE1)
+
+
+def periodic(cycles=4, period_s=10.0, amp_deg=50.0):
+    """A homed knob swept ``cycles`` times: 0 -> +amp -> -amp -> ... (a sine from rest at 0)."""
+    t = np.arange(int(cycles * period_s * FS_HZ)) / FS_HZ
+    return t, amp_deg * np.sin(2 * np.pi * t / period_s)
+
+
+def cut(t, u, y, a, n):
+    return HysteresisData(cmd_deg=u[a:a + n], meas_deg=y[a:a + n], t_s=t[a:a + n] - t[a])
+
+
+def test_a_cycle_cut_mid_swing_is_run_exactly_as_the_continuous_record_from_its_estimated_start():
+    # One full sweep before the cut sets the state of every play narrower than the sweep as the
+    # history did (the wiping-out property): from the estimated start the model reproduces the
+    # continuous record within 0.03 deg (its widest plays, wider than the sweep, still remember
+    # the knob's rest). From rest (as if it came up from 0 to where it moves down) it is 2.1 deg off.
+    m = truth()
+    t, u = periodic()
+    y = m.predict(u)
+    a = int(2.4 * 10 * FS_HZ)  # 29 deg on the way down from +50
+    rec = cut(t, u, y, a, 1000)
+    rest = m.predict(rec)
+    assert np.sqrt(np.mean((rest - rec.meas_deg) ** 2)) > 1.0
+    pred, starts = estimate_starts(m.predict, rec)
+    # moving down: the lead-in goes down to -50, up to +50 and down to the cut, as the history did
+    assert len(starts) == 1 and starts[0].path_deg == pytest.approx((u[a], u.min(), u.max(), u[a]), abs=0.1)
+    assert np.max(np.abs(pred - rec.meas_deg)) < 0.03
+    assert starts[0].rmse_estimated_deg < 0.01 * starts[0].rmse_rest_deg
+
+
+def test_a_record_from_rest_keeps_the_models_own_start():
+    m = truth()
+    t, u = periodic(cycles=2)
+    y = m.predict(u) + 0.3 * np.random.default_rng(0).standard_normal(u.size)
+    pred, starts = estimate_starts(m.predict, HysteresisData(cmd_deg=u, meas_deg=y, t_s=t))
+    assert starts == [] and np.array_equal(pred, m.predict(u))
+
+
+def test_a_fit_on_a_cut_cycle_recovers_the_plant_as_one_from_rest():
+    # Fitted from rest on the cut cycle, the stretch before its first reversal pulls the loop (the
+    # true model is 2.1 deg off from rest there); fitted from the estimated start, the cycle's
+    # error is the added noise (0.3 deg), and another cut of the plant is predicted as well.
+    m = truth()
+    t, u = periodic(cycles=6)
+    rng = np.random.default_rng(1)
+    y = m.predict(u) + 0.3 * rng.standard_normal(u.size)
+    a = int(2.4 * 10 * FS_HZ)
+    fitted = make_model("pi", ["envelope"]).fit(cut(t, u, y, a, 1200))
+    assert fitted.fit_report_.estimated_starts and fitted.fit_report_.rmse_deg < 1.05 * 0.3
+    other = cut(t, u, m.predict(u), int(1.4 * 10 * FS_HZ), 1200)  # noise-free: the model's own error
+    pred, starts = estimate_starts(fitted.predict, other)
+    assert starts and np.sqrt(np.mean((pred - other.meas_deg) ** 2)) < 0.3
+
+
+def test_lead_in_paths_and_first_reversal():
+    u = np.array([1.8, 1.0, 0.0, 1.0, 3.6, 2.0])
+    assert lead_in_paths(u) == [(0.0, 1.8), (1.8, 0.0, 3.6, 1.8)]  # moving down: came down from the top
+    assert lead_in_paths(np.array([0.0, 1.0, 3.6, 0.0]))[0] == (0.0, 3.6, 0.0)  # at its low end: no last leg
+    assert lead_in_paths(np.full(5, 2.0)) == []
+    assert first_reversal(u) == 2 and first_reversal(np.arange(10.0)) is None
+
+
+def test_a_lead_in_is_run_but_time_counts_from_the_record():
+    # `drift` counts a record's time from its first sample, not from its lead-in's
+    m = make_model("linear", ["drift"]).set_parameters(
+        {"linear_up_slope": 1.0, "linear_up_offset_deg": 0.0, "linear_down_slope": 1.0,
+         "linear_down_offset_deg": 0.0, "linear_transition_slope": 1.0, "drift_rate_dps": 0.5})
+    t, u = periodic(cycles=1)
+    rec = HysteresisData(cmd_deg=u[200:], t_s=t[200:] - t[200])
+    led = with_lead_in(rec, lead_in_paths(rec.cmd_deg)[-1])
+    n = int(led.lead_in[0])
+    assert n > 0 and led.t_s[n] == 0.0 and np.all(np.diff(led.t_s) > 0)
+    np.testing.assert_allclose(m.predict(led)[n:], m.predict(rec), atol=1e-12)
+    both, keep = with_lead_ins(HysteresisData.from_runs([rec, rec]), [])
+    assert keep.size == 2 * rec.n_samples and np.array_equal(both.cmd_deg, np.concatenate([u[200:]] * 2))
+
+
+def test_a_lead_in_longer_than_its_run_is_refused():
+    with pytest.raises(ModelError, match="lead_in"):
+        HysteresisData(cmd_deg=np.zeros(5), lead_in=np.array([5]))
