@@ -78,10 +78,11 @@ class RecordStart:
                    float(d["rmse_rest_deg"]), float(d["rmse_estimated_deg"]))
 
     def describe(self) -> str:
-        """``"as if the knob had come 1.8 -> 0 -> 3.6 -> 1.8 deg (RMSE 3.2 -> 0.53 deg)"``."""
+        """``"as if the knob had come 1.8 -> 0 -> 3.6 -> 1.8 deg before it (RMSE 3.2 deg from the
+        model's relaxed start, 0.53 deg from this one)"``."""
         path = " -> ".join(f"{x:.3g}" for x in self.path_deg)
-        return (f"as if the knob had come {path} deg before it (RMSE {self.rmse_rest_deg:.3g} -> "
-                f"{self.rmse_estimated_deg:.3g} deg)")
+        return (f"as if the knob had come {path} deg before it (RMSE {self.rmse_rest_deg:.3g} deg from the model's "
+                f"relaxed start, {self.rmse_estimated_deg:.3g} deg from this one)")
 
 
 def lead_in_paths(cmd_deg: np.ndarray) -> list[tuple[float, ...]]:

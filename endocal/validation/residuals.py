@@ -273,9 +273,10 @@ def cut_start(data: HysteresisData, resid_deg: np.ndarray, what: str = "validati
     if starts:
         st = max(starts, key=lambda s: s.rmse_rest_deg - s.rmse_estimated_deg)
         which = f"the {what}" if data.n_runs == 1 else f"{len(starts)} of {data.n_runs} {what}s (the largest gain)"
-        return (f"{which} {_start_words(data.cmd_deg[runs[st.run]])}: run from its estimated start, "
-                f"{st.describe()}: the model's own start (as if relaxed at 0) is not the state its history left; "
-                "every fit and score of it here uses that start")
+        return (f"{which} {_start_words(data.cmd_deg[runs[st.run]])}: run from an estimated start, "
+                f"{st.describe()}: a record cut from a longer motion starts where that motion left the knob, not "
+                "in the relaxed state a model assumes; every model here, candidates too, runs it from the start "
+                "that predicts it best")
     tp = turning_points(data)
     found = []
     for sl in runs:
@@ -297,7 +298,7 @@ def cut_start(data: HysteresisData, resid_deg: np.ndarray, what: str = "validati
     which = f"the {what}" if data.n_runs == 1 else f"{len(found)} of {data.n_runs} {what}s (the worst)"
     u = data.cmd_deg[next(sl for sl in runs if sl.start == a)]
     return (f"{which} {_start_words(u)}: its error before the first reversal is {rb:.3g} deg RMS, "
-            f"{rb / ra:.1f}x the {ra:.3g} deg after it. It started in a state that neither the rest every model "
-            "assumes (as if the knob came from 0) nor a cut from a longer motion fits (a first sweep from a "
-            "relaxed sheath, a step): that stretch measures the start, not the physics, and a candidate may fit "
+            f"{rb / ra:.1f}x the {ra:.3g} deg after it. Neither the relaxed start every model assumes nor a start "
+            "as if cut from a longer motion predicts it (a step, or a first sweep from a relaxed sheath, starts a "
+            "record so): that stretch measures the start, not the physics, and a candidate may fit "
             "it; cut the records at their first reversal, or move the knob through its range before each acquisition")
