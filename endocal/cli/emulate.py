@@ -19,11 +19,15 @@ app = typer.Typer(help="Emulated rig devices speaking the real wire protocols, f
                   no_args_is_help=True)
 
 
-def _run_until_stopped(emulator) -> None:
-    """Serve until Ctrl-C or SIGTERM, then close the emulator."""
+def _run_until_stopped(emulator, ready: str) -> None:
+    """Print the ``ready`` line, serve until Ctrl-C or SIGTERM, then close the emulator.
+
+    SIGTERM is caught before ``ready`` is printed: whoever waits for that line may stop us at once.
+    """
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
+        out.print(ready, markup=False)
         while not stop.wait(0.2):
             pass
     except KeyboardInterrupt:
@@ -82,8 +86,7 @@ def dynamixel(
                        unplug_after_s=unplug_after, hardware_error=errors, hardware_error_after_s=hardware_error_after)
     bus = ServoBus(id_list, model_number=model_number, baudrate=baudrate, faults=faults, seed=seed, on_event=_event)
     bus.start()
-    out.print(f"dynamixel bus on {bus.port} (ids {', '.join(map(str, id_list))}, {baudrate} bd)", markup=False)
-    _run_until_stopped(bus)
+    _run_until_stopped(bus, f"dynamixel bus on {bus.port} (ids {', '.join(map(str, id_list))}, {baudrate} bd)")
 
 
 @app.command("rig")
@@ -129,9 +132,8 @@ def rig(
     rig_.start()
     rig_.write_config(config_out)
     where = f"stage on 127.0.0.1:{rig_.stage.port}" if rig_.stage is not None else "stage absent"
-    out.print(f"emulated rig: servos on {rig_.bus.port}, aurora on {rig_.aurora.port}, {where}; wrote {config_out}",
-              markup=False)
-    _run_until_stopped(rig_)
+    _run_until_stopped(rig_, f"emulated rig: servos on {rig_.bus.port}, aurora on {rig_.aurora.port}, {where}; "
+                             f"wrote {config_out}")
 
 
 @app.command("aurora")
@@ -158,9 +160,8 @@ def aurora(
                          faults=AuroraFaults(missing=tuple(missing), missing_after_s=missing_after,
                                              silent_after_s=silent_after))
     emu.start()
-    out.print(f"aurora on {emu.port} (tip port handle {tip_port_handle:#04x}, base {base_port_handle:#04x}, 40 Hz)",
-              markup=False)
-    _run_until_stopped(emu)
+    _run_until_stopped(emu, f"aurora on {emu.port} (tip port handle {tip_port_handle:#04x}, "
+                            f"base {base_port_handle:#04x}, 40 Hz)")
 
 
 @app.command("stage")
@@ -186,5 +187,4 @@ def stage(
         from endocal.errors import ConfigError
 
         raise ConfigError(f"cannot listen on 127.0.0.1:{port} ({exc.strerror}): pick another --port") from None
-    out.print(f"stage on 127.0.0.1:{emu.port} (UDP, stage protocol version 1)", markup=False)
-    _run_until_stopped(emu)
+    _run_until_stopped(emu, f"stage on 127.0.0.1:{emu.port} (UDP, stage protocol version 1)")
