@@ -175,18 +175,20 @@ class BSplineModel(DirectionalModel):
         B = BSpline.design_matrix(vc, t, k).tocsr()
         m = len(t) - k - 1
         # end tangents: f'(a) = k (c1 - c0)/(t[k+1] - t[1]),  f'(b) = k (c[m-1] - c[m-2])/(t[m+k-1] - t[m-1])
-        ext = np.zeros((v.size, m))
-        lo = v < a
-        hi = v > b
-        if lo.any():
-            g = k / (t[k + 1] - t[1]) * (v[lo] - a)
-            ext[lo, 0] -= g
-            ext[lo, 1] += g
-        if hi.any():
-            g = k / (t[m + k - 1] - t[m - 1]) * (v[hi] - b)
-            ext[hi, m - 2] -= g
-            ext[hi, m - 1] += g
-        ext = csr_matrix(ext) if (lo.any() or hi.any()) else None
+        # built sparse from the samples beyond the interval (two entries each): a dense (n, m) array
+        # would take m * 8 bytes per sample on every prediction
+        lo = np.flatnonzero(v < a)
+        hi = np.flatnonzero(v > b)
+        ext = None
+        if lo.size or hi.size:
+            g_lo = k / (t[k + 1] - t[1]) * (v[lo] - a)
+            g_hi = k / (t[m + k - 1] - t[m - 1]) * (v[hi] - b)
+            rows = np.concatenate([lo, lo, hi, hi])
+            cols = np.concatenate([np.zeros(lo.size, np.int64), np.ones(lo.size, np.int64),
+                                   np.full(hi.size, m - 2, np.int64), np.full(hi.size, m - 1, np.int64)])
+            vals = np.concatenate([-g_lo, g_lo, -g_hi, g_hi])
+            ext = csr_matrix((vals, (rows, cols)), shape=(v.size, m))
+            ext.sum_duplicates()  # canonical: each row's columns sorted, as the dense conversion gave them
         self._design_cache = (v.copy(), t.copy(), B, ext)
         return B, ext
 

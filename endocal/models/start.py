@@ -151,6 +151,8 @@ def with_lead_in(run: HysteresisData, path: tuple[float, ...]) -> HysteresisData
 
 def with_lead_ins(data: HysteresisData, starts: list[RecordStart]) -> tuple[HysteresisData, np.ndarray]:
     """``data`` with the lead-ins of ``starts`` before their runs, and the indices of its own samples."""
+    if not starts and not data.lead_in.any():
+        return data, np.arange(data.n_samples)  # no lead-in to add: not a copy of every column
     by_run = {s.run: s for s in starts}
     parts, keep, offset = [], [], 0
     for r, sl in enumerate(data.run_slices()):
@@ -189,7 +191,7 @@ def estimate_starts(predict: Callable[[HysteresisData], np.ndarray], data: Hyste
         return pred, []
     starts = []
     for r, sl in enumerate(data.run_slices()):
-        own = data.take([np.arange(sl.start, sl.stop)])
+        own = _run_view(data, sl)
         k = first_reversal(own.cmd_deg)
         if k is None:
             continue
@@ -205,6 +207,7 @@ def estimate_starts(predict: Callable[[HysteresisData], np.ndarray], data: Hyste
             if est < (1.0 - START_GAIN_MIN) * rest and est < best and explained:
                 best, pred[sl] = est, alt
                 chosen = RecordStart(r, path, n, rest, est)
+            del run, alt  # before the next lead-in's copy of the record is made
         if best < rest:
             starts.append(chosen)
     return pred, starts
@@ -217,6 +220,13 @@ def rescored(starts: list[RecordStart], data: HysteresisData, pred_rest: np.ndar
     runs = data.run_slices()
     return [replace(s, rmse_rest_deg=_rms(pred_rest[runs[s.run]] - data.meas_deg[runs[s.run]]),
                     rmse_estimated_deg=_rms(resid_deg[runs[s.run]])) for s in starts]
+
+
+def _run_view(data: HysteresisData, sl: slice) -> HysteresisData:
+    """Run ``sl`` of ``data`` as a record of its own, its columns views (``take`` would copy every column)."""
+    return HysteresisData(cmd_deg=data.cmd_deg[sl], meas_deg=None if data.meas_deg is None else data.meas_deg[sl],
+                          t_s=None if data.t_s is None else data.t_s[sl],
+                          extras={k: v[sl] for k, v in data.extras.items()})
 
 
 def _rms(x: np.ndarray) -> float:

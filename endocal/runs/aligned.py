@@ -64,7 +64,16 @@ def read_parquet(source: Path | list[Path], where: str | None = None) -> pd.Data
     """
     where = where or str(source)
     try:
-        return pq.read_table(source).to_pandas()
+        if isinstance(source, list):
+            return pq.read_table(source).to_pandas()
+        # one column at a time (decoding a whole file at once holds its pages and the decoded table
+        # together), then converted column by column, each Arrow column released once pandas has it
+        # (to_pandas() would hold the Arrow table and a consolidated copy at once: 3x the table's size)
+        pf = pq.ParquetFile(source)
+        schema = pf.schema_arrow
+        table = pa.Table.from_arrays([pf.read(columns=[name], use_threads=False).column(0) for name in schema.names],
+                                     schema=schema)
+        return table.to_pandas(self_destruct=True, split_blocks=True)
     except FileNotFoundError:
         raise RunFormatError(f"{where} does not exist") from None
     except (pa.ArrowException, OSError) as exc:

@@ -200,7 +200,7 @@ def _through_planes(data: AlignedData, axis: str, planes) -> AlignedData:
                          "a model fitted without --planes")
     first, second = data.axes
     comp = planes.compensate(data.meas_deg(first), data.meas_deg(second))
-    table = data.table.copy()
+    table = data.table.copy(deep=False)  # copy-on-write: the new column only, not every column again
     table[f"{axis}_meas_deg"] = np.asarray(comp[0] if axis == first else comp[1], float)
     return replace(data, table=table)
 

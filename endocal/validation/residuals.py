@@ -120,10 +120,17 @@ _HINTS = {
 def _xcorr(a: np.ndarray, b: np.ndarray, max_lag: int) -> np.ndarray:
     """``r(tau) = sum_t a_t b_{t - tau} / (n sd_a sd_b)`` for ``tau = -max_lag..max_lag`` (means removed)."""
     n = a.size
+    same = a is b  # an autocorrelation: one transform serves both sides (the same numbers)
     a = a - a.mean()
-    b = b - b.mean()
+    b = a if same else b - b.mean()
     nfft = 1 << int(np.ceil(np.log2(2 * n)))
-    c = np.fft.irfft(np.fft.rfft(a, nfft) * np.conj(np.fft.rfft(b, nfft)), nfft)
+    # each spectrum freed once used: the (nfft,) buffers alive at once are the fewest the product needs
+    fa = np.fft.rfft(a, nfft)
+    fb = np.conj(fa if same else np.fft.rfft(b, nfft))
+    prod = fa * fb
+    del fa, fb
+    c = np.fft.irfft(prod, nfft)
+    del prod
     denom = n * a.std() * b.std()
     full = np.concatenate([c[-max_lag:], c[: max_lag + 1]]) if max_lag > 0 else c[:1]
     return full / denom if denom > 0 else np.zeros(2 * max_lag + 1)

@@ -43,7 +43,7 @@ from endocal.models.base import HysteresisModel
 from endocal.models.start import with_lead_ins
 from endocal.validation.data import speed_dps
 from endocal.validation.regimes import turning_points
-from endocal.validation.suspects import predict_extrapolated, predict_scored
+from endocal.validation.suspects import columns_read, predict_extrapolated, predict_scored
 
 #: Largest loop change searched, as a fraction of the validation command's span per side.
 MAX_WIDTH_FRAC = 0.2
@@ -95,7 +95,8 @@ def record_shift(model: HysteresisModel, data: HysteresisData) -> RecordShift:
     """Fit a zero shift and a friction change of ``model`` on the validation ``data`` (module docstring)."""
     y = np.asarray(data.meas_deg, dtype=float)
     p, _, starts = predict_scored(model, data)
-    led, keep = with_lead_ins(data, starts)  # the shifted commands start where the record's estimate put it
+    # the shifted commands start where the record's estimate put it (the columns the model reads only)
+    led, keep = with_lead_ins(columns_read(model, data), starts)
     rmse = _rms(p - y)
     c = float(np.mean(y - p))
     span = float(np.ptp(data.cmd_deg))

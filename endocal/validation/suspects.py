@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import dataclasses
 import math
 import re
 import shlex
@@ -664,8 +665,14 @@ def unit_test(err_base: np.ndarray, err_cand: np.ndarray, units: Units, n_flips:
         signs = 1 - 2 * ((np.arange(2**n)[:, None] >> np.arange(n)) & 1)
         return float(np.mean(signs @ sums >= observed * (1 - 1e-12)))
     rng = np.random.default_rng(0)
-    flips = rng.choice(np.array([-1.0, 1.0]), size=(n_flips, n)) @ sums
-    return float((1 + np.count_nonzero(flips >= observed * (1 - 1e-12))) / (1 + n_flips))
+    # drawn 1000 flips at a time (an even count of draws per call keeps the generator's stream, so the
+    # p-value is the one a single (n_flips, n) draw gives): the whole matrix would hold 16 bytes per flip
+    # and unit (int64 draws and their float signs), 300 MB for an hour's record of 1000 half-cycles
+    hits = 0
+    for a in range(0, n_flips, 1000):
+        flips = rng.choice(np.array([-1.0, 1.0]), size=(min(1000, n_flips - a), n)) @ sums
+        hits += np.count_nonzero(flips >= observed * (1 - 1e-12))
+    return float((1 + hits) / (1 + n_flips))
 
 
 def predict_scored(model: HysteresisModel, data: HysteresisData) -> tuple[np.ndarray, int, list[RecordStart]]:
@@ -700,8 +707,21 @@ def predict_scored(model: HysteresisModel, data: HysteresisData) -> tuple[np.nda
     m = copy.copy(model)
     m.out_of_range = "extrapolate"
     lo, hi = model.cmd_range_deg_
-    pred, starts = estimate_starts(m.predict, data)
+    pred, starts = estimate_starts(m.predict, columns_read(model, data))
     return pred, int(np.sum((data.cmd_deg < lo) | (data.cmd_deg > hi))), starts
+
+
+def columns_read(model: HysteresisModel, data: HysteresisData) -> HysteresisData:
+    """``data`` with only the extra columns ``model``'s effects read (coupling, load), as views.
+
+    A prediction needs no other column, and :func:`~endocal.models.start.estimate_starts` and
+    :func:`~endocal.models.start.with_lead_ins` copy every column they are given (each lead-in
+    tried is a record's length and more).
+    """
+    read = {c for e in getattr(model, "effects_", []) if (c := getattr(e, "column", None))}
+    if not set(data.extras) - read:
+        return data
+    return dataclasses.replace(data, extras={k: v for k, v in data.extras.items() if k in read})
 
 
 def predict_extrapolated(model: HysteresisModel, data: HysteresisData) -> tuple[np.ndarray, int]:

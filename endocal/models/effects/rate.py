@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit
 
 from endocal.errors import ModelError
-from endocal.models._kernels import varplay_forward_jac
+from endocal.models._kernels import varplay_forward, varplay_forward_jac
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import InputEffect
 from endocal.models.params import Parameter
@@ -251,8 +251,14 @@ class Rate(InputEffect):
                               np.ascontiguousarray(M, dtype=float), data.run_starts)
 
     def apply(self, p: dict, u: np.ndarray, data: HysteresisData) -> np.ndarray:
-        v, _, _ = self.apply_jac(p, u, data, np.zeros((len(u), 0)))
-        return v
+        # apply_jac's output without its Jacobian (an (n, 3) design and an (n, 3) Jacobian on a prediction)
+        g, h, kappa = self._gains(p)
+        s, _ = self._speed(u, data, np.zeros((len(u), 0)))
+        F = capstan_speed_jac(s, float(kappa))[0]
+        u = np.asarray(u, dtype=float)
+        prev = np.concatenate([u[:1], u[:-1]])
+        gain = g + h * np.abs(prev)
+        return varplay_forward(np.ascontiguousarray(u, dtype=float), gain * F, data.run_starts)
 
     def apply_jac(self, p: dict, u: np.ndarray, data: HysteresisData, M: np.ndarray):
         g, h, kappa = self._gains(p)
