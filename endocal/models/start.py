@@ -10,13 +10,15 @@ against 0.87 after; a candidate effect that follows time, drift or creep, fits i
 
 System-identification tools estimate the initial state from the data they score
 (MATLAB's ``compare`` does by default). For a rate-independent hysteresis the state at the
-start is set by the last turning points (the wiping-out property), so one alternative covers the
-record that was cut from a periodic motion: the knob came from the far end of the record's own
-sweep, i.e. it is taken along a **lead-in** ``u0 -> far end -> near end -> u0`` (the end it
-moves towards first is the far one) at the record's own typical step, whose prediction is run
-but not scored. The lead-in is taken when it lowers the record's RMSE by
-:data:`START_GAIN_MIN`; else the record keeps the rest start. One choice per record, a
-discrete initial condition, not a parameter fitted on the validation data.
+start is set by the last turning points (the wiping-out property), so two histories cover the
+usual records, each run as a **lead-in** at the record's own typical step, whose prediction is
+run but not scored (:func:`lead_in_paths`): the knob came straight from 0 (a homed knob; the
+B-spline's mid-line start is not that), or the record was cut from a periodic motion, the knob
+taken along ``u0 -> far end -> near end -> u0`` (the end it moves towards first is the far one).
+A lead-in is taken when it lowers the record's RMSE by :data:`START_GAIN_MIN` and explains the
+stretch before the first reversal (:data:`EXPLAINED_RATIO`); else the record keeps the rest
+start. One choice per record, a discrete initial condition, not a parameter fitted on the
+validation data.
 """
 
 from __future__ import annotations
@@ -150,13 +152,14 @@ def with_lead_in(run: HysteresisData, path: tuple[float, ...]) -> HysteresisData
 
 
 def with_lead_ins(data: HysteresisData, starts: list[RecordStart]) -> tuple[HysteresisData, np.ndarray]:
-    """``data`` with the lead-ins of ``starts`` before their runs, and the indices of its own samples."""
-    if not starts and not data.lead_in.any():
+    """``data`` (without lead-ins) with the lead-ins of ``starts`` before their runs, and the
+    indices of its own samples."""
+    if not starts:
         return data, np.arange(data.n_samples)  # no lead-in to add: not a copy of every column
     by_run = {s.run: s for s in starts}
     parts, keep, offset = [], [], 0
     for r, sl in enumerate(data.run_slices()):
-        run = data.take([np.arange(sl.start, sl.stop)])
+        run = _run_view(data, sl)
         if r in by_run:
             run = with_lead_in(run, by_run[r].path_deg)
         n_lead = int(run.lead_in[0])
