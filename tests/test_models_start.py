@@ -5,7 +5,8 @@ import pytest
 
 from endocal.errors import ModelError
 from endocal.models import HysteresisData, PIModel, make_model
-from endocal.models.start import estimate_starts, first_reversal, lead_in_paths, with_lead_in, with_lead_ins
+from endocal.models.start import (estimate_starts, first_reversal, first_stretch_fraction, lead_in_paths, with_lead_in,
+                                  with_lead_ins)
 from tests._models_signals import PAPER_TABLE1
 
 FS_HZ = 100.0
@@ -66,6 +67,23 @@ def test_a_fit_on_a_cut_cycle_recovers_the_plant_as_one_from_rest():
     other = cut(t, u, m.predict(u), int(1.4 * 10 * FS_HZ), 1200)  # noise-free: the model's own error
     pred, starts = estimate_starts(fitted.predict, other)
     assert starts and np.sqrt(np.mean((pred - other.meas_deg) ** 2)) < 0.3
+
+
+def test_a_short_cut_whose_first_stretch_pulled_the_rest_fit_is_fitted_from_its_history():
+    # One cycle cut at 47.6 deg on the way down: 45 % of it comes before its first reversal, and
+    # the fit from rest bends the loop until the periodic start no longer predicts it better
+    # (0.48 deg, no start taken). Fitted from each history in turn, the periodic one reaches
+    # the added noise (0.3 deg) and is the start the model records.
+    m = truth()
+    t, u = periodic(cycles=6)
+    y = m.predict(u) + 0.3 * np.random.default_rng(1).standard_normal(u.size)
+    a = int(2.3 * 10 * FS_HZ)
+    rec = cut(t, u, y, a, 1000)
+    assert first_stretch_fraction(rec) > 0.4
+    fitted = make_model("pi", ["envelope"]).fit(rec)
+    (start,) = fitted.fit_report_.estimated_starts
+    assert start["path_deg"] == pytest.approx([u[a], -50.0, 50.0, u[a]], abs=0.1)
+    assert fitted.fit_report_.rmse_deg < 1.05 * 0.3
 
 
 def test_lead_in_paths_and_first_reversal():

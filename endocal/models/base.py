@@ -34,7 +34,8 @@ from endocal.models.effects import resolve_effects
 from endocal.models.effects.base import Effect, InputEffect, OutputEffect
 from endocal.models.effects.base import OutputFilter
 from endocal.models.params import Parameter
-from endocal.models.start import estimate_starts, rescored, with_lead_ins
+from endocal.models.start import (FIT_HISTORY_FRACTION, START_GAIN_MIN, assumed_starts, estimate_starts,
+                                  first_stretch_fraction, rescored, with_lead_ins)
 
 OUT_OF_RANGE_CHOICES = ("error", "clamp")
 #: ``out_of_range`` values a model accepts: the users' choices, and ``"extrapolate"``, with which
@@ -408,11 +409,18 @@ class HysteresisModel(ABC):
         # A run that starts where a longer motion left the knob is fitted from its estimated start
         # (models.start): else its stretch before the first reversal pulls the parameters.
         starts = self._estimated_starts(d, values, free, res.x, structure, effects)
+        x_from = res.x
+        if not starts and first_stretch_fraction(d) >= FIT_HISTORY_FRACTION:
+            # a short record's first stretch may have pulled the rest fit until it predicts the
+            # wrong start as well as the right one: fit from each history and estimate again
+            x_from, starts, more = self._starts_by_history(d, values, free, res, structure, effects, (lo, hi),
+                                                           max_nfev)
+            nfev, njev = nfev + more[0], njev + more[1]
         if starts:
             nfev, njev = nfev + res.nfev, njev + int(res.njev or 0)
             led, keep = with_lead_ins(d, starts)
             residual, jac = self._residual_fns(led, values, free, structure, effects, keep)
-            res = least_squares(residual, np.clip(res.x, lo, hi), jac=jac, bounds=(lo, hi), method="trf",
+            res = least_squares(residual, np.clip(x_from, lo, hi), jac=jac, bounds=(lo, hi), method="trf",
                                 x_scale="jac", max_nfev=max_nfev)
             final = {**values, **{n: float(v) for n, v in zip(free, res.x)}}
             starts = rescored(starts, d, self._forward(d, *self._grouped(final), structure, effects), res.fun)
@@ -461,6 +469,27 @@ class HysteresisModel(ABC):
         """The runs of ``d`` that the model at ``x`` predicts better from a lead-in (models.start)."""
         trial = {**values, **{n: float(v) for n, v in zip(free, x)}}
         return estimate_starts(lambda dd: self._forward(dd, *self._grouped(trial), structure, effects), d)[1]
+
+    def _starts_by_history(self, d: HysteresisData, values: dict, free: list[str], rest, structure: dict,
+                           effects: list[Effect], bounds: tuple, max_nfev) -> tuple[np.ndarray, list, tuple]:
+        """The rest fit ``rest`` refitted with every run started along each history
+        (models.start.assumed_starts); the best that lowers the RMSE by START_GAIN_MIN, and the
+        starts estimated from it (an empty list: keep the rest fit). Also (nfev, njev) spent."""
+        best, spent = None, [0, 0]
+        for periodic in (True, False):
+            trial = assumed_starts(d, periodic)
+            if not trial:
+                continue
+            led, keep = with_lead_ins(d, trial)
+            residual, jac = self._residual_fns(led, values, free, structure, effects, keep)
+            fit = least_squares(residual, np.clip(rest.x, *bounds), jac=jac, bounds=bounds, method="trf",
+                                x_scale="jac", max_nfev=max_nfev)
+            spent = [spent[0] + fit.nfev, spent[1] + int(fit.njev or 0)]
+            if fit.cost < (1.0 - START_GAIN_MIN) ** 2 * rest.cost and (best is None or fit.cost < best.cost):
+                best = fit
+        if best is None:
+            return rest.x, [], tuple(spent)
+        return best.x, self._estimated_starts(d, values, free, best.x, structure, effects), tuple(spent)
 
     def _residual_fns(self, data: HysteresisData, values: dict, free: list[str], structure: dict,
                       effects: list[Effect], keep: np.ndarray | None = None):

@@ -43,6 +43,14 @@ START_GAIN_MIN = 0.05
 #: trade one error for another (and pull the fit's delay from 0.15 to 0.17 s).
 EXPLAINED_RATIO = 3.0
 
+#: A fit from rest tries each history as a start of its own (:func:`assumed_starts`) when the
+#: stretches before the runs' first reversals hold at least this fraction of the samples: there
+#: they pull the parameters until the rest fit predicts the wrong start as well as the right one
+#: (the paper's PI cut at 47.6 deg on the way down, one cycle, 45 % before its first reversal:
+#: 0.48 deg from rest, the added noise 0.29 from the right start, which the rest fit's estimate
+#: missed); with 9 % (five cycles) the estimate from the rest fit finds the start.
+FIT_HISTORY_FRACTION = 0.1
+
 #: A lead-in is at most this many times its record's length (a record that barely moves and
 #: then sweeps far would otherwise get a lead-in of its sweep at its resting step).
 MAX_LEAD_RATIO = 4
@@ -108,6 +116,29 @@ def lead_in_paths(cmd_deg: np.ndarray) -> list[tuple[float, ...]]:
     return paths + [tuple(x for i, x in enumerate(cut) if i == 0 or x != cut[i - 1])]  # at an end: one leg less
 
 
+def assumed_starts(data: HysteresisData, periodic: bool) -> list[RecordStart]:
+    """Every run that turns back started along one history: cut from a periodic motion
+    (``periodic``) or straight from 0 (not tried for a run that starts at 0). Their RMSEs are
+    NaN until a model scores them (:func:`rescored`)."""
+    starts = []
+    for r, sl in enumerate(data.run_slices()):
+        u = data.cmd_deg[sl]
+        paths = lead_in_paths(u) if first_reversal(u) is not None else []
+        path = (paths[-1] if periodic else paths[0] if len(paths) == 2 else None) if paths else None
+        if path:
+            starts.append(RecordStart(r, path, _lead_length(u, path), math.nan, math.nan))
+    return starts
+
+
+def first_stretch_fraction(data: HysteresisData) -> float:
+    """The fraction of ``data``'s samples before each run's first reversal (runs that never turn: all)."""
+    total = 0
+    for sl in data.run_slices():
+        k = first_reversal(data.cmd_deg[sl])
+        total += (sl.stop - sl.start) if k is None else k
+    return total / max(data.n_samples, 1)
+
+
 def first_reversal(cmd_deg: np.ndarray, tol_frac: float = 0.01) -> int | None:
     """Index of a record's first turning point (the command turns back by ``tol_frac`` of its
     span), or None when it never turns (or holds fewer than 2 samples after it)."""
@@ -132,11 +163,8 @@ def with_lead_in(run: HysteresisData, path: tuple[float, ...]) -> HysteresisData
     other knob, covariates) hold their first value.
     """
     u = run.cmd_deg
-    steps = np.abs(np.diff(u))
-    moving = steps[steps > 1e-3 * float(np.ptp(u))]
-    step = float(np.median(moving)) if moving.size else float(np.ptp(u)) / max(u.size - 1, 1)
     legs = np.abs(np.diff(path))
-    n = min(max(int(math.ceil(float(legs.sum()) / step)), 1), MAX_LEAD_RATIO * u.size)
+    n = _lead_length(u, path)
     s = np.linspace(0.0, float(legs.sum()), n, endpoint=False)
     lead = np.interp(s, np.concatenate([[0.0], np.cumsum(legs)]), path)
     t = None
@@ -149,6 +177,14 @@ def with_lead_in(run: HysteresisData, path: tuple[float, ...]) -> HysteresisData
         t_s=t, extras={k: np.concatenate([np.full(n, v[0]), v]) for k, v in run.extras.items()},
         lead_in=np.array([n]),
     )
+
+
+def _lead_length(u: np.ndarray, path: tuple[float, ...]) -> int:
+    """Samples of the lead-in along ``path`` at the median moving step of ``u``."""
+    steps = np.abs(np.diff(u))
+    moving = steps[steps > 1e-3 * float(np.ptp(u))]
+    step = float(np.median(moving)) if moving.size else float(np.ptp(u)) / max(u.size - 1, 1)
+    return min(max(int(math.ceil(float(np.abs(np.diff(path)).sum()) / step)), 1), MAX_LEAD_RATIO * u.size)
 
 
 def with_lead_ins(data: HysteresisData, starts: list[RecordStart]) -> tuple[HysteresisData, np.ndarray]:
