@@ -59,6 +59,20 @@ def test_compensation_reaches_the_noise_floor(which, signal, request, tmp_path):
     assert set(result.runs) == {"compensated", "uncompensated"} and (tmp_path / "compensated" / "run.json").exists()
 
 
+def test_a_playback_without_a_folder_leaves_nothing_behind(model, tmp_path, monkeypatch):
+    # without out_dir the two runs go to a temporary folder, removed once read (it used to
+    # stay in /tmp, two Parquet runs per `validate --protocol`); what the runs logged is kept
+    import tempfile
+
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
+    proto = load_protocol("triangle", overrides={"amplitude_deg": 30.0, "cycles": 1})
+    result = validate_on_backend(model, proto, lambda: make_backend("sim", PROBE, seed=1), PROBE, seed=1)
+    assert list(scratch.iterdir()) == [] and result.runs == {}
+    assert set(result.events) == {"compensated", "uncompensated"} and result.metrics.rmse_deg < 1.0
+
+
 def test_task_space_excite_plays_desired_angles_through_the_inverse(model, tmp_path):
     import numpy as np
 

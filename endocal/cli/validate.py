@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import tempfile
 from pathlib import Path
 from typing import Optional
 
@@ -289,6 +290,9 @@ def _playback(model, model_path, protocol, backend, probe, sim_config, hardware_
     # the planes the model was fitted through (as offline): its commands bend those planes
     cal = recorded_planes(model, model_path, planes)[0]
     make_guard = guard_factory(force_model, max_force_n, probe_cfg)
+    if runs_out is None and backend != "sim":  # what a rig recorded is kept: say where
+        runs_out = Path(tempfile.mkdtemp(prefix="endocal-validate-"))
+        err.print(f"the played runs are kept in {runs_out} (--runs-out names a folder)", markup=False)
     with warnings_as_lines():
         result = validate_on_backend(
             model,
@@ -305,8 +309,7 @@ def _playback(model, model_path, protocol, backend, probe, sim_config, hardware_
     out.print(_metrics_table(f"compensated: {protocol} on {backend}", result.metrics))
     out.print(_metrics_table("uncompensated", result.uncompensated))
     if make_guard is not None:
-        for name, run in result.runs.items():
-            events = json.loads((Path(run) / "run.json").read_text()).get("events", [])
+        for name, events in result.events.items():
             stops = [e for e in events if e["kind"] == "stop"]
             out.print(f"force guard, {name}: {len(stops)} stop(s)" + "".join(
                 f"; t = {e['t_s']:.2f} s at {e['force_pred_n']:.3f} N" for e in stops), markup=False)

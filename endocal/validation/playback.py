@@ -13,6 +13,8 @@ The error is ``reached - desired`` per sample (thesis eq. 2), summarised by
 
 from __future__ import annotations
 
+import contextlib
+import json
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,7 +45,11 @@ class PlaybackResult:
         On the compensated run's aligned clock (the uncompensated reach is interpolated
         onto it).
     runs : dict
-        ``{"compensated": Path, "uncompensated": Path}`` of the played runs.
+        ``{"compensated": Path, "uncompensated": Path}`` of the played runs (empty when they
+        were played into a temporary folder, removed after reading).
+    events : dict
+        ``{"compensated": [...], "uncompensated": [...]}``: each run's events (run.json), e.g.
+        the force guard's stops.
     """
 
     axis: str
@@ -56,6 +62,7 @@ class PlaybackResult:
     uncompensated_deg: np.ndarray
     command_deg: np.ndarray
     runs: dict = field(default_factory=dict)
+    events: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return {
@@ -67,6 +74,7 @@ class PlaybackResult:
             if self.uncompensated.rmse_deg > 0
             else 0.0,
             "runs": {k: str(v) for k, v in self.runs.items()},
+            "events": self.events,
         }
 
 
@@ -193,8 +201,8 @@ def validate_on_backend(
     seed : int
         Seed of the protocol and backend.
     out_dir : Path, optional
-        Where the two runs are kept (``compensated/``, ``uncompensated/``); a temporary
-        folder when omitted.
+        Where the two runs are kept (``compensated/``, ``uncompensated/``); when omitted they
+        are played into a temporary folder, removed once read.
     guard_factory : callable, optional
         ``guard_factory() -> ForceGuard``: a fresh contact-force guard for each playback.
 
@@ -219,24 +227,27 @@ def validate_on_backend(
     comp_traj.check_limits(probe)  # both refused before anything moves
     uncomp_traj.check_limits(probe)
 
-    root = Path(out_dir) if out_dir is not None else Path(tempfile.mkdtemp(prefix="endocal-validate-"))
-    runs = {"compensated": root / "compensated", "uncompensated": root / "uncompensated"}
-    reached = {}
-    for name, traj in (("compensated", comp_traj), ("uncompensated", uncomp_traj)):
-        run_excitation(
-            traj,
-            backend_factory(),
-            probe,
-            runs[name],
-            protocol_info={**proto.to_dict(), "playback": name, "model_axis": axis},
-            seed=seed,
-            force=True,
-            progress=progress,
-            guard=guard_factory() if guard_factory is not None else None,
-        )
-        data = load_aligned(runs[name])
-        keep = data.t_s >= PREROLL_S - 1e-9  # metrics over the protocol only, on its own clock
-        reached[name] = (data.t_s[keep] - PREROLL_S, data.meas_deg(axis)[keep])
+    with contextlib.ExitStack() as scratch:
+        root = Path(out_dir) if out_dir is not None else Path(
+            scratch.enter_context(tempfile.TemporaryDirectory(prefix="endocal-validate-")))
+        runs = {"compensated": root / "compensated", "uncompensated": root / "uncompensated"}
+        reached, events = {}, {}
+        for name, traj in (("compensated", comp_traj), ("uncompensated", uncomp_traj)):
+            run_excitation(
+                traj,
+                backend_factory(),
+                probe,
+                runs[name],
+                protocol_info={**proto.to_dict(), "playback": name, "model_axis": axis},
+                seed=seed,
+                force=True,
+                progress=progress,
+                guard=guard_factory() if guard_factory is not None else None,
+            )
+            data = load_aligned(runs[name])
+            keep = data.t_s >= PREROLL_S - 1e-9  # metrics over the protocol only, on its own clock
+            reached[name] = (data.t_s[keep] - PREROLL_S, data.meas_deg(axis)[keep])
+            events[name] = json.loads((runs[name] / "run.json").read_text()).get("events", [])
 
     t, reach = reached["compensated"]
     desired = np.interp(t, desired_traj.t_s, desired_traj.goal[axis])
@@ -252,5 +263,6 @@ def validate_on_backend(
         reached_deg=reach,
         uncompensated_deg=reach_uncomp,
         command_deg=cmd,
-        runs=runs,
+        runs=runs if out_dir is not None else {},
+        events=events,
     )
