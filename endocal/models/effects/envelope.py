@@ -47,12 +47,15 @@ def envelope_inverse(x, theta0, theta1, theta2, k0, k1, k2):
 def _hinge_start(u: np.ndarray, y: np.ndarray, split: float):
     """Start values from a continuous three-segment line fitted to (u, y), hysteresis averaged out.
 
-    Both branches are sampled, so a least-squares fit of ``y ≈ a + k1 (u - θ1) + (k0-k1)
-    min(u-θ0, 0) + (k2-k1) max(u-θ2, 0)`` over a grid of kinks finds the dead band and
-    the stiffening; returns ``θ0, θ1, θ2, k0/k1, k2/k1``.
+    A least-squares fit of ``y ≈ a + k1 (u - θ1) + (k0-k1) min(u-θ0, 0) + (k2-k1)
+    max(u-θ2, 0) + c sign(du)`` over a grid of kinks finds the dead band and the stiffening;
+    returns ``θ0, θ1, θ2, k0/k1, k2/k1``. The last term, a constant offset per direction of
+    motion (the loop's half width), keeps a record with more of one branch than the other
+    (1.5 cycles) from bending the line towards it.
     """
     stride = max(1, u.size // 4000)
     uu, yy = u[::stride], y[::stride]
+    moving = np.sign(np.diff(u, prepend=u[0]))[::stride]
     lo_grid = np.quantile(uu, np.linspace(0.03, 0.5, 12))
     hi_grid = np.quantile(uu, np.linspace(0.5, 0.97, 12))
     lo_grid = lo_grid[lo_grid <= split]
@@ -63,14 +66,14 @@ def _hinge_start(u: np.ndarray, y: np.ndarray, split: float):
         for b in hi_grid:
             if b <= a:
                 continue
-            A = np.column_stack([ones, uu, np.minimum(uu - a, 0.0), np.maximum(uu - b, 0.0)])
+            A = np.column_stack([ones, uu, np.minimum(uu - a, 0.0), np.maximum(uu - b, 0.0), moving])
             coef, *_ = np.linalg.lstsq(A, yy, rcond=None)
             cost = float(np.sum((A @ coef - yy) ** 2))
             if best is None or cost < best[0]:
                 best = (cost, float(a), float(b), coef)
     if best is None:
         return float(np.quantile(u, 0.2)), split, float(np.quantile(u, 0.8)), 1.0, 1.0
-    _, a, b, (c0, c1, d0, d2) = best
+    _, a, b, (c0, c1, d0, d2, _) = best
     k1 = c1 if c1 > 0 else max(abs(c1), 1e-6)
     ratio0 = max((c1 + d0) / k1, 0.05)
     ratio2 = max((c1 + d2) / k1, 0.05)
@@ -97,16 +100,21 @@ class Envelope(InputEffect):
     units = {"theta0_deg": "deg", "theta1_deg": "deg", "theta2_deg": "deg", "k0": "", "k1": "", "k2": ""}
 
     def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
-        split = float(np.median(u))
+        # theta0 <= theta2 (eq. 10 inverts only then) is held by a bound between them: the
+        # middle of the knob's range, not where it spends its time (the median, which a record
+        # of 1.5 cycles puts on one side, bounding the kinks away from a dead band at neutral).
+        # Each kink stays within the range: one beyond it shapes nothing the data hold, and a
+        # kink that wandered out (to -461 deg on 1.5 cycles) had no gradient to come back.
+        split = 0.5 * (float(np.min(u)) + float(np.max(u)))
         th0, th2, th1 = float(np.quantile(u, 0.2)), float(np.quantile(u, 0.8)), split
         ratio0 = ratio2 = 1.0
         if data.meas_deg is not None and np.ptp(u) > 0:
             th0, th1, th2, ratio0, ratio2 = _hinge_start(u, data.meas_deg, split)
         pre = self.prefix
         return [
-            Parameter(f"{pre}_theta0_deg", th0, -np.inf, split),
+            Parameter(f"{pre}_theta0_deg", th0, float(np.min(u)), split),
             Parameter(f"{pre}_theta1_deg", th1),
-            Parameter(f"{pre}_theta2_deg", th2, split, np.inf),
+            Parameter(f"{pre}_theta2_deg", th2, split, float(np.max(u))),
             Parameter(f"{pre}_k0", ratio0, _K_MIN, np.inf),
             Parameter(f"{pre}_k1", 1.0, _K_MIN, np.inf),
             Parameter(f"{pre}_k2", ratio2, _K_MIN, np.inf),
