@@ -86,11 +86,38 @@ def test_a_short_cut_whose_first_stretch_pulled_the_rest_fit_is_fitted_from_its_
     assert fitted.fit_report_.rmse_deg < 1.05 * 0.3
 
 
+def test_one_sweep_per_acquisition_starts_where_the_other_direction_left_the_tip():
+    # A lab records each direction in turn: 0 -> +50 -> 0, then 0 -> -50 -> 0, then up again.
+    # Each acquisition starts at knob 0 with the plays as the opposite sweep left them (the tip
+    # still bent the other way), which neither rest nor a periodic cut (that would come down
+    # from +50) reproduces: the mirrored sweep does, within 0.03 deg. A fit on such a record
+    # takes that start (2.9 deg from rest); it stops at 1.5x the added noise, in a local optimum
+    # of the envelope's kinks (8.7 and 39 deg where the paper's upper kink is 7.3; the lower one,
+    # -8.2, is outside a sweep that never goes below 0).
+    m = truth()
+    half = 0.5 * (1 - np.cos(2 * np.pi * np.arange(1000) / 1000))  # 0 -> 1 -> 0, at rest at both ends
+    u = np.concatenate([50 * half, -50 * half, 50 * half])
+    y = m.predict(u)
+    third = HysteresisData(cmd_deg=u[2000:], meas_deg=y[2000:], t_s=np.arange(1000) / FS_HZ)
+    assert np.sqrt(np.mean((m.predict(third) - third.meas_deg) ** 2)) > 0.5
+    pred, starts = estimate_starts(m.predict, third)
+    assert len(starts) == 1 and starts[0].path_deg == pytest.approx((0.0, -50.0, 0.0), abs=0.1)
+    assert np.max(np.abs(pred - third.meas_deg)) < 0.03
+    noisy = HysteresisData(cmd_deg=third.cmd_deg, t_s=third.t_s,
+                           meas_deg=third.meas_deg + 0.3 * np.random.default_rng(2).standard_normal(1000))
+    fitted = make_model("pi", ["envelope"]).fit(noisy)
+    (start,) = fitted.fit_report_.estimated_starts
+    assert start["path_deg"] == pytest.approx([0.0, -50.0, 0.0]) and start["rmse_rest_deg"] > 2.0
+    assert fitted.fit_report_.rmse_deg < 1.6 * 0.3
+
+
 def test_lead_in_paths_and_first_reversal():
     u = np.array([1.8, 1.0, 0.0, 1.0, 3.6, 2.0])
-    assert lead_in_paths(u) == [(0.0, 1.8), (1.8, 0.0, 3.6, 1.8)]  # moving down: came down from the top
-    assert lead_in_paths(np.array([0.0, 1.0, 3.6, 0.0]))[0] == (0.0, 3.6, 0.0)  # at its low end: no last leg
-    assert lead_in_paths(np.full(5, 2.0)) == []
+    # moving down: came down from the top; its mirror (-0) is inside its range
+    assert lead_in_paths(u) == {"homed": (0.0, 1.8), "periodic": (1.8, 0.0, 3.6, 1.8)}
+    # at its low end, 0: no homed lead-in, the periodic one a leg less, and the mirrored sweep
+    assert lead_in_paths(np.array([0.0, 1.0, 3.6, 0.0])) == {"periodic": (0.0, 3.6, 0.0), "mirrored": (0.0, -3.6, 0.0)}
+    assert lead_in_paths(np.full(5, 2.0)) == {}
     assert first_reversal(u) == 2 and first_reversal(np.arange(10.0)) is None
 
 
@@ -101,7 +128,7 @@ def test_a_lead_in_is_run_but_time_counts_from_the_record():
          "linear_down_offset_deg": 0.0, "linear_transition_slope": 1.0, "drift_rate_dps": 0.5})
     t, u = periodic(cycles=1)
     rec = HysteresisData(cmd_deg=u[200:], t_s=t[200:] - t[200])
-    led = with_lead_in(rec, lead_in_paths(rec.cmd_deg)[-1])
+    led = with_lead_in(rec, lead_in_paths(rec.cmd_deg)["periodic"])
     n = int(led.lead_in[0])
     assert n > 0 and led.t_s[n] == 0.0 and np.all(np.diff(led.t_s) > 0)
     np.testing.assert_allclose(m.predict(led)[n:], m.predict(rec), atol=1e-12)

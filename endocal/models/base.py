@@ -34,7 +34,7 @@ from endocal.models.effects import resolve_effects
 from endocal.models.effects.base import Effect, InputEffect, OutputEffect
 from endocal.models.effects.base import OutputFilter
 from endocal.models.params import Parameter
-from endocal.models.start import (FIT_HISTORY_FRACTION, START_GAIN_MIN, assumed_starts, estimate_starts,
+from endocal.models.start import (FIT_HISTORY_FRACTION, HISTORIES, START_GAIN_MIN, assumed_starts, estimate_starts,
                                   first_stretch_fraction, rescored, with_lead_ins)
 
 OUT_OF_RANGE_CHOICES = ("error", "clamp")
@@ -476,8 +476,8 @@ class HysteresisModel(ABC):
         (models.start.assumed_starts); the best that lowers the RMSE by START_GAIN_MIN, and the
         starts estimated from it (an empty list: keep the rest fit). Also (nfev, njev) spent."""
         best, spent = None, [0, 0]
-        for periodic in (True, False):
-            trial = assumed_starts(d, periodic)
+        for history in HISTORIES:
+            trial = assumed_starts(d, history)
             if not trial:
                 continue
             led, keep = with_lead_ins(d, trial)

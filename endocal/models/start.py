@@ -10,11 +10,13 @@ against 0.87 after; a candidate effect that follows time, drift or creep, fits i
 
 System-identification tools estimate the initial state from the data they score
 (MATLAB's ``compare`` does by default). For a rate-independent hysteresis the state at the
-start is set by the last turning points (the wiping-out property), so two histories cover the
+start is set by the last turning points (the wiping-out property), so three histories cover the
 usual records, each run as a **lead-in** at the record's own typical step, whose prediction is
 run but not scored (:func:`lead_in_paths`): the knob came straight from 0 (a homed knob; the
-B-spline's mid-line start is not that), or the record was cut from a periodic motion, the knob
-taken along ``u0 -> far end -> near end -> u0`` (the end it moves towards first is the far one).
+B-spline's mid-line start is not that), the record was cut from a periodic motion, the knob
+taken along ``u0 -> far end -> near end -> u0`` (the end it moves towards first is the far one),
+or the last acquisition swept the other way to the mirror of this one's far end (one sweep per
+acquisition, each direction in turn).
 A lead-in is taken when it lowers the record's RMSE by :data:`START_GAIN_MIN` and explains the
 stretch before the first reversal (:data:`EXPLAINED_RATIO`); else the record keeps the rest
 start. One choice per record, a discrete initial condition, not a parameter fitted on the
@@ -95,36 +97,48 @@ class RecordStart:
                 f"relaxed start, {self.rmse_estimated_deg:.3g} deg from this one)")
 
 
-def lead_in_paths(cmd_deg: np.ndarray) -> list[tuple[float, ...]]:
-    """The turning points of each lead-in tried for a record (none for a still record).
+#: The histories tried for a record's start, by name (:func:`lead_in_paths`).
+HISTORIES = ("homed", "periodic", "mirrored")
 
-    Two histories: the knob came straight from 0 (as a homed knob does; the PI's own start,
-    not the B-spline's mid-line), and the record was cut from a periodic motion: the end it
-    moves towards first is the far one, so a record moving up from ``u0`` came up from its low
-    end, and down to it from its high end (``u0``, high, low, ``u0``).
+
+def lead_in_paths(cmd_deg: np.ndarray) -> dict[str, tuple[float, ...]]:
+    """The turning points of each lead-in tried for a record, by history (none for a still record).
+
+    - ``homed``: the knob came straight from 0 (as a homed knob does; the PI's own start, not
+      the B-spline's mid-line); not tried for a record that starts at 0.
+    - ``periodic``: the record was cut from a periodic motion: the end it moves towards first
+      is the far one, so a record moving up from ``u0`` came up from its low end, and down to
+      it from its high end (``u0``, high, low, ``u0``).
+    - ``mirrored``: the last acquisition swept the other way, one sweep per acquisition as
+      labs record a knob's two directions: a record that moves up to ``hi`` from ``u0`` came
+      back to ``u0`` from ``-hi`` (the tip still bent the other way); tried only where ``-hi``
+      lies beyond the record's own range.
     """
     u = np.asarray(cmd_deg, dtype=float)
     span = float(np.ptp(u))
     if not span > 0.0:
-        return []
+        return {}
     moved = np.flatnonzero(np.abs(u - u[0]) > 0.01 * span)
     if not moved.size:
-        return []
+        return {}
     lo, hi, u0 = float(u.min()), float(u.max()), float(u[0])
-    cut = (u0, hi, lo, u0) if u[moved[0]] > u0 else (u0, lo, hi, u0)
-    paths = [(0.0, u0)] if abs(u0) > 0.01 * span else []
-    return paths + [tuple(x for i, x in enumerate(cut) if i == 0 or x != cut[i - 1])]  # at an end: one leg less
+    up = u[moved[0]] > u0
+    cut = (u0, hi, lo, u0) if up else (u0, lo, hi, u0)
+    paths = {"homed": (0.0, u0)} if abs(u0) > 0.01 * span else {}
+    paths["periodic"] = tuple(x for i, x in enumerate(cut) if i == 0 or x != cut[i - 1])  # at an end: one leg less
+    mirror = -hi if up else -lo
+    if (mirror < lo - 0.01 * span) if up else (mirror > hi + 0.01 * span):
+        paths["mirrored"] = (u0, mirror, u0)
+    return paths
 
 
-def assumed_starts(data: HysteresisData, periodic: bool) -> list[RecordStart]:
-    """Every run that turns back started along one history: cut from a periodic motion
-    (``periodic``) or straight from 0 (not tried for a run that starts at 0). Their RMSEs are
-    NaN until a model scores them (:func:`rescored`)."""
+def assumed_starts(data: HysteresisData, history: str) -> list[RecordStart]:
+    """Every run that turns back started along one of :data:`HISTORIES` (runs it does not
+    apply to keep the rest start). Their RMSEs are NaN until a model scores them (:func:`rescored`)."""
     starts = []
     for r, sl in enumerate(data.run_slices()):
         u = data.cmd_deg[sl]
-        paths = lead_in_paths(u) if first_reversal(u) is not None else []
-        path = (paths[-1] if periodic else paths[0] if len(paths) == 2 else None) if paths else None
+        path = lead_in_paths(u).get(history) if first_reversal(u) is not None else None
         if path:
             starts.append(RecordStart(r, path, _lead_length(u, path), math.nan, math.nan))
     return starts
@@ -236,7 +250,7 @@ def estimate_starts(predict: Callable[[HysteresisData], np.ndarray], data: Hyste
             continue
         y = data.meas_deg[sl]
         rest = best = _rms(pred[sl] - y)
-        for path in lead_in_paths(own.cmd_deg):
+        for path in lead_in_paths(own.cmd_deg).values():
             run = with_lead_in(own, path)
             n = int(run.lead_in[0])
             alt = np.asarray(predict(run), dtype=float)[n:]
