@@ -405,7 +405,8 @@ def test_one_speed_to_fit_a_faster_one_to_validate_points_at_the_lag_and_says_wh
     assert not d["clean"]
     ptr = {p["effect"]: p for p in d["pointers"]}
     assert ptr["delay"]["status"] == "unconfirmed" and "does not pin it down" in ptr["delay"]["why"], d["pointers"]
-    assert "too short to test that for significance" in ptr["delay"]["evidence"]
+    ev = ptr["delay"]["evidence"]
+    assert "record too short for any correlation to be significant" in ev or "not significant on a record this short" in ev
     assert ptr["delay"]["experiment"].startswith("record estimation data with")
     # the experiment: a second speed in the estimation data, and the scan confirms the lag
     _run("excite", "sine", "--set", "cycles=1", "--set", "frequency_hz=0.1", "--amplitude", "30",
@@ -460,3 +461,19 @@ def test_the_refit_folds_the_validation_data_in_only_when_asked(sine_sweeps):
     assert cmd[cmd.index("--out") + 1] == str(tmp / "pe-deadzone-all.json") != default[default.index("--out") + 1]
     _one_line_exit_2(_run("validate", tmp / "pe.json", tmp / "val", "--refit-on", "both", ok=False),
                      "--refit-on must be one of")
+
+
+def test_a_record_mostly_beyond_the_fitted_range_gets_no_refit_command(sine_sweeps):
+    # A sweep around 65 deg (45..85) validates a model fitted to +-60 deg: more than half of it
+    # is extrapolated. A candidate's refit on the same estimation sweep cannot cover it, so
+    # validate says to record covering data instead of printing a refit command.
+    tmp = sine_sweeps
+    _run("excite", "sine", "--set", "cycles=1", "--set", "frequency_hz=0.05", "--set", "offset_deg=65",
+         "--amplitude", "20", "--out", tmp / "far", "--seed", "3", "--quiet")
+    _run("fit", "hysteresis", tmp / "est", "--axis", "ap", "--model", "bspline", "--out", tmp / "bs-far.json",
+         "--force")
+    d = _validate_json(tmp, tmp / "bs-far.json", tmp / "far")
+    assert d["beyond_samples"] > 0.5 * d["data"][0]["n_samples"] and d["suspects"], d["suspects"]
+    res = _run("validate", tmp / "bs-far.json", tmp / "far")
+    assert "Next: refit on data that covers this record's commands" in res.stdout, res.stdout
+    assert "endocal fit hysteresis" not in res.stdout

@@ -142,9 +142,13 @@ def render(result) -> None:
             out.print(f"     {s.cause}; signature: {s.signature}", markup=False)
             if s.caution:
                 out.print(f"     caution: {s.caution}", markup=False)
-        out.print("[bold]Next:[/] refit with the first " + ("candidate" if thin else "suspect") +
-                  ", then validate the new model:")
-        out.print("  " + result.suspects[0].command, markup=False)
+        if result.beyond_samples > 0.5 * n:  # no effect term fixes a model asked where it was never fitted
+            out.print("[bold]Next:[/] refit on data that covers this record's commands (most of it lies beyond the "
+                      "model's range, where the candidates above are scored on an extrapolation), then validate again")
+        else:
+            out.print("[bold]Next:[/] refit with the first " + ("candidate" if thin else "suspect") +
+                      ", then validate the new model:")
+            out.print("  " + result.suspects[0].command, markup=False)
     elif scan.scheme == "none":
         out.print("[bold]Which effect is missing:[/] not tested: " + escape(scan.scheme_reason))
     elif result.pointers:

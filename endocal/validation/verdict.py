@@ -96,7 +96,9 @@ def _evidence(resid, regimes) -> dict[str, list[str]]:
             # lines up any slow residual with any slow signal. Not time: over a cycle or two any
             # residual that differs between the record's start and end follows the clock.
             r, lag = abs(x.corr_at_zero), 0.0
-            untested = f", a record too short to test that for significance (bound {x.bound:.2g})"
+            untested = (", a record too short for any correlation to be significant (too few independent stretches)"
+                        if x.bound >= 1.0 else
+                        f", not significant on a record this short (that takes |r| above {x.bound:.2g})")
         else:
             continue
         if x.signal.startswith("load:"):
@@ -217,6 +219,11 @@ def shift_pointers(shift, scan, covariates: list[str] = (), speeds_dps: tuple[fl
     best = min([scan.baseline_rmse_heldout_deg] + [s.rmse_heldout_deg for s in scan.tested])
     fr, zr, base = shift.friction_rmse_deg, shift.zero_rmse_deg, shift.rmse_deg
     if not (fr <= SHIFT_CUT * base and fr <= SHIFT_CUT * best):
+        return []
+    if not 0.5 <= shift.gain <= 2.0:
+        # the slope more than doubled or halved: no change of friction between two records does
+        # that; the model is read where it was never fitted (a record beyond its range: +64
+        # million % was said), which validate's range warning already says
         return []
     fitted = f"with the estimation record's parameters the validation RMSE is {base:.3g} deg"
     seen = ("; " + "; ".join(covariates)) if covariates else ""
