@@ -680,6 +680,24 @@ def test_a_log_holding_the_latest_pose_on_every_row_reads_each_frame_at_its_own_
     np.testing.assert_allclose(b["ap_meas_deg"], a["ap_meas_deg"], atol=1e-9)
 
 
+def test_a_tracker_that_starts_a_moment_after_the_motors_is_no_gap(sim_log, tmp_path):
+    # devices start one after the other: motor rows before the first frame are trimmed, as every
+    # aligned table is, and said only when that edge is longer than a gap (0.2 s); a warning on
+    # every clean log (the first motor row 0.4 ms before the first frame) taught users to skip it
+    import endocal.runs.csvlog as csvlog
+
+    log = pd.read_csv(sim_log / "log.csv")
+    pose = [c for c in log.columns if c.startswith(("tip_", "base_"))]
+    stamp = log["stamp_ms"].to_numpy()
+    for name, late_ms, warned in (("late", 100, False), ("later", 500, True)):
+        cut = log.copy()
+        cut.loc[stamp < stamp[0] + late_ms, pose] = np.nan
+        cut.to_csv(tmp_path / f"{name}.csv", index=False)
+        res = csvlog.import_csv(tmp_path / f"{name}.csv", MAP, tmp_path / name)
+        assert (res.gap_warning is not None) == warned, (name, res.gap_warning)
+        assert (res.motor_rows_unaligned > 0) == warned
+
+
 def test_a_gap_in_the_poses_is_warned_with_its_rows_first_line_and_length(sim_log, tmp_path):
     # the tracker lost both sensors for a second (a bridge writes empty cells): the motor samples
     # in that gap have no bend to interpolate and are left out of the aligned table, which the

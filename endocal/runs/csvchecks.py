@@ -258,7 +258,8 @@ class ReadingGaps:
 
 def reading_gaps(covered: np.ndarray, t_read: np.ndarray, t_motor: np.ndarray, lines: np.ndarray) -> ReadingGaps:
     """The motor samples left out of the aligned table: in a gap of the readings longer than
-    :data:`MAX_GAP_S` (rows whose pose or angle cells are empty or invalid) or outside their span.
+    :data:`MAX_GAP_S` (rows whose pose or angle cells are empty or invalid) or outside their span
+    by more than that (a shorter edge is the devices starting one after the other, not a gap).
 
     Parameters
     ----------
@@ -272,10 +273,16 @@ def reading_gaps(covered: np.ndarray, t_read: np.ndarray, t_motor: np.ndarray, l
         The motor samples' lines in the log.
     """
     left = ~covered
+    if not t_read.size:
+        return ReadingGaps(int(left.sum()), int(lines[left][0]), float(t_motor[-1] - t_motor[0])) if left.any() \
+            else ReadingGaps(0, None, 0.0)
+    # a log whose motor rows begin or end a little before or after its readings (the devices
+    # start one after the other) is trimmed there, as every aligned table is: not a gap to warn of
+    edges = ((t_motor < t_read[0]) & (t_read[0] - t_motor[0] <= MAX_GAP_S)) | \
+        ((t_motor > t_read[-1]) & (t_motor[-1] - t_read[-1] <= MAX_GAP_S))
+    left &= ~edges
     if not left.any():
         return ReadingGaps(0, None, 0.0)
-    if not t_read.size:
-        return ReadingGaps(int(left.sum()), int(lines[left][0]), float(t_motor[-1] - t_motor[0]))
     t = t_motor[left]
     k = np.searchsorted(t_read, t, side="right")  # the reading after each left-out sample
     before = np.where(k > 0, t_read[np.maximum(k - 1, 0)], t_motor[0])
