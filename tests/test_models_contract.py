@@ -126,3 +126,23 @@ def test_bspline_branches_rise_where_few_samples_lie_on_them():
         assert np.all(np.diff(branch) >= 0.0)
     y_model = m.predict(u)
     assert np.max(np.abs(m.predict(m.inverse(y_model)) - y_model)) < 1e-9
+
+
+def test_a_hold_at_the_start_puts_no_knot_at_the_end_of_the_range():
+    # A record that begins with the knob held at 0 (float noise of 1e-8 deg on the hold) and then
+    # sweeps 0 -> 45 -> 0: counting the hold's samples put a quantile knot 4.5e-8 deg from the
+    # end, an interval only the hold lay in, and the fitted branch jumped there (-16.8 deg at 0,
+    # -5.4 deg at 3e-5). Knots come from the moving command, a quarter of an even step apart.
+    rng = np.random.default_rng(3)
+    hold = np.abs(1e-8 * rng.standard_normal(800))
+    sweep = 45 * 0.5 * (1 - np.cos(2 * np.pi * np.arange(1500) / 1500))
+    u = np.concatenate([hold, sweep])
+    y = np.where(np.diff(u, prepend=0.0) >= 0, 0.9 * u - 3, 0.9 * u + 3) + 0.3 * rng.standard_normal(u.size)
+    y[:800] = -5.6 + 0.3 * rng.standard_normal(800)  # the tip still bent from the last acquisition
+    m = make_model("bspline").fit(HysteresisData(cmd_deg=u, meas_deg=y, t_s=np.arange(u.size) / 100.0))
+    t = np.asarray(m.structure_["knots"])
+    inner = t[m.structure_["degree"] + 1:-m.structure_["degree"] - 1]
+    assert np.all(np.diff(np.concatenate([[0.0], inner, [t[-1]]])) >= 0.25 * 45 / 7 - 1e-9), inner
+    p = {k.removeprefix("bspline_"): v for k, v in m.params_.items()}
+    lo, up = m._eval_branches(m.structure_, p, np.array([0.0, 3e-5]))
+    assert abs(lo[1] - lo[0]) < 0.01 and abs(up[1] - up[0]) < 0.01

@@ -2,7 +2,7 @@
 
 Thesis, section 2.3: the loop is modelled by one B-spline for increasing and one for
 decreasing command (:class:`scipy.interpolate.BSpline`, shared knots at quantiles of
-the command, continued along their end tangents beyond them). At a reversal the output leaves the branch it
+the moving command, continued along their end tangents beyond them). At a reversal the output leaves the branch it
 was on along a backlash transition of slope ``s`` until it meets the other branch
 (:mod:`endocal.models._directional`), so the switch is continuous. Fitting adjusts
 both splines' coefficients and ``s`` jointly by least squares, from per-direction
@@ -48,6 +48,27 @@ def _lsq_spline(t: np.ndarray, k: int, x: np.ndarray, y: np.ndarray) -> np.ndarr
     return lsq_linear(A, np.r_[y, np.zeros(D.shape[0])], bounds=(lower, np.inf), method="bvls").x
 
 
+def _knots_inside(v: np.ndarray, a: float, b: float, n_knots: int) -> np.ndarray:
+    """Interior knots at quantiles of the command while it moves, at least a quarter of an even
+    spacing apart and from the ends.
+
+    A hold is many samples at one value: counted, it pulls quantiles onto itself, and a knot
+    4.5e-8 deg from the end (a record that began with a hold at 0) gave the spline an interval
+    only the hold's samples lie in, where it took any value (-16.8 deg at 0, -5.4 just after).
+    """
+    if not n_knots:
+        return np.array([])
+    step = np.abs(np.diff(v, prepend=v[0]))
+    moving = v[step > 1e-6 * (b - a)]
+    q = np.quantile(moving if moving.size > 2 * n_knots else v, np.linspace(0, 1, n_knots + 2)[1:-1])
+    gap = 0.25 * (b - a) / (n_knots + 1)
+    out: list[float] = []
+    for x in q:
+        if x - (out[-1] if out else a) >= gap and b - x >= gap:
+            out.append(float(x))
+    return np.array(out)
+
+
 class BSplineModel(DirectionalModel):
     """Direction-dependent B-spline hysteresis model (thesis).
 
@@ -58,7 +79,7 @@ class BSplineModel(DirectionalModel):
     Parameters
     ----------
     n_knots : int
-        Interior knots of each spline, at quantiles of the command (default 6).
+        Interior knots of each spline, at quantiles of the command while it moves (default 6).
     degree : int
         Spline degree (default 3, cubic).
     effects, fixed, axis, out_of_range
@@ -89,8 +110,7 @@ class BSplineModel(DirectionalModel):
             a, b = float(v.min()), float(v.max())
             if not b > a:
                 raise ModelError("the command reaching the B-spline model is constant: nothing to fit")
-            inner = np.quantile(v, np.linspace(0, 1, self.n_knots + 2)[1:-1]) if self.n_knots else np.array([])
-            inner = np.unique(np.clip(inner, a + 1e-9 * (b - a), b - 1e-9 * (b - a)))
+            inner = _knots_inside(v, a, b, self.n_knots)
             k = self.degree
             st["knots"] = [a] * (k + 1) + [float(x) for x in inner] + [b] * (k + 1)
         return st
