@@ -142,6 +142,14 @@ def test_bad_maps_are_one_line(sim_log, tmp_path, old, new, fragments):
     assert not (tmp_path / "run").exists()
 
 
+def test_a_map_without_poses_or_angles_names_both_ways(tmp_path):
+    (tmp_path / "log.csv").write_text("t,ap,ml\n0,0,0\n0.01,1,0\n")
+    (tmp_path / "map.toml").write_text('[time]\ncolumn = "t"\nunit = "s"\n[knobs.ap]\nposition = "ap"\nunit = "deg"\n'
+                                       '[knobs.ml]\nposition = "ml"\nunit = "deg"\n')
+    one_line_exit_2(endocal("import", "csv", tmp_path / "log.csv", "--map", tmp_path / "map.toml", "--out",
+                            tmp_path / "run"), "a [tip] table is required", "[angles.AXIS] tables instead")
+
+
 def test_not_a_table_and_existing_output(sim_log, tmp_path):
     (tmp_path / "prose.csv").write_text("just one line of prose\n")
     one_line_exit_2(endocal("import", "csv", tmp_path / "prose.csv", "--map", MAP, "--out", tmp_path / "r"),

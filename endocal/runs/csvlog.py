@@ -289,6 +289,10 @@ def _column(t: dict, key: str, w: str, what: str, required: bool = True) -> str 
 
 
 def _pose(d: dict, key: str, where: str) -> _Pose:
+    if not isinstance(d.get(key), dict):
+        raise RunFormatError(f"{where}: a [{key}] table is required (the EM sensor's pose columns), or, for a rig that "
+                             "measures the bend itself, [angles.AXIS] tables instead of [tip] and [base] "
+                             "(configs/csv-map.angles.example.toml)")
     t = _table(d, key, where, _POSE_KEYS)
     w = f"{where} [{key}]"
     unit = _choice(t.get("unit", "mm"), LENGTH_UNITS, "length unit", w)
