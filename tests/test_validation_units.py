@@ -258,3 +258,35 @@ def test_a_suggestion_whose_own_parameter_ends_at_a_bound_carries_a_caution():
     assert delay.caution.startswith("delay_s = -0.5 sits at its lower bound"), delay.caution
     order = [bool(s.caution) for s in res.scan.suspects]
     assert order == sorted(order)  # at-bound suggestions after the others
+
+
+def test_a_start_no_history_explains_is_not_called_nothing_missing():
+    # A one-sided sweep fitted from rest; the next acquisition starts at knob 0 with the tip still
+    # 6 deg off (bent by a sweep the model never saw), the offset fading until the reversal. Its
+    # error before the first reversal is many times the error after it and no start tried
+    # predicts it: validate says so instead of "nothing is missing" (it said that, clean).
+    from endocal.models import make_model
+    from endocal.validation.offline import validate_offline
+
+    rng = np.random.default_rng(0)
+    u = 45 * 0.5 * (1 - np.cos(2 * np.pi * np.arange(2000) / 2000))  # 0 -> 45 -> 0 from rest
+
+    def plant(u):
+        z, y = 0.0, np.empty_like(u)
+        for i, x in enumerate(u):
+            z = min(max(z, x - 3.0), x + 3.0)
+            y[i] = 0.8 * z
+        return y
+
+    def table(y, name):
+        df = pd.DataFrame({"t_s": np.arange(u.size) / FS, "ap_cmd_deg": u,
+                           "ap_meas_deg": y + 0.2 * rng.standard_normal(u.size)})
+        return AlignedData(df, ["ap"], Path(name), name[0] * 64, {})
+
+    est = table(plant(u), "est")
+    bent = plant(u) - 6.0 * np.clip(1 - np.arange(u.size) / 1000, 0, 1)
+    model = make_model("bspline", axis="ap").fit(axis_data([est], "ap"))
+    res = validate_offline(model, [table(bent, "val")], train=[est], model_path="m.json")
+    assert not res.clean and res.unexplained.startswith("the validation record's start is not explained"), \
+        (res.unexplained, res.notes)
+    assert any("No start tried predicts it" in n for n in res.notes)

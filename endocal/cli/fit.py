@@ -117,7 +117,9 @@ def hysteresis(
     out.print(str(result.model), markup=False)
     out.print(
         f"fit: {result.samples} samples ({result.duration_s:.4g} s, {result.rate_hz:.3g} Hz) from "
-        f"{len(result.sources)} source(s); RMSE {rep.rmse_deg:.3f} deg; {rep.nfev} evaluations; {rep.message}",
+        f"{len(result.sources)} source(s); RMSE {rep.rmse_deg:.3f} deg; {rep.nfev} evaluations; "
+        + ("converged" if rep.status > 0 else f"stopped before converging ({rep.message}): the parameters may not be "
+           "final; refit with --start-from this model"),
         markup=False,
     )
     slow = slow_clock_warning(result.samples, result.duration_s)

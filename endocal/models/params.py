@@ -39,7 +39,8 @@ class Parameter:
 
 
 def fmt_value(value: float, stderr: float | None = None, unit: str = "") -> str:
-    """``0.1183+-0.0021`` with digits set by the standard error (two significant), else 4 significant."""
+    """``0.1183+-0.0021`` with digits set by the standard error (two significant), else 4 significant;
+    an infinite standard error (a direction the data do not pin down) is said in words."""
     suffix = f" {unit}" if unit else ""
     if stderr is not None and math.isfinite(stderr) and stderr > 0:
         decimals = max(0, 1 - int(math.floor(math.log10(stderr))))
@@ -47,5 +48,5 @@ def fmt_value(value: float, stderr: float | None = None, unit: str = "") -> str:
             return f"{value:.4g}+-{stderr:.2g}{suffix}"
         return f"{value:.{decimals}f}+-{stderr:.{decimals}f}{suffix}"
     if stderr is not None and math.isinf(stderr):
-        return f"{value:.4g}+-inf{suffix}"
+        return f"{value:.4g}{suffix} (not identified)"
     return f"{value:.4g}{suffix}"

@@ -18,7 +18,8 @@ from endocal.runs.aligned import AlignedData
 from endocal.validation.data import MIN_SPAN_DEG, axis_data, check_columns, glitch_note, load_candidates
 from endocal.validation.metrics import ErrorMetrics, error_metrics
 from endocal.validation.regimes import RegimeBreakdown, error_by_regime
-from endocal.validation.residuals import ResidualTests, cut_start, residual_tests, unexplained_shape
+from endocal.validation.residuals import (ResidualTests, cut_start, residual_tests, unexplained_shape,
+                                          unexplained_start)
 from endocal.validation.suspects import (
     MAX_SCAN_SAMPLES,
     ScanResult,
@@ -108,8 +109,9 @@ class ValidationResult:
         A zero shift and a friction change fitted on the validation data with the model held
         (:mod:`endocal.validation.shift`; estimation/validation scheme only).
     unexplained : str
-        When the residual is a shape rather than noise, what it says
-        (:func:`~endocal.validation.residuals.unexplained_shape`).
+        When the record's start leaves its first stretch far worse than the rest
+        (:func:`~endocal.validation.residuals.unexplained_start`), or the residual is a shape
+        rather than noise (:func:`~endocal.validation.residuals.unexplained_shape`), what it says.
     beyond_samples : int
         Samples whose command lies beyond the model's fitted range (predicted by extrapolation).
     """
@@ -395,5 +397,7 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
                   "equation": model.equation(), "fit_warnings": list(rep.warnings) if rep is not None else []}
     return ValidationResult(axis=ax, model=model_info, data=info, metrics=metrics, regimes=regimes,
                             residuals=resid, scan=scan, notes=tuple(notes), compare=comp, pointers=tuple(pointers),
-                            estimation=est_info, shift=shift, unexplained=unexplained_shape(data, resid),
+                            estimation=est_info, shift=shift,
+                            unexplained="; and ".join(x for x in (unexplained_start(data, data.meas_deg - pred),
+                                                                  unexplained_shape(data, resid)) if x),
                             beyond_samples=beyond)

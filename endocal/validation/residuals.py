@@ -246,10 +246,37 @@ def unexplained_shape(data: HysteresisData, resid: ResidualTests, frac: float = 
 #: A record's error before its first reversal this many times its error after it is the start,
 #: not the physics (see :func:`cut_start`).
 START_ERROR_RATIO = 2.0
-#: A record starting within this fraction of its command span from 0 starts where a homed knob
-#: rests, in the state every model assumes; a larger error before its first reversal is
-#: something else (a drift, the virgin loading of the first sweep), not the cut.
-NEUTRAL_FRAC = 0.05
+
+
+def _unexplained_starts(data: HysteresisData, resid_deg: np.ndarray) -> list[tuple[float, float, float, int]]:
+    """``(ratio, rmse before, rmse after, run start)`` of each run off :data:`START_ERROR_RATIO`
+    times more before its first reversal than after it."""
+    tp = turning_points(data)
+    found = []
+    for sl in data.run_slices():
+        first = tp[(tp >= sl.start) & (tp < sl.stop)]
+        if not first.size or not float(np.ptp(data.cmd_deg[sl])) > 0:
+            continue
+        k = int(first[0])
+        before, after = resid_deg[sl.start:k], resid_deg[k:sl.stop]
+        if before.size < 2 or after.size < 2:
+            continue
+        rb, ra = float(np.sqrt(np.mean(before**2))), float(np.sqrt(np.mean(after**2)))
+        if rb >= START_ERROR_RATIO * ra:
+            found.append((rb / max(ra, 1e-12), rb, ra, sl.start))
+    return found
+
+
+def unexplained_start(data: HysteresisData, resid_deg: np.ndarray, what: str = "validation record") -> str:
+    """Said when a record's start leaves its error before the first reversal
+    :data:`START_ERROR_RATIO` times its error after it (``resid_deg`` from the starts taken), or ``""``:
+    then "nothing is missing" would contradict the residual."""
+    found = _unexplained_starts(data, resid_deg)
+    if not found:
+        return ""
+    ratio, rb, ra, _ = max(found)
+    return (f"the {what}'s start is not explained: its error before the first reversal is {rb:.3g} deg RMS, "
+            f"{ratio:.1f}x the {ra:.3g} deg after it (see the note on its start)")
 
 
 def _start_words(u: np.ndarray) -> str:
@@ -269,11 +296,12 @@ def cut_start(data: HysteresisData, resid_deg: np.ndarray, what: str = "validati
     straight from 0 (the PI's eq. 5 start), or on the mid-line between its branches (the
     B-spline). A record cut from a longer one has the state its history left; the records in
     ``starts`` were run from a state estimated from their first stretch
-    (:mod:`endocal.models.start`), which is said with the RMSE it saved. Of the others, one that
-    does not start at 0 (:data:`NEUTRAL_FRAC`) and is off :data:`START_ERROR_RATIO` times more
-    before its first reversal than after it started in a state neither start fits (a virgin
-    first sweep, a step from rest): that stretch measures the start, not the physics, and a
-    time-dependent candidate (drift, creep) can fit it. ``resid_deg`` is the residual of the
+    (:mod:`endocal.models.start`), which is said with the RMSE it saved. Of the others, one off
+    :data:`START_ERROR_RATIO` times more before its first reversal than after it started in a
+    state no start fits (a virgin first sweep, a step from rest, a knob homed to 0 with the tip
+    still bent from the last acquisition where the model has never seen the other side): that
+    stretch measures the start, not the physics, and a time-dependent candidate (drift, creep)
+    can fit it. ``resid_deg`` is the residual of the
     records from rest (only read when ``starts`` is empty).
     """
     runs = data.run_slices()
@@ -284,28 +312,15 @@ def cut_start(data: HysteresisData, resid_deg: np.ndarray, what: str = "validati
                 f"{st.describe()}: a record cut from a longer motion starts where that motion left the knob, not "
                 "in the relaxed state a model assumes; every model here, candidates too, runs it from the start "
                 "that predicts it best")
-    tp = turning_points(data)
-    found = []
-    for sl in runs:
-        u = data.cmd_deg[sl]
-        first = tp[(tp >= sl.start) & (tp < sl.stop)]
-        span = float(np.ptp(u))
-        if not first.size or not span > 0 or abs(u[0]) <= NEUTRAL_FRAC * span:
-            continue
-        k = int(first[0])
-        before, after = resid_deg[sl.start:k], resid_deg[k:sl.stop]
-        if before.size < 2 or after.size < 2:
-            continue
-        rb, ra = float(np.sqrt(np.mean(before**2))), float(np.sqrt(np.mean(after**2)))
-        if rb >= START_ERROR_RATIO * ra:
-            found.append((rb / max(ra, 1e-12), rb, ra, sl.start))
+    found = _unexplained_starts(data, resid_deg)
     if not found:
         return ""
     _, rb, ra, a = max(found)
     which = f"the {what}" if data.n_runs == 1 else f"{len(found)} of {data.n_runs} {what}s (the worst)"
     u = data.cmd_deg[next(sl for sl in runs if sl.start == a)]
     return (f"{which} {_start_words(u)}: its error before the first reversal is {rb:.3g} deg RMS, "
-            f"{rb / ra:.1f}x the {ra:.3g} deg after it. Neither the relaxed start every model assumes nor a start "
-            "as if cut from a longer motion predicts it (a step, or a first sweep from a relaxed sheath, starts a "
-            "record so): that stretch measures the start, not the physics, and a candidate may fit "
-            "it; cut the records at their first reversal, or move the knob through its range before each acquisition")
+            f"{rb / ra:.1f}x the {ra:.3g} deg after it. No start tried predicts it (relaxed, from 0, cut from a "
+            "periodic motion, after a sweep the other way): a step, a first sweep from a relaxed sheath, or a tip "
+            "still bent where the model never saw the knob starts a record so; that stretch measures the start, not "
+            "the physics, and a candidate may fit it; cut the records at their first reversal, or move the knob "
+            "through its range before each acquisition")
