@@ -398,6 +398,7 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     return ValidationResult(axis=ax, model=model_info, data=info, metrics=metrics, regimes=regimes,
                             residuals=resid, scan=scan, notes=tuple(notes), compare=comp, pointers=tuple(pointers),
                             estimation=est_info, shift=shift,
-                            unexplained="; and ".join(x for x in (unexplained_start(data, data.meas_deg - pred),
-                                                                  unexplained_shape(data, resid)) if x),
+                            unexplained="; and ".join(x for x in (
+                                "" if starts else unexplained_start(data, data.meas_deg - pred),
+                                unexplained_shape(data, resid)) if x),
                             beyond_samples=beyond)
