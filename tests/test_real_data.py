@@ -241,18 +241,21 @@ def test_the_verdict_that_the_residual_contradicts_prints_as_text(tmp_path):
     assert "[bold]" not in val.stdout and "[/]" not in val.stdout
 
 
-def test_the_papers_weight_law_gives_way_to_free_weights_where_it_draws_no_loop():
-    # One cycle of the piezo from 0 V (0 -> 3.6 -> 0 V, rows 150-350): `pi` + `envelope` started
-    # on the paper's law (eq. 8) ended at 3.1, worse than a straight line per direction; `auto`
-    # now fits free weights there too and keeps them, below `linear` and at a tenth of the law's
-    # error. (The cycles cut at the stack's rest start, _cycle, fit the law at 0.46.)
+def test_the_papers_pi_fits_one_piezo_cycle_from_0_v_below_a_two_branch_line():
+    # One cycle of the piezo from 0 V (0 -> 3.6 -> 0 V, rows 150-350): `pi` + `envelope` ended at
+    # 3.1, worse than `linear` (0.84). `auto` picks its weights from start values; its choice
+    # here, free weights, ends at 3.4, worse than a straight line per direction of motion (1.7),
+    # so the paper's law is fitted too and kept (0.33), and the fit report says so.
     from endocal.models import HysteresisData, make_model
+    from endocal.models.pi import _branch_lines_rmse
 
     t = load_aligned(PIEZO).table.iloc[150:351]
     d = HysteresisData(cmd_deg=t["piezo_cmd_deg"].to_numpy(), meas_deg=t["piezo_meas_deg"].to_numpy(),
                        t_s=t["t_s"].to_numpy() - t["t_s"].iloc[0])
-    law = make_model("pi", ["envelope"], weights="exponential").fit(d).fit_report_.rmse_deg
+    free = make_model("pi", ["envelope"], weights="free").fit(d).fit_report_.rmse_deg
     auto = make_model("pi", ["envelope"]).fit(d)
     line = make_model("linear").fit(d).fit_report_.rmse_deg
-    assert auto.structure_["weights"] == "free" and "free weights taken" in auto.fit_report_.warnings[0]
-    assert auto.fit_report_.rmse_deg < min(0.5 * line, 0.2 * law), (auto.fit_report_.rmse_deg, line, law)
+    assert free > _branch_lines_rmse(d) and auto.structure_["weights"] == "exponential"
+    assert auto.fit_report_.warnings[0].startswith("free weights fitted worse") and "law (eq. 8) taken" in \
+        auto.fit_report_.warnings[0]
+    assert auto.fit_report_.rmse_deg < 0.5 * line, (auto.fit_report_.rmse_deg, line)

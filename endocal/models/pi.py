@@ -163,31 +163,34 @@ class PIModel(HysteresisModel):
     def _fit(self, data, meas_deg, *, t_s, extras, max_nfev, warm_start=None):
         """The fit, with ``weights="auto"`` checked against two straight branches.
 
-        ``auto`` takes the paper's law (eq. 8) from start values; when the law's fit then
-        ends worse than a straight line per direction of motion (a loop the law cannot draw,
-        e.g. one real piezo cycle: 3.1 against 0.84), free weights are fitted too and kept
-        when they do better, and the fit report says so.
+        ``auto`` chooses the weights from start values (``_resolve_structure``); with the
+        envelope, when the chosen weights' fit then ends worse than a straight line per
+        direction of motion (a loop they cannot draw, or a local minimum: free weights on one
+        real piezo cycle, 3.4 against 1.7), the other weights are fitted too and the better fit
+        is kept; the fit report says when that is the other.
         """
         super()._fit(data, meas_deg, t_s=t_s, extras=extras, max_nfev=max_nfev, warm_start=warm_start)
-        if self.weights != "auto" or self.structure_["weights"] != "exponential":
+        if self.weights != "auto" or not any(e.name == "envelope" for e in self.effects_):
             return self
         d, _ = as_data(data, meas_deg, t_s=t_s, extras=extras)
         line = _branch_lines_rmse(d)
-        law = self.fit_report_.rmse_deg
-        if not law > line:
+        first, chosen = self.fit_report_.rmse_deg, self.structure_["weights"]
+        if not first > line:
             return self
-        fitted_law = dict(self.__dict__)
-        self.weights = "free"
+        fitted_first = dict(self.__dict__)
+        other = "free" if chosen == "exponential" else "exponential"
+        self.weights = other
         try:
             super()._fit(data, meas_deg, t_s=t_s, extras=extras, max_nfev=max_nfev, warm_start=warm_start)
         finally:
             self.weights = "auto"
-        if not self.fit_report_.rmse_deg * AUTO_RMS_RATIO < law:
-            self.__dict__.update(fitted_law)
+        if not self.fit_report_.rmse_deg < first:
+            self.__dict__.update(fitted_first)
             return self
+        words = {"exponential": "the paper's weight law (eq. 8)", "free": "free weights"}
         self.fit_report_.warnings.insert(0, (
-            f"the paper's weight law (eq. 8) fitted worse ({law:.3g} deg RMSE) than a straight line per direction "
-            f"of motion ({line:.3g} deg): free weights taken ({self.fit_report_.rmse_deg:.3g} deg)"))
+            f"{words[chosen]} fitted worse ({first:.3g} deg RMSE) than a straight line per direction of motion "
+            f"({line:.3g} deg): {words[other]} taken ({self.fit_report_.rmse_deg:.3g} deg)"))
         return self
 
     # ------------------------------------------------------------------ structure

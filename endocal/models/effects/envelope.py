@@ -100,21 +100,26 @@ class Envelope(InputEffect):
     units = {"theta0_deg": "deg", "theta1_deg": "deg", "theta2_deg": "deg", "k0": "", "k1": "", "k2": ""}
 
     def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
-        # theta0 <= theta2 (eq. 10 inverts only then) is held by a bound between them: the
-        # middle of the knob's range, not where it spends its time (the median, which a record
-        # of 1.5 cycles puts on one side, bounding the kinks away from a dead band at neutral).
-        # Each kink stays within the range: one beyond it shapes nothing the data hold, and a
-        # kink that wandered out (to -461 deg on 1.5 cycles) had no gradient to come back.
-        split = 0.5 * (float(np.min(u)) + float(np.max(u)))
+        # theta0 <= theta2 (eq. 10 inverts only then) is held by a bound between them: neutral
+        # (knob 0), where the dead band the kinks bound lies, when the range holds it, else the
+        # middle of the range; never where the knob spends its time (the median, which a record
+        # of 1.5 cycles puts on one side, bounding the kinks away from the dead band). A sweep to
+        # one side (0 -> +50 -> 0) holds only the upper kink, and finds it (a split at the middle
+        # made the lower kink take it: 1.5x the noise). Each kink stays within the range: one
+        # beyond it shapes nothing the data hold, and a kink that wandered out (to -461 deg on
+        # 1.5 cycles) had no gradient to come back.
+        lo, hi = float(np.min(u)), float(np.max(u))
+        split = 0.0 if lo <= 0.0 <= hi else 0.5 * (lo + hi)
+        margin = 0.01 * (hi - lo)
         th0, th2, th1 = float(np.quantile(u, 0.2)), float(np.quantile(u, 0.8)), split
         ratio0 = ratio2 = 1.0
         if data.meas_deg is not None and np.ptp(u) > 0:
             th0, th1, th2, ratio0, ratio2 = _hinge_start(u, data.meas_deg, split)
         pre = self.prefix
         return [
-            Parameter(f"{pre}_theta0_deg", th0, float(np.min(u)), split),
+            Parameter(f"{pre}_theta0_deg", min(th0, split), min(lo, split - margin), split),
             Parameter(f"{pre}_theta1_deg", th1),
-            Parameter(f"{pre}_theta2_deg", th2, split, float(np.max(u))),
+            Parameter(f"{pre}_theta2_deg", max(th2, split), split, max(hi, split + margin)),
             Parameter(f"{pre}_k0", ratio0, _K_MIN, np.inf),
             Parameter(f"{pre}_k1", 1.0, _K_MIN, np.inf),
             Parameter(f"{pre}_k2", ratio2, _K_MIN, np.inf),
