@@ -595,7 +595,8 @@ def test_epoch_time_stamps_in_errors_are_printed_so_the_row_can_be_found(sim_log
     back.to_csv(tmp_path / "back.csv", index=False)
     later = back["stamp_s"].iloc[201] - back["stamp_s"].iloc[0]
     one_line_exit_2(endocal("import", "csv", tmp_path / "back.csv", "--map", tmp_path / "map.toml", "--out",
-                            tmp_path / "r"), "time goes back at line 203", f"{later:.3f} s after the first row")
+                            tmp_path / "r"), "time goes back", "at line 203", f"{later:.3f} s after the first row",
+                    "split the log there into two records")
 
 
 @pytest.mark.parametrize("old, new, fragments", [

@@ -605,8 +605,10 @@ def _clock(df: pd.DataFrame, cmap: CsvMap, dedupe: bool, where: str) -> tuple[pd
     back = np.flatnonzero(np.diff(t) < 0)
     if back.size:
         k = int(back[0])
-        raise RunFormatError(f"{where}: time goes back at line {lines[k + 1]} ({stamps.at(df, t, k + 1)}; line "
-                             f"{lines[k]} has {stamps.at(df, t, k)}); sort the log by time")
+        raise RunFormatError(f"{where}: time goes back {t[k] - t[k + 1]:.3g} s at line {lines[k + 1]} "
+                             f"({stamps.at(df, t, k + 1)}; line {lines[k]} has {stamps.at(df, t, k)}); if rows were "
+                             "written out of order, sort the log by time; if the clock itself was set back during "
+                             "the recording, split the log there into two records")
     return df, t - t[0], dropped, merged
 
 
