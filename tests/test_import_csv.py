@@ -807,3 +807,14 @@ def test_a_fixed_sample_rate_is_checked_as_a_clock_is(bench_log, tmp_path, time,
     (tmp_path / "map.toml").write_text(text.replace(clock, "sample_rate_hz = 100.0\n\n"))
     ok = endocal("import", "csv", bench_log[0], "--map", tmp_path / "map.toml", "--out", tmp_path / "t.parquet")
     assert ok.returncode == 0 and "(100.0 Hz)" in ok.stdout, ok.stderr
+
+
+def test_a_drafted_import_is_pointed_beside_the_log_or_here_when_its_folder_is_read_only(tmp_path, monkeypatch):
+    # a shared data folder is often read-only: the drafted `--out` then lands in the working folder
+    import endocal.runs.mapdraft as mapdraft
+
+    log = tmp_path / "sweep.csv"
+    assert mapdraft.import_out(log, angles=True) == tmp_path / "sweep.parquet"
+    monkeypatch.setattr(mapdraft.os, "access", lambda path, mode: False)  # root may write anywhere
+    assert mapdraft.import_out(log, angles=True) == Path("sweep.parquet")
+    assert mapdraft.import_out(log, angles=False) == Path("sweep")

@@ -28,6 +28,7 @@ that fill every row, but for clocks and counters (a ROS header's ``stamp`` and `
 
 from __future__ import annotations
 
+import os
 import re
 import shlex
 from dataclasses import dataclass, field
@@ -85,9 +86,12 @@ class Draft:
 
 
 def import_out(log: str | Path, angles: bool) -> Path:
-    """What ``--out`` the import of ``log`` through its drafted map can take: beside the log and
-    named after it, an aligned table (``.parquet``) for an ``[angles]`` map, else a run folder."""
+    """What ``--out`` the import of ``log`` through its drafted map can take: beside the log (in
+    the working folder when the log's folder is read-only, as a shared data folder is) and named
+    after it, an aligned table (``.parquet``) for an ``[angles]`` map, else a run folder."""
     log = Path(log)
+    if log.parent.is_dir() and not os.access(log.parent, os.W_OK):
+        log = Path(log.name)
     if angles:
         return log.with_suffix(".parquet")
     return log.with_suffix("") if log.suffix else log.with_name(log.name + "-run")
