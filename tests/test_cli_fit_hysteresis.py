@@ -25,6 +25,7 @@ def test_fit_prints_the_equation_and_saves_a_model_that_predicts_the_data(run, t
     proc = endocal("fit", "hysteresis", run, "--axis", "ap", "--model", "bspline", "--effects", "envelope", "--out", out)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.startswith("ap_deg = BSpline3(f(cmd))") and "RMSE" in proc.stdout
+    assert "evaluations; converged" in proc.stdout and "termination condition" not in proc.stdout, proc.stdout
     model = load_model(out)
     data = load_aligned(run)
     pred = model.predict(data.cmd_deg("ap"), t_s=data.t_s)

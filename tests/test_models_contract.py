@@ -146,3 +146,12 @@ def test_a_hold_at_the_start_puts_no_knot_at_the_end_of_the_range():
     p = {k.removeprefix("bspline_"): v for k, v in m.params_.items()}
     lo, up = m._eval_branches(m.structure_, p, np.array([0.0, 3e-5]))
     assert abs(lo[1] - lo[0]) < 0.01 and abs(up[1] - up[0]) < 0.01
+
+
+def test_a_value_the_data_do_not_pin_down_is_said_in_words():
+    import math
+
+    from endocal.models.params import fmt_value
+
+    assert fmt_value(0.11834, 0.0021) == "0.1183+-0.0021"
+    assert fmt_value(-2.459, math.inf, "deg") == "-2.459 deg (not identified)"  # was "-2.459+-inf deg"

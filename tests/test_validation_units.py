@@ -206,6 +206,21 @@ def test_a_loop_that_changed_between_records_is_put_down_to_speed_only_when_the_
         assert "2.8 times as fast" in next(p for p in ptrs if p.effect == "delay").evidence
 
 
+@pytest.mark.parametrize("gain, named", [(0.96, True), (1.9, True), (0.45, False), (640_000.0, False)])
+def test_a_slope_no_friction_change_makes_is_not_put_down_to_one(gain, named):
+    # fitted on a record the model extrapolates, the shift's slope ran to +64 million %: no change
+    # of friction between two records doubles or halves the loop's slope, so nothing is pointed at
+    from types import SimpleNamespace
+
+    from endocal.validation.shift import RecordShift
+    from endocal.validation.verdict import shift_pointers
+
+    shift = RecordShift(rmse_deg=1.7, zero_deg=0.1, zero_rmse_deg=1.69, width_deg=0.85, gain=gain,
+                        offset_deg=0.1, friction_rmse_deg=1.0)
+    scan = SimpleNamespace(scheme="estimation/validation", baseline_rmse_heldout_deg=1.7, tested=[])
+    assert bool(shift_pointers(shift, scan, [], (10.0, 11.0))) == named
+
+
 def _play_record(wrap_deg: np.ndarray, name: str) -> AlignedData:
     """A sine through a play whose half width grows with the wrap column (capstan friction)."""
     t, u = _sine(duration_s=wrap_deg.size / FS)
