@@ -198,7 +198,7 @@ def validate(
     hardware_config: Optional[Path] = typer.Option(None, "--hardware-config", help="Rig TOML for --backend hardware."),
     planes: Optional[Path] = typer.Option(None, "--planes", help="planes.json (endocal fit planes): for --protocol; offline, overrides the planes the model was fitted through."),
     sets: list[str] = typer.Option([], "--set", help="Override a parameter of --protocol, e.g. --set amplitude_deg=40 (repeatable)."),
-    runs_out: Optional[Path] = typer.Option(None, "--runs-out", help="With --protocol: keep the played runs here (compensated/, uncompensated/)."),
+    runs_out: Optional[Path] = typer.Option(None, "--runs-out", help="With --protocol: keep the played runs here (compensated/, uncompensated/); without it they are removed once scored on the simulator, and kept in a temporary folder (named) on a rig."),
     force_model: Optional[Path] = typer.Option(None, "--force-model", help="With --protocol: force.json (endocal fit force); guard both playbacks every tick."),
     max_force_n: Optional[float] = typer.Option(None, "--max-force-n", help="With --force-model: stop bending into the load at this predicted tip force (N)."),
 ) -> None:

@@ -483,28 +483,6 @@ def pi_exp_forward_jac(x, r, w, beta, n_ops, G, run_starts):
 
 
 @njit(cache=True)
-def varplay_forward(u, w, run_starts):
-    """:func:`varplay_forward_jac`'s output ``v`` (n,) alone (a prediction needs no Jacobian)."""
-    n = u.shape[0]
-    v = np.empty(n)
-    n_runs = run_starts.shape[0]
-    for r in range(n_runs):
-        a = run_starts[r]
-        b = run_starts[r + 1] if r + 1 < n_runs else n
-        vk = u[a]
-        v[a] = vk
-        for k in range(a + 1, b):
-            lo = u[k] - w[k]
-            hi = u[k] + w[k]
-            if vk < lo:
-                vk = lo
-            elif vk > hi:
-                vk = hi
-            v[k] = vk
-    return v
-
-
-@njit(cache=True)
 def varplay_forward_jac(u, w, Wg, M, run_starts):
     """Play operator of time-varying half width: ``v_k = clip(v_{k-1}, u_k - w_k, u_k + w_k)``, ``v_0 = u_0``.
 

@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit
 
 from endocal.errors import ModelError
-from endocal.models._kernels import varplay_forward, varplay_forward_jac
+from endocal.models._kernels import varplay_forward_jac
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import InputEffect
 from endocal.models.params import Parameter
@@ -258,7 +258,8 @@ class Rate(InputEffect):
         u = np.asarray(u, dtype=float)
         prev = np.concatenate([u[:1], u[:-1]])
         gain = g + h * np.abs(prev)
-        return varplay_forward(np.ascontiguousarray(u, dtype=float), gain * F, data.run_starts)
+        none = np.zeros((u.size, 0))  # no Jacobian columns: the output alone
+        return varplay_forward_jac(np.ascontiguousarray(u, dtype=float), gain * F, none, none, data.run_starts)[0]
 
     def apply_jac(self, p: dict, u: np.ndarray, data: HysteresisData, M: np.ndarray):
         g, h, kappa = self._gains(p)

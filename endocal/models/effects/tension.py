@@ -24,7 +24,7 @@ then this, then eq. 10) and the effect streams.
 from __future__ import annotations
 
 import numpy as np
-from endocal.models._kernels import causal_play_inverse, play_inverse_step, varplay_forward, varplay_forward_jac
+from endocal.models._kernels import causal_play_inverse, play_inverse_step, varplay_forward_jac
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import InputEffect
 from endocal.models.params import Parameter
@@ -65,7 +65,8 @@ class Tension(InputEffect):
         c = float(p["friction"])
         x = np.ascontiguousarray(u, dtype=float)
         prev = np.concatenate([x[:1], x[:-1]])
-        return varplay_forward(x, c * np.abs(prev), data.run_starts)
+        none = np.zeros((x.size, 0))  # no Jacobian columns: the output alone
+        return varplay_forward_jac(x, c * np.abs(prev), none, none, data.run_starts)[0]
 
     def apply_jac(self, p: dict, u: np.ndarray, data: HysteresisData, M: np.ndarray):
         """Output (n,), its derivative w.r.t. ``friction`` (n, 1) and w.r.t. upstream parameters (n, q)."""
