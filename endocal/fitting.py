@@ -65,17 +65,16 @@ def fit_hysteresis(
     ModelError
         ``start_from`` of another axis or base model.
     """
-    warm = None
     if start_from is not None:
         if start_from.base_name != base or (start_from.axis and start_from.axis != axis):
             raise ModelError(f"--start-from: that model is a {start_from.base_name} model of axis "
                              f"{start_from.axis or '(none)'}, this fit a {base} model of axis {axis}; start from a "
                              "model of the same axis and base model, or drop --start-from")
-        warm = dict(start_from.params_)
     datas = [load_aligned(p) for p in paths]
     dropped: list = []
     data = axis_data(datas, axis, planes, dropped)
-    model = make_model(base, effects=effects or (), axis=axis, **settings).fit(data, warm_start=warm)
+    model = make_model(base, effects=effects or (), axis=axis, **settings)
+    model = model.fit_from(start_from, data) if start_from is not None else model.fit(data)
     span = sum(float(np.ptp(d.table["t_s"])) for d in datas)
     starts = [RecordStart.from_dict(s) for s in model.fit_report_.estimated_starts]
     cut = cut_start(data, model.predict(data) - data.meas_deg, "fitted record", starts)

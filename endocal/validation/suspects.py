@@ -752,7 +752,7 @@ def split_fit(model: HysteresisModel, effects: Sequence[str], train: HysteresisD
     estimation data), so only a new effect searches its start candidates.
     """
     dt = train.decimate(stride) if stride > 1 else train
-    return _template(model, effects).fit(dt, warm_start=getattr(model, "params_", None))
+    return _template(model, effects).fit_from(model, dt)
 
 
 def predict_errors(model: HysteresisModel, data: HysteresisData) -> np.ndarray:
