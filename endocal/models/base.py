@@ -905,11 +905,20 @@ def _loose_parameters(free: list[str], owners: dict, values: dict, stderr: dict,
     """Warnings for effect parameters the data does not pin down (at a bound, or standard error > |value|).
 
     The base's shape coefficients (B-spline increments, PI weights) sit at their zero bound
-    by design and are not reported.
+    by design and are not reported. An effect whose ``why_loose`` explains its loose values
+    (a parametrisation, not missing data) gets that one line instead of a line per parameter.
     """
     out = []
+    explained: set[str] = set()
+    for e in {id(o): o for o, _ in owners.values() if o != "base"}.values():
+        if hasattr(e, "why_loose"):
+            p = {short: values[full] for full, (o, short) in owners.items() if o is e}
+            why = e.why_loose(p, {short: stderr[full] for full, (o, short) in owners.items() if o is e})
+            if why:
+                out.append(why)
+                explained.update(full for full, (o, _) in owners.items() if o is e)
     for i, n in enumerate(free):
-        if owners[n][0] == "base":
+        if owners[n][0] == "base" or n in explained:
             continue
         v, se = values[n], stderr[n]
         span = hi[i] - lo[i] if math.isfinite(hi[i] - lo[i]) else max(abs(v), 1.0)
