@@ -46,6 +46,8 @@ _OUT_OF_RANGE_MODES = OUT_OF_RANGE_CHOICES + ("extrapolate",)
 #: :meth:`HysteresisModel.fit_from`: a warm fit whose RMSE exceeds its start model's by more than this
 #: fraction stopped in a local minimum (optimiser tolerance is ~1e-8; a nested optimum is never worse)
 NESTED_TOL = 1e-3
+#: :meth:`HysteresisModel._starts_by_history`: evaluations per free parameter of a history's screening fit
+HISTORY_NFEV_PER_PARAMETER = 10
 
 
 def min_fit_samples(n_free: int) -> int:
@@ -517,7 +519,16 @@ class HysteresisModel(ABC):
                            effects: list[Effect], bounds: tuple, max_nfev) -> tuple[np.ndarray, list, tuple]:
         """The rest fit ``rest`` refitted with every run started along each history
         (models.start.assumed_starts); the best that lowers the RMSE by START_GAIN_MIN, and the
-        starts estimated from it (an empty list: keep the rest fit). Also (nfev, njev) spent."""
+        starts estimated from it (an empty list: keep the rest fit). Also (nfev, njev) spent.
+
+        Each history fit screens (the fit from the starts it finds polishes the winner), so it is
+        capped at HISTORY_NFEV_PER_PARAMETER evaluations per free parameter: a history that fits
+        reaches its minimum in 4-63 evaluations (tests/test_models_start.py), while one that does
+        not fit can crawl (B-spline + delay + deadzone on one 20 000-sample sweep: 2 500
+        evaluations, 90 s, to end twice the rest fit's cost).
+        """
+        cap = HISTORY_NFEV_PER_PARAMETER * (len(free) + 1)
+        max_nfev = min(max_nfev, cap) if max_nfev else cap
         best, spent = None, [0, 0]
         for history in HISTORIES:
             trial = assumed_starts(d, history)
