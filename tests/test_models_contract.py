@@ -191,3 +191,7 @@ def test_a_fit_from_a_smaller_model_is_never_worse_than_that_model():
     assert bigger.fit_report_.rmse_deg <= smaller.fit_report_.rmse_deg
     assert bigger.fit_report_.rmse_deg < 1.1 * 0.15  # the noise, +10 % for 9 parameters and a lag that is no delay
     assert "local minimum" in bigger.fit_report_.warnings[0]
+    # dropping an effect nests nothing: a fit worse than the bigger model is no local minimum
+    back = make_model("pi", ["delay"], axis="ap").fit_from(bigger, d)
+    assert back.fit_report_.rmse_deg > bigger.fit_report_.rmse_deg
+    assert not any("local minimum" in w for w in back.fit_report_.warnings), back.fit_report_.warnings

@@ -344,6 +344,8 @@ class HysteresisModel(ABC):
             What to fit, as :meth:`fit` takes it.
         """
         self.fit(data, max_nfev=max_nfev, warm_start=dict(start.params_))
+        if not {e.label for e in start.effects_} <= {e.label for e in self.effects_}:
+            return self  # an effect dropped: this model does not nest start, and may well fit worse
         d, _ = as_data(data)
         scored = copy.copy(start)
         scored.out_of_range = "extrapolate"

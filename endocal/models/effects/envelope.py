@@ -177,20 +177,21 @@ class Envelope(InputEffect):
     def why_loose(self, p: dict, se: dict) -> str:
         """One line for a dead band the gauge ``k1`` cannot express well, else ``""``.
 
-        Slack tendons leave a nearly flat middle segment. With its slope ``k1`` held at 1 as
-        the scale (the gauge), flat means outer slopes ``k0``, ``k2`` ever steeper and a zero
+        Slack tendons leave a nearly flat middle segment. With its slope ``k1`` held as the
+        scale (the gauge, 1), flat means outer slopes ``k0``, ``k2`` ever steeper and a zero
         ``θ1`` ever farther out: those (and the base's scale) lose their standard errors while
         the shape they draw, and every prediction, stays pinned down. Said when both outer
-        slopes exceed the middle one DEAD_BAND_RATIO times and any of them is loose.
+        slopes exceed the middle one DEAD_BAND_RATIO times, any of them is loose and ``k1`` is
+        held (the model's gauge, or a user's fixed value).
         """
         ratio = min(p["k0"], p["k2"]) / p["k1"]
         loose = [k for k in ("theta1_deg", "k0", "k2") if not se.get(k, 0.0) <= abs(p[k])]
-        if not (ratio > DEAD_BAND_RATIO and loose):
+        if not (ratio > DEAD_BAND_RATIO and loose and se.get("k1", 0.0) == 0.0):  # k1 held: the gauge
             return ""
         return (f"the envelope is a dead band: its slope from theta0 to theta2 ({p['theta0_deg']:.2f}..{p['theta2_deg']:.2f} "
-                f"deg) is 1/{ratio:.0f} of the outer slopes, so with k1 held at 1 as the scale its outer slopes and "
-                f"zero ({', '.join(loose)}) have no useful standard errors; the shape and the predictions are "
-                "identified (`deadzone` models tendon slack as such)")
+                f"deg) is 1/{ratio:.0f} of the outer slopes, so with k1 held at {p['k1']:.4g} as the scale its outer "
+                f"slopes and zero ({', '.join(loose)}) have no useful standard errors; the shape and the predictions "
+                "are identified (`deadzone` models tendon slack as such)")
 
     def wrap(self, inner: str) -> str:
         return f"f({inner})"
