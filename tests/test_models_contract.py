@@ -176,7 +176,7 @@ def _tendon_sheath_sweep(rng):
                           t_s=t)
 
 
-def test_a_fit_from_a_smaller_model_is_never_worse_than_that_model():
+def test_a_fit_from_a_smaller_model_is_never_worse_than_that_model(monkeypatch):
     """`fit_from` (validate's candidates, `fit --start-from`): `pi` + `delay` + `envelope` nests
     `pi` + `delay` (an envelope of equal slopes is no envelope), so its fit cannot be worse on the
     same data. From `pi` + `delay`'s values the least squares stopped in a local minimum worse than
@@ -191,7 +191,11 @@ def test_a_fit_from_a_smaller_model_is_never_worse_than_that_model():
     assert bigger.fit_report_.rmse_deg <= smaller.fit_report_.rmse_deg
     assert bigger.fit_report_.rmse_deg < 1.1 * 0.15  # the noise, +10 % for 9 parameters and a lag that is no delay
     assert "local minimum" in bigger.fit_report_.warnings[0]
-    # dropping an effect nests nothing: a fit worse than the bigger model is no local minimum
-    back = make_model("pi", ["delay"], axis="ap").fit_from(bigger, d)
-    assert back.fit_report_.rmse_deg > bigger.fit_report_.rmse_deg
-    assert not any("local minimum" in w for w in back.fit_report_.warnings), back.fit_report_.warnings
+    # dropping an effect nests nothing: a fit worse than the bigger model is no local minimum, and
+    # is not fitted a second time from scratch
+    back = make_model("pi", ["delay"], axis="ap")
+    fits = []
+    fit = type(back).fit
+    monkeypatch.setattr(type(back), "fit", lambda self, *a, **k: fits.append(1) or fit(self, *a, **k))
+    back.fit_from(bigger, d)
+    assert back.fit_report_.rmse_deg > bigger.fit_report_.rmse_deg and len(fits) == 1
