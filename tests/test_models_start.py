@@ -86,6 +86,21 @@ def test_a_short_cut_whose_first_stretch_pulled_the_rest_fit_is_fitted_from_its_
     assert fitted.fit_report_.rmse_deg < 1.05 * 0.3
 
 
+def test_the_same_cut_recorded_at_1_khz_is_screened_on_a_subsample_and_still_found():
+    # The cut above at ten times the rate (10 000 samples): each history's fit screens on a
+    # subsample of 4 000 (one of 2 here, a screening fit at full rate crawled for 90 s on a
+    # 20 000-sample sweep), and the start it finds is estimated and fitted on every sample.
+    m = truth()
+    t = np.arange(60_000) / 1000.0
+    u = 50.0 * np.sin(2 * np.pi * t / 10.0)
+    y = m.predict(u) + 0.3 * np.random.default_rng(1).standard_normal(u.size)
+    a = 23_000
+    fitted = make_model("pi", ["envelope"]).fit(cut(t, u, y, a, 10_000))
+    (start,) = fitted.fit_report_.estimated_starts
+    assert start["path_deg"] == pytest.approx([u[a], -50.0, 50.0, u[a]], abs=0.1)
+    assert fitted.fit_report_.rmse_deg < 1.05 * 0.3
+
+
 def test_one_sweep_per_acquisition_starts_where_the_other_direction_left_the_tip():
     # A lab records each direction in turn: 0 -> +50 -> 0, then 0 -> -50 -> 0, then up again.
     # Each acquisition starts at knob 0 with the plays as the opposite sweep left them (the tip

@@ -48,6 +48,8 @@ _OUT_OF_RANGE_MODES = OUT_OF_RANGE_CHOICES + ("extrapolate",)
 NESTED_TOL = 1e-3
 #: :meth:`HysteresisModel._starts_by_history`: evaluations per free parameter of a history's screening fit
 HISTORY_NFEV_PER_PARAMETER = 10
+#: samples a start candidate's or a start history's screening fit sees of a long record (:func:`_subsample`)
+SUBSAMPLE_SAMPLES = 4000
 
 
 def min_fit_samples(n_free: int) -> int:
@@ -405,7 +407,7 @@ class HysteresisModel(ABC):
                 overrides.update({n: float(warm[n]) for n in known})
         if overrides:
             start, structure, owners = self._start(dd, effects, fixed, overrides)
-        ds = dd.decimate(dd.n_samples // 4000) if dd.n_samples >= 8000 else dd
+        ds = _subsample(dd)
         for e in effects:
             if not hasattr(e, "start_candidates") or all(n in overrides for n in e.full_names() if n not in fixed):
                 continue
@@ -531,17 +533,22 @@ class HysteresisModel(ABC):
         """
         cap = HISTORY_NFEV_PER_PARAMETER * (len(free) + 1)
         max_nfev = min(max_nfev, cap) if max_nfev else cap
+        # a long record is screened on a subsample (as start candidates are), against the rest
+        # fit's cost there; the starts are then estimated on every sample
+        ds, rest_cost = _subsample(d), rest.cost
+        if ds is not d:
+            rest_cost = 0.5 * float(np.sum(self._residual_fns(ds, values, free, structure, effects)[0](rest.x) ** 2))
         best, spent = None, [0, 0]
         for history in HISTORIES:
-            trial = assumed_starts(d, history)
+            trial = assumed_starts(ds, history)
             if not trial:
                 continue
-            led, keep = with_lead_ins(d, trial)
+            led, keep = with_lead_ins(ds, trial)
             residual, jac = self._residual_fns(led, values, free, structure, effects, keep)
             fit = least_squares(residual, np.clip(rest.x, *bounds), jac=jac, bounds=bounds, method="trf",
                                 x_scale="jac", max_nfev=max_nfev)
             spent = [spent[0] + fit.nfev, spent[1] + int(fit.njev or 0)]
-            if fit.cost < (1.0 - START_GAIN_MIN) ** 2 * rest.cost and (best is None or fit.cost < best.cost):
+            if fit.cost < (1.0 - START_GAIN_MIN) ** 2 * rest_cost and (best is None or fit.cost < best.cost):
                 best = fit
         if best is None:
             return rest.x, [], tuple(spent)
@@ -894,6 +901,12 @@ class HysteresisModel(ABC):
         from endocal.models.io import save_model
 
         save_model(self, path)
+
+
+def _subsample(d: HysteresisData) -> HysteresisData:
+    """Every k-th sample of a record over 2 x SUBSAMPLE_SAMPLES long, about SUBSAMPLE_SAMPLES of them
+    (the knob moves little between samples, so the loops keep their shape); else ``d``."""
+    return d.decimate(d.n_samples // SUBSAMPLE_SAMPLES) if d.n_samples >= 2 * SUBSAMPLE_SAMPLES else d
 
 
 def _no_better_than_a_line(d: HysteresisData, rmse_deg: float, base: str) -> list[str]:
