@@ -172,8 +172,8 @@ def _tendon_sheath_sweep(rng):
     a = 1.0 / (1.0 + 0.05 / 0.01)
     for i in range(1, p.size):
         y[i] = y[i - 1] + a * (p[i] - y[i - 1])
-    return HysteresisData(cmd_deg=u, meas_deg=0.78 * y + 4e-4 * np.sign(y) * y ** 2 + 0.15 * rng.standard_normal(u.size),
-                          t_s=t)
+    meas = 0.78 * y + 4e-4 * np.sign(y) * y ** 2 + 0.15 * rng.standard_normal(u.size)
+    return HysteresisData(cmd_deg=u, meas_deg=meas, t_s=t)
 
 
 def test_a_fit_from_a_smaller_model_is_never_worse_than_that_model(monkeypatch):

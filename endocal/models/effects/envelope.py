@@ -188,10 +188,11 @@ class Envelope(InputEffect):
         loose = [k for k in ("theta1_deg", "k0", "k2") if not se.get(k, 0.0) <= abs(p[k])]
         if not (ratio > DEAD_BAND_RATIO and loose and se.get("k1", 0.0) == 0.0):  # k1 held: the gauge
             return ""
-        return (f"the envelope is a dead band: its slope from theta0 to theta2 ({p['theta0_deg']:.2f}..{p['theta2_deg']:.2f} "
-                f"deg) is 1/{ratio:.0f} of the outer slopes, so with k1 held at {p['k1']:.4g} as the scale its outer "
-                f"slopes and zero ({', '.join(loose)}) have no useful standard errors; the shape and the predictions "
-                "are identified (`deadzone` models tendon slack as such)")
+        band = f"{p['theta0_deg']:.2f}..{p['theta2_deg']:.2f} deg"
+        return (f"the envelope is a dead band: its slope from theta0 to theta2 ({band}) is 1/{ratio:.0f} of the outer "
+                f"slopes, so with k1 held at {p['k1']:.4g} as the scale its outer slopes and zero ({', '.join(loose)}) "
+                "have no useful standard errors; the shape and the predictions are identified (`deadzone` models "
+                "tendon slack as such)")
 
     def wrap(self, inner: str) -> str:
         return f"f({inner})"
