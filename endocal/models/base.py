@@ -44,7 +44,7 @@ OUT_OF_RANGE_CHOICES = ("error", "clamp")
 #: tangents, straight lines, saturated plays) as validation scores it; the inverse clamps then.
 _OUT_OF_RANGE_MODES = OUT_OF_RANGE_CHOICES + ("extrapolate",)
 #: :meth:`HysteresisModel.fit_from`: a warm fit whose RMSE exceeds its start model's by more than this
-#: fraction stopped in a local minimum (optimiser tolerance is ~1e-8; a nested optimum is never worse)
+#: fraction stopped in a local minimum (far above FTOL's per-step change; a nested optimum is never worse)
 NESTED_TOL = 1e-3
 #: :meth:`HysteresisModel._starts_by_history`: evaluations per free parameter of a history's screening fit
 HISTORY_NFEV_PER_PARAMETER = 10
@@ -332,8 +332,8 @@ class HysteresisModel(ABC):
     def fit_from(self, start: HysteresisModel, data, *, max_nfev: int | None = None):
         """Fit starting from ``start``, a fitted model with some of these effects (``--start-from``).
 
-        The effects ``start`` has begin at its values (:meth:`fit`'s ``warm_start``). This model
-        holds ``start``'s effects and more, each of which can vanish, so its least-squares optimum
+        The effects ``start`` has begin at its values (:meth:`fit`'s ``warm_start``). When this model
+        holds ``start``'s effects and more, each of which can vanish, its least-squares optimum
         on ``data`` is never worse than ``start`` there: a warm fit that ends worse than ``start``
         predicts stopped in another local minimum (`pi` + `delay` + `envelope` on one sweep of a
         foreign tendon-sheath bench: 0.231 deg from the `pi` + `delay` values, which score 0.204
