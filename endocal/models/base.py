@@ -538,7 +538,9 @@ class HysteresisModel(ABC):
         # fit's cost there; the starts are then estimated on every sample
         ds, rest_cost = _subsample(d), rest.cost
         if ds is not d:
-            rest_cost = 0.5 * float(np.sum(self._residual_fns(ds, values, free, structure, effects)[0](rest.x) ** 2))
+            at_rest = {**values, **{n: float(v) for n, v in zip(free, rest.x)}}
+            r = self._forward(ds, *self._grouped(at_rest), structure, effects) - ds.meas_deg
+            rest_cost = 0.5 * float(r @ r)
         best, spent = None, [0, 0]
         for history in HISTORIES:
             trial = assumed_starts(ds, history)
@@ -948,7 +950,7 @@ def _loose_parameters(free: list[str], owners: dict, values: dict, stderr: dict,
     """
     out = []
     explained: set[str] = set()
-    for e in {id(o): o for o, _ in owners.values() if o != "base"}.values():
+    for e in {id(o): o for o, _ in owners.values() if isinstance(o, Effect)}.values():
         if hasattr(e, "why_loose"):
             p = {short: values[full] for full, (o, short) in owners.items() if o is e}
             why = e.why_loose(p, {short: stderr[full] for full, (o, short) in owners.items() if o is e})
