@@ -35,7 +35,7 @@ def _excite_on_rig(tmp, args, **rig_kw):
     with EmulatedRig(TEE, seed=1, on_event=events.append, **rig_kw) as rig:
         cfg = rig.write_config(tmp / "rig.toml")
         proc = endocal("excite", *args, "--backend", "hardware", "--hardware-config", cfg, "--out", tmp / "rig-run",
-                       "-q", timeout=120)
+                       "-q", timeout=120, process=True)
         torque = rig.bus.torque()
     return proc, events, torque
 
@@ -117,7 +117,7 @@ def test_one_emulated_rig_serves_run_after_run(tmp_path):
         # check refuses to jump from: a rig used run after run homes the knobs on open
         cfg.write_text(cfg.read_text() + "\n[safety]\nhome_on_open = true\n")
         procs = [endocal("excite", *short, "--backend", "hardware", "--hardware-config", cfg, "--out",
-                         tmp_path / f"run{k}", "-q", timeout=120) for k in range(2)]
+                         tmp_path / f"run{k}", "-q", timeout=120, process=True) for k in range(2)]
         torque = rig.bus.torque()
     for proc in procs:
         assert proc.returncode == 0, proc.stderr
