@@ -397,7 +397,8 @@ class HysteresisModel(ABC):
         # their shape); the final iterations and the covariance use every sample.
         stride = d.n_samples // 20000
         dd = d.decimate(stride) if stride >= 2 else d
-        start, structure, owners = self._start(dd, effects, fixed, {})
+        initials: dict = {}  # the output effects' start values on dd, the same for every start tried below
+        start, structure, owners = self._start(dd, effects, fixed, {}, initials)
         # Effects whose nonlinear parameters (a delay, a time constant, a play width) need a
         # good start offer a few candidates: each is tried with the base re-started on the
         # command it produces, and the one with the lowest start cost is kept (greedy, in
@@ -409,7 +410,7 @@ class HysteresisModel(ABC):
             if known and all(n in warm for n in known):
                 overrides.update({n: float(warm[n]) for n in known})
         if overrides:
-            start, structure, owners = self._start(dd, effects, fixed, overrides)
+            start, structure, owners = self._start(dd, effects, fixed, overrides, initials)
         ds = _subsample(dd)
         for e in effects:
             if not hasattr(e, "start_candidates") or all(n in overrides for n in e.full_names() if n not in fixed):
@@ -419,7 +420,7 @@ class HysteresisModel(ABC):
                 trial = {**overrides, **{f"{e.prefix}_{k}": float(v) for k, v in cand.items()
                                          if f"{e.prefix}_{k}" not in fixed}}
                 if isinstance(e, InputEffect):
-                    st, stru, own = self._start(dd, effects, fixed, trial)
+                    st, stru, own = self._start(dd, effects, fixed, trial, initials)
                 else:  # the base's start does not depend on a filter or an additive term
                     st, stru, own = dict(start), structure, owners
                     for k, v in trial.items():
@@ -587,8 +588,14 @@ class HysteresisModel(ABC):
 
         return residual, jac
 
-    def _start(self, dd: HysteresisData, effects: list[Effect], fixed: dict, overrides: dict):
-        """Start values (input effects in chain order, each seeing the command the chain gives it), structure, owners."""
+    def _start(self, dd: HysteresisData, effects: list[Effect], fixed: dict, overrides: dict,
+               initials: dict | None = None):
+        """Start values (input effects in chain order, each seeing the command the chain gives it), structure, owners.
+
+        ``initials`` keeps the output effects' start values between calls on the same ``dd``
+        (they see the raw command, not the chain's): an envelope's hinge search is done once per fit.
+        """
+        initials = {} if initials is None else initials
         start: dict[str, Parameter] = {}
         u = dd.cmd_deg
         for e in effects:
@@ -607,8 +614,10 @@ class HysteresisModel(ABC):
             start[f"{self.base_name}_{prm.name}"] = Parameter(f"{self.base_name}_{prm.name}", prm.value, prm.lower, prm.upper)
         for e in effects:
             if not isinstance(e, InputEffect):
-                for prm in e.initial(dd, dd.cmd_deg):
-                    start[prm.name] = prm
+                if id(e) not in initials:
+                    initials[id(e)] = e.initial(dd, dd.cmd_deg)
+                for prm in initials[id(e)]:
+                    start[prm.name] = copy.copy(prm)
                 e.adapt_start(start, fixed)
                 for full in e.full_names():
                     if full in overrides:

@@ -206,8 +206,13 @@ class PIModel(HysteresisModel):
         weights = self.weights if self.weights != "auto" else ("exponential" if has_env else "free")
         offset = self.offset if self.offset != "auto" else (not has_env)
         st = {"n_operators": int(self.n_operators), "weights": weights, "offset": bool(offset)}
+        # start values found while choosing, for _base_initial on the same command (it ran both
+        # searches again: a fifth of a pi + envelope fit's time on the thesis's sine-set)
+        self._start_memo = {}
         if weights == "free" and v is not None:
-            st["threshold_step"] = self._choose_step(v, data, st)[0]
+            step = self._choose_step(v, data, st)
+            st["threshold_step"] = step[0]
+            self._start_memo = {"free": (v, data, step)}
         elif weights == "free":
             st["threshold_step"] = None
         elif self.weights == "auto" and v is not None:
@@ -217,11 +222,12 @@ class PIModel(HysteresisModel):
             # weights on the same plays; those then describe the loop, with the same exact
             # inverse (eq. 11). Only a clear gap switches: free weights also fit noise and
             # other effects' signatures, which would blur the diagnosis of effects.
-            r_free, _, cost_free = self._choose_step(v, data, {**st, "weights": "free"})
-            cost_exp = self._exp_start(v, data, st)[0]
-            if not cost_exp <= AUTO_RMS_RATIO ** 2 * cost_free:
+            free = self._choose_step(v, data, {**st, "weights": "free"})
+            exp = self._exp_start(v, data, st)
+            self._start_memo = {"free": (v, data, free), "exponential": (v, data, exp)}
+            if not exp[0] <= AUTO_RMS_RATIO ** 2 * free[2]:
                 st["weights"] = "free"
-                st["threshold_step"] = r_free
+                st["threshold_step"] = free[0]
         return st
 
     def _base_names(self, structure: dict) -> list[str]:
@@ -343,15 +349,18 @@ class PIModel(HysteresisModel):
 
     def _base_initial(self, structure: dict, v: np.ndarray, data: HysteresisData) -> list[Parameter]:
         n = structure["n_operators"]
-        steps = [structure["threshold_step"]] if structure["weights"] == "free" else None
-        r, x, _ = self._choose_step(v, data, structure, steps)
-        w = x[: n + 1]
+        kind = structure["weights"]
+        v_chosen, data_chosen, chosen = self.__dict__.pop("_start_memo", {}).get(kind, (None, None, None))
+        if v_chosen is not v or data_chosen is not data or (kind == "free" and chosen[0] != structure["threshold_step"]):
+            chosen = None
         out: list[Parameter] = []
-        if structure["weights"] == "free":
+        if kind == "free":
+            _, x, _ = chosen or self._choose_step(v, data, structure, [structure["threshold_step"]])
+            w = x[: n + 1]
             scale = max(float(w.sum()), 1e-12)
             out += [Parameter(f"w{i}", float(w[i]), 1e-9 * scale if i == 0 else 0.0, np.inf) for i in range(n + 1)]
         else:
-            _, r, beta, w0, off = self._exp_start(v, data, structure)
+            _, r, beta, w0, off = chosen or self._exp_start(v, data, structure)
             out += [Parameter("r", r, 1e-12 * max(r, 1e-300), np.inf), Parameter("w", w0, 1e-12 * max(w0, 1e-300), np.inf),
                     Parameter("beta", beta)]
             if structure["offset"]:
