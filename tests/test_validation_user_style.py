@@ -96,6 +96,23 @@ def test_control_with_nothing_hidden_lists_nothing():
     assert res.scan.baseline_rmse_heldout_deg <= 1.1 * noise
 
 
+@pytest.mark.parametrize("hidden", ["rate", "coupling", "envelope"])
+def test_three_hidden_effects_leave_too_little_to_halve(hidden):
+    """Why the bar of 7 in 8 is out of reach on these recordings, whatever the diagnosis or the base.
+
+    A refit scored on the validation run cannot beat its tracker noise, so halving the error
+    needs a model error at least twice that floor before the refit. Rate (1.24x: the random
+    run is slow), coupling (1.02x: one knob moves) and, with the B-spline, envelope (1.02x: its
+    free branches take the stiffer shape up) sit below it, so at most 5 of 8 can halve with
+    this model. `pi` + `tension` + `delay` (measured by hand, seed 0) adds the envelope (0.99
+    deg, -56 %) but leaves rate (0.50 deg) and coupling (0.45) under twice its own floor (0.43):
+    6 of 8 at most. Should a change of the simulator or the protocols lift one of them over the
+    floor, this fails: try the bar again.
+    """
+    res, _, _, _, noise = _case(hidden)
+    assert res.scan.baseline_rmse_heldout_deg < 2.0 * noise, (res.scan.baseline_rmse_heldout_deg, noise)
+
+
 def test_a_fit_from_scratch_is_never_worse_than_the_model_without_the_added_effect():
     """A user's own refit (no --start-from) of the control with `deadzone` added on its estimation data.
 
