@@ -102,12 +102,13 @@ def test_three_hidden_effects_leave_too_little_to_halve(hidden):
 
     A refit scored on the validation run cannot beat its tracker noise, so halving the error
     needs a model error at least twice that floor before the refit. Rate (1.24x: the random
-    run is slow), coupling (1.02x: one knob moves) and, with the B-spline, envelope (1.02x: its
-    free branches take the stiffer shape up) sit below it, so at most 5 of 8 can halve with
-    this model. `pi` + `tension` + `delay` (measured by hand, seed 0) adds the envelope (0.99
-    deg, -56 %) but leaves rate (0.50 deg) and coupling (0.45) under twice its own floor (0.43):
-    6 of 8 at most. Should a change of the simulator or the protocols lift one of them over the
-    floor, this fails: try the bar again.
+    run is slow), coupling (1.02x: one knob moves) and, with the B-spline, envelope (1.02x: the
+    hidden stiffening is the default probe's, so this is the control's record, whose shape the
+    free branches take up) sit below it, so at most 5 of 8 can halve with this model. `pi` +
+    `tension` + `delay` on a probe whose control does not stiffen (measured by hand, seed 0)
+    adds the envelope (0.99 deg, -56 %) but leaves rate (0.50 deg) and coupling (0.45) under
+    twice its own floor (0.43): 6 of 8 at most. Should a change of the simulator or the
+    protocols lift one of them over the floor, this fails: try the bar again.
     """
     res, _, _, _, noise = _case(hidden)
     assert res.scan.baseline_rmse_heldout_deg < 2.0 * noise, (res.scan.baseline_rmse_heldout_deg, noise)
