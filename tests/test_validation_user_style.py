@@ -23,8 +23,8 @@ not tuning (numbers: seed 0, noise floor 0.33 deg):
 
 Another base does not close the gaps: `pi` with `tension` and `delay`, on a probe whose
 stiffening is switched off so that the envelope can be hidden, names 6 of 8 (envelope found,
--57 %) and cuts 5 of 8 (load -30 %), but its control lists `envelope` (the play bank does not
-take the capstan plant's static shape). Meeting 7 of 8 would take a protocol moving both knobs
+-57 %) and cuts 5 of 8 (load -30 %), but its control lists `envelope` (-14 %: the play bank
+does not take the capstan plant's static shape). Meeting 7 of 8 would take a protocol moving both knobs
 and a faster random run, i.e. a recording picked for the effect.
 """
 
@@ -105,10 +105,10 @@ def test_three_hidden_effects_leave_too_little_to_halve(hidden):
     run is slow), coupling (1.02x: one knob moves) and, with the B-spline, envelope (1.02x: the
     hidden stiffening is the default probe's, so this is the control's record, whose shape the
     free branches take up) sit below it, so at most 5 of 8 can halve with this model. `pi` +
-    `tension` + `delay` on a probe whose control does not stiffen (measured by hand, seed 0)
-    adds the envelope (0.99 deg, -56 %) but leaves rate (0.50 deg) and coupling (0.45) under
-    twice its own floor (0.43): 6 of 8 at most. Should a change of the simulator or the
-    protocols lift one of them over the floor, this fails: try the bar again.
+    `tension` + `delay` on a probe that does not stiffen (measured by hand, seed 0) adds the
+    envelope (0.99 deg, -57 %) but leaves rate (0.53 deg) and coupling (0.49) under twice its
+    own floor (0.43): 6 of 8 at most. Should a change of the simulator or the protocols lift
+    one of them over the floor, this fails: try the bar again.
     """
     res, _, _, _, noise = _case(hidden)
     assert res.scan.baseline_rmse_heldout_deg < 2.0 * noise, (res.scan.baseline_rmse_heldout_deg, noise)
