@@ -206,9 +206,8 @@ class PIModel(HysteresisModel):
         weights = self.weights if self.weights != "auto" else ("exponential" if has_env else "free")
         offset = self.offset if self.offset != "auto" else (not has_env)
         st = {"n_operators": int(self.n_operators), "weights": weights, "offset": bool(offset)}
-        # start values found while choosing, for _base_initial on the same command (it ran both
-        # searches again: a fifth of a pi + envelope fit's time on the thesis's sine-set)
-        self._start_memo = {}
+        # start values found while choosing are kept for _base_initial on the same command (it ran
+        # both searches again: a fifth of a pi + envelope fit's time on the thesis's sine-set)
         if weights == "free" and v is not None:
             step = self._choose_step(v, data, st)
             st["threshold_step"] = step[0]
@@ -351,8 +350,9 @@ class PIModel(HysteresisModel):
         n = structure["n_operators"]
         kind = structure["weights"]
         v_chosen, data_chosen, chosen = self.__dict__.pop("_start_memo", {}).get(kind, (None, None, None))
-        if v_chosen is not v or data_chosen is not data or (kind == "free" and chosen[0] != structure["threshold_step"]):
-            chosen = None
+        same_step = kind != "free" or (chosen is not None and chosen[0] == structure["threshold_step"])
+        if v_chosen is not v or data_chosen is not data or not same_step:
+            chosen = None  # not found for this command: search again
         out: list[Parameter] = []
         if kind == "free":
             _, x, _ = chosen or self._choose_step(v, data, structure, [structure["threshold_step"]])
