@@ -214,6 +214,34 @@ def test_bad_angle_maps_and_outputs_are_one_line(bench_log, tmp_path, edit, out,
     assert not (tmp_path / out).exists()
 
 
+@pytest.mark.parametrize("edit, fragments", [
+    # the motor's radians read as degrees: a 35-fold gain
+    (lambda t: t.replace('unit = "rad"  ', 'unit = "deg"  '),
+     ("read as deg, column 'motor_rad'", "35 deg of bend per knob degree", "[knobs.ap] unit", "[angles.ap] unit")),
+    # the joint's degrees read as radians: a bend over 3 000 deg
+    (lambda t: t.replace('unit = "deg"                  # ...in deg or rad', 'unit = "rad"'),
+     ("read as rad, column 'joint_deg'", "more than a bending section or joint turns", "[angles.ap] unit right?")),
+])
+def test_a_measured_angle_map_with_a_unit_mistake_warns_naming_the_key(bench_log, tmp_path, edit, fragments):
+    """Warned, not refused: an angles map also carries what is no angle (the real piezo's volts and
+    displacement, imported by test_a_headerless_logger_file_imports_by_column_number)."""
+    (tmp_path / "map.toml").write_text(edit(ANGLES_MAP.read_text()))
+    proc = endocal("import", "csv", bench_log[0], "--map", tmp_path / "map.toml", "--out", tmp_path / "t.parquet")
+    assert proc.returncode == 0, proc.stderr
+    warned = [ln for ln in proc.stderr.splitlines() if ln.startswith("warning:") and "unit" in ln]
+    assert len(warned) == 1 and all(f in warned[0] for f in fragments), proc.stderr
+
+
+def test_a_geared_bench_whose_motor_turns_far_more_than_its_joint_imports_without_a_word(bench_log, tmp_path):
+    """Only a bend many times the knob's travel looks like a unit mistake: a motor geared 20:1 down
+    to the joint turns 20 times as far (0.05 deg of bend per motor degree)."""
+    log = pd.read_csv(bench_log[0])
+    log["motor_rad"] *= 20.0
+    log.to_csv(tmp_path / "geared.csv", index=False)
+    proc = endocal("import", "csv", tmp_path / "geared.csv", "--map", ANGLES_MAP, "--out", tmp_path / "g.parquet")
+    assert proc.returncode == 0 and "warning" not in proc.stderr, proc.stderr
+
+
 def test_a_clock_written_as_date_and_time_text(sim_log, tmp_path):
     # LabVIEW and spreadsheet exports stamp rows with date-time text, here to the microsecond
     log = pd.read_csv(sim_log / "log.csv")

@@ -78,6 +78,8 @@ def import_csv_cmd(
                   f"{res.rows_unused_line}", markup=False)
     if res.gap_warning:
         err.print(f"warning: {res.gap_warning}", markup=False)
+    for w in res.unit_warnings:
+        err.print(f"warning: {w}", markup=False)
     if res.alignment_error:
         err.print(f"warning: no aligned table: {res.alignment_error}", markup=False)
 

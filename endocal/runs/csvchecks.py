@@ -5,8 +5,8 @@ one line naming the map key to fix: knob positions far beyond the probe's limits
 motor sample rate under 1 Hz or over 10 kHz, tip and base sensors nowhere near a bending length
 apart, a base quaternion read in the wrong order, a knob whose bend moves many times as far as
 it does or that is bent at its zero, fewer aligned rows than any fit can use. Motor samples the
-aligned table leaves out for want of a reading (:func:`reading_gaps`) are not refused but
-counted, for the import to warn.
+aligned table leaves out for want of a reading (:func:`reading_gaps`), and measured angles with
+such numbers (:func:`measured_angle_warnings`), are not refused but said, for the import to warn.
 """
 
 from __future__ import annotations
@@ -179,6 +179,62 @@ def check_base_order(tip: np.ndarray, base: np.ndarray, good: np.ndarray, cmap: 
             f"\"{other}\"{tip_too}")
 
 
+#: The widest a measured bending angle may range (deg, 1st to 99th percentile) before its unit is
+#: called a mistake: a bending section or a bench's joint stays within a turn, while degrees read
+#: as radians give 57 times the bend.
+ANGLE_SPAN_MAX_DEG = 360.0
+
+_KNOB_HINTS = {"deg": 'radians need unit = "rad"', "rad": "check the column holds this knob's angle",
+               "ticks": "check ticks_per_rev"}
+
+
+def _knob_line(knob: np.ndarray, bend: np.ndarray) -> tuple[float, float, float, float] | None:
+    """The knob's 1st and 99th percentiles and the straight line through the bend against it
+    (gain, bend at knob 0); None where the knob barely moves or the bend does not follow it."""
+    lo, hi = np.quantile(knob, [0.01, 0.99])
+    if hi - lo < KNOB_SPAN_MIN_DEG or abs(np.corrcoef(knob, bend)[0, 1]) < KNOB_BEND_MIN_CORR:
+        return None
+    gain, at_zero = (float(c) for c in np.polyfit(knob, bend, 1))
+    return float(lo), float(hi), gain, at_zero
+
+
+def _gain_message(line, bend: np.ndarray, dof: str, k, where: str, ask: str = "") -> str:
+    lo, hi, gain, _ = line
+    b_lo, b_hi = np.quantile(bend, [0.01, 0.99])
+    return (f"{where}: read as {k.unit}, column '{k.position}' turns the {dof} knob over {hi - lo:.3g} deg while "
+            f"the tip bends over {b_hi - b_lo:.3g} deg: {abs(gain):.0f} deg of bend per knob degree, where a "
+            f"tendon drive gives about 1 (at most {BEND_PER_KNOB_MAX:g}): {ask}is [knobs.{dof}] unit right? "
+            f"({_KNOB_HINTS[k.unit]})")
+
+
+def measured_angle_warnings(knob_deg: dict[str, np.ndarray], meas_deg: dict[str, np.ndarray], cmap: CsvMap,
+                            where: str) -> list[str]:
+    """A map of measured angles (:func:`check_knob_to_bend` for poses): an angle ranging over more
+    than :data:`ANGLE_SPAN_MAX_DEG`, or a knob whose angle moves more than :data:`BEND_PER_KNOB_MAX`
+    degrees per knob degree, said in one line each naming the map keys. ``knob_deg`` and
+    ``meas_deg`` hold each knob's position and each axis' angle on the same samples.
+
+    Warned, not refused: an angles map also carries what is no angle (the real piezo recording's
+    drive voltage and displacement, data_samples/piezo), whose numbers may be anything. A bench's knob
+    zero is not checked: its encoder may count from anywhere (nor are the probe's knob limits).
+    """
+    out = []
+    for axis, bend in meas_deg.items():
+        ang = cmap.angles[axis]
+        b_lo, b_hi = np.quantile(bend, [0.01, 0.99])
+        if b_hi - b_lo > ANGLE_SPAN_MAX_DEG:
+            out.append(f"{where}: read as {ang.unit}, column '{ang.column}' gives a bend ranging over "
+                       f"{b_hi - b_lo:.4g} deg ({b_lo:.4g} to {b_hi:.4g}), more than a bending section or joint turns "
+                       f"(at most {ANGLE_SPAN_MAX_DEG:g}): if it is an angle, is [angles.{axis}] unit right?")
+            continue
+        k = cmap.knobs.get(axis)
+        line = _knob_line(knob_deg[axis], bend) if k is not None else None
+        if line is not None and abs(line[2]) > BEND_PER_KNOB_MAX:
+            out.append(_gain_message(line, bend, axis, k, where, "if both are angles, ") +
+                       f", or [angles.{axis}] unit (read as {ang.unit})?")
+    return out
+
+
 def check_knob_to_bend(motor: dict, tip: np.ndarray, base: np.ndarray, good: np.ndarray, cmap: CsvMap,
                        where: str) -> None:
     """Refuse a knob whose bend moves more than :data:`BEND_PER_KNOB_MAX` degrees per knob degree
@@ -193,24 +249,17 @@ def check_knob_to_bend(motor: dict, tip: np.ndarray, base: np.ndarray, good: np.
                                                                            base[good, 4:]))))
     t_frame = tip[good, 0]
     inside = (t_frame >= motor["t_s"][0]) & (t_frame <= motor["t_s"][-1])
-    hints = {"deg": 'radians need unit = "rad"', "rad": "check the column holds this knob's angle",
-             "ticks": "check ticks_per_rev"}
     for dof, k in cmap.knobs.items():
         if dof not in bends or inside.sum() < MIN_ALIGNED_ROWS:
             continue
         knob = np.interp(t_frame[inside], motor["t_s"], motor[f"{dof}_pos_{probe.unit(dof)}"])
         bend = bends[dof][inside]
-        lo, hi = np.quantile(knob, [0.01, 0.99])
-        if hi - lo < KNOB_SPAN_MIN_DEG or abs(np.corrcoef(knob, bend)[0, 1]) < KNOB_BEND_MIN_CORR:
+        line = _knob_line(knob, bend)
+        if line is None:
             continue
-        gain, at_zero = (float(c) for c in np.polyfit(knob, bend, 1))
+        gain, at_zero = line[2:]
         if abs(gain) > BEND_PER_KNOB_MAX:
-            b_lo, b_hi = np.quantile(bend, [0.01, 0.99])
-            raise RunFormatError(
-                f"{where}: read as {k.unit}, column '{k.position}' turns the {dof} knob over {hi - lo:.3g} deg while "
-                f"the tip bends over {b_hi - b_lo:.3g} deg: {abs(gain):.0f} deg of bend per knob degree, where a "
-                f"tendon drive gives about 1 (at most {BEND_PER_KNOB_MAX:g}): is [knobs.{dof}] unit right? "
-                f"({hints[k.unit]})")
+            raise RunFormatError(_gain_message(line, bend, dof, k, where))
         if abs(at_zero) > ZERO_BEND_MAX_DEG:
             straight = -at_zero / gain
             key = "zero_ticks" if k.unit == "ticks" else "zero"
@@ -290,6 +339,6 @@ def reading_gaps(covered: np.ndarray, t_read: np.ndarray, t_motor: np.ndarray, l
     return ReadingGaps(int(left.sum()), int(lines[left][0]), float((after - before).max()))
 
 
-__all__ = ["BEND_PER_KNOB_MAX", "DISTANCE_RANGE_LENGTHS", "MAX_GAP_S", "MIN_ALIGNED_ROWS", "ReadingGaps",
-           "check_aligned_rows", "check_base_order", "check_distance", "check_knob_to_bend", "check_knobs", "check_rate",
-           "reading_gaps"]
+__all__ = ["ANGLE_SPAN_MAX_DEG", "BEND_PER_KNOB_MAX", "DISTANCE_RANGE_LENGTHS", "MAX_GAP_S", "MIN_ALIGNED_ROWS",
+           "ReadingGaps", "check_aligned_rows", "check_base_order", "check_distance", "check_knob_to_bend",
+           "check_knobs", "check_rate", "measured_angle_warnings", "reading_gaps"]

@@ -48,7 +48,7 @@ from __future__ import annotations
 import hashlib
 import time
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +58,8 @@ from endocal.errors import OutputExistsError, OutputPathError, RunFormatError
 from endocal.probe import TRANSLATION, ProbeConfig, load_probe
 from endocal.runs.aligned import CMD, CSV_SUFFIXES, MEAS, check_aligned, load_aligned, measured_at
 from endocal.runs.csvchecks import (MAX_GAP_S, ReadingGaps, check_aligned_rows, check_base_order, check_distance,
-                                    check_knob_to_bend, check_knobs, check_rate, reading_gaps)
+                                    check_knob_to_bend, check_knobs, check_rate, measured_angle_warnings,
+                                    reading_gaps)
 from endocal.runs.format import atomic_write_bytes, check_parent, parquet_bytes, prepare_output, software_versions
 from endocal.runs.imported import tracker_stream, write_imported_run
 from endocal.runs.textable import read_csv_table, sniff_delimiter
@@ -97,7 +98,8 @@ class CsvImportResult:
     neither a motor sample nor a frame; ``motor_rows_unaligned`` motor samples left out of the
     aligned table for want of a reading (in a gap of the readings over :data:`MAX_GAP_S`, or
     outside their span), ``longest_gap_s`` the longest such gap (s); each ``*_line`` is the first
-    such row's line in the log (None when there is none).
+    such row's line in the log (None when there is none). ``unit_warnings``: measured angles whose
+    numbers look like a unit mistake, one line each (:func:`~endocal.runs.csvchecks.measured_angle_warnings`).
     """
 
     run_dir: Path
@@ -121,6 +123,7 @@ class CsvImportResult:
     motor_rows_unaligned: int = 0
     motor_rows_unaligned_line: int | None = None
     longest_gap_s: float = 0.0
+    unit_warnings: tuple[str, ...] = ()
 
     @property
     def gap_warning(self) -> str | None:
@@ -158,6 +161,7 @@ class _Knob:
 @dataclass(frozen=True)
 class _Angle:
     column: str
+    unit: str
     factor: float
     direction: float
     zero: float
@@ -341,7 +345,7 @@ def _angles(d: dict, probe: ProbeConfig, where: str) -> dict[str, _Angle]:
         column = _column(a, "column", w, "the measured angle")
         unit = _choice(a.get("unit", "deg"), ("deg", "rad"), "angle unit", w)
         zero = _number(a, "zero", w, 0.0, "the reading when the section is straight")
-        out[axis] = _Angle(column, _SCALE[unit], _direction(a, w), zero)
+        out[axis] = _Angle(column, unit, _SCALE[unit], _direction(a, w), zero)
     return out
 
 
@@ -775,12 +779,13 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
                                int(unused.sum()), first(unused), gaps.rows, gaps.first_line, gaps.longest_s)
 
     if cmap.angles:
-        is_read, covered, table = _angles_table(df, t, motor, cmap, where)
+        is_read, covered, table, unit_warnings = _angles_table(df, t, motor, cmap, where)
         gaps = reading_gaps(covered, t[is_read], motor["t_s"], lines[is_motor])
         unused, invalid = ~(is_motor | incomplete | is_read), np.zeros(len(df), bool)
         _write_table(out, table, {"source": source, "backend": backend(unused, invalid, gaps), "command": command,
                                   "software": software_versions()})
-        return result(out, int(is_read.sum()), len(table), invalid, unused, gaps)
+        return replace(result(out, int(is_read.sum()), len(table), invalid, unused, gaps),
+                       unit_warnings=tuple(unit_warnings))
 
     tip, base, valid, is_frame = _frames(df, t, cmap, where)
     good = is_frame & valid.all(axis=1)
@@ -838,9 +843,10 @@ def _is_aligned_table(path: Path) -> bool:
 
 
 def _angles_table(df: pd.DataFrame, t: np.ndarray, motor: dict, cmap: CsvMap,
-                  where: str) -> tuple[np.ndarray, np.ndarray, pd.DataFrame]:
-    """Which rows hold every measured angle, which motor samples those readings cover, and the
-    aligned table of a log with measured angles (the covered motor samples).
+                  where: str) -> tuple[np.ndarray, np.ndarray, pd.DataFrame, list[str]]:
+    """Which rows hold every measured angle, which motor samples those readings cover, the
+    aligned table of a log with measured angles (the covered motor samples), and what looks like
+    a unit mistake in it (:func:`~endocal.runs.csvchecks.measured_angle_warnings`).
 
     The readings are interpolated onto the motor samples inside their span, across gaps of
     at most :data:`MAX_GAP_S` (as tracker frames are in :func:`endocal.runs.aligned.align`).
@@ -868,7 +874,9 @@ def _angles_table(df: pd.DataFrame, t: np.ndarray, motor: dict, cmap: CsvMap,
         table[col] = motor[col][ok]
     out = pd.DataFrame(table)
     check_aligned(out, where)
-    return is_read, ok, out
+    warnings = measured_angle_warnings({dof: motor[f"{dof}_pos_{probe.unit(dof)}"][ok] for dof in cmap.knobs},
+                                       {axis: table[axis + MEAS] for axis in cmap.angles}, cmap, where)
+    return is_read, ok, out, warnings
 
 
 def _write_table(out: Path, table: pd.DataFrame, provenance: dict) -> None:
