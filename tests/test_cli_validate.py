@@ -119,6 +119,11 @@ def test_bad_input_is_one_line_and_exit_2(drifting, tmp_path):
     _one_line_exit_2(_invoke(tmp / "m.json", csv, "--train", short), "never reverses")
     # nothing to validate on
     _one_line_exit_2(_invoke(tmp / "m.json"), "nothing to validate on")
+    # a previous model of the other axis to compare with (its error would be scored against this axis' angle)
+    save_model(make_model("linear", axis="ml").fit(axis_data(aligned, "ap")), tmp_path / "ml.json")  # a label is enough
+    _one_line_exit_2(_invoke(tmp / "m.json", csv, "--compare", tmp_path / "ml.json", "--json-out", tmp_path / "v.json"),
+                     "is a model of axis 'ml'")
+    assert not (tmp_path / "v.json").exists()
 
 
 def test_load_on_a_missing_or_constant_column_is_refused(drifting, tmp_path):

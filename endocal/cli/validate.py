@@ -261,6 +261,9 @@ def validate(
     effects = [e.label for e in model.effects_]
     old_path = compare_path if compare_path is not None else previous_model_path(model_path, effects)
     old = load_model(old_path) if old_path is not None else None
+    if compare_path is not None and old.axis != model.axis:
+        raise ModelError(f"--compare {compare_path} is a model of axis '{old.axis}', but {model_path} is of axis "
+                         f"'{model.axis}': compare with a model of the same axis")
     refit_paths, suffix = plan.train_paths, ""
     if refit_on == "all" and plan.train is not None:  # asked for: the validation data folded into the refits
         refit_paths = list(dict.fromkeys([*plan.train_paths, *(str(p) for p in data)]))
