@@ -211,3 +211,10 @@ def test_out_of_range_on_excite_model_errors_by_default_and_clamps_on_request(tm
     one_line_error(endocal("excite", "triangle", "--out-of-range", "clamp", "--out", tmp_path / "r3"), "--model")
     one_line_error(endocal("excite", "triangle", "--model", model, "--out-of-range", "wrap", "--out", tmp_path / "r4"),
                    "--out-of-range must be one of")
+    # a model of the axis the protocol holds still: nothing it moves would be compensated
+    other = json.loads(model.read_text())
+    other["axis"] = "ml"
+    (tmp_path / "ml.json").write_text(json.dumps(other))
+    one_line_error(endocal("excite", "triangle", "--model", tmp_path / "ml.json", "--axes", "ap", "--out",
+                           tmp_path / "r5"), "are for axis 'ml', but this protocol moves ap", "--axes ml")
+    assert not (tmp_path / "r5").exists()

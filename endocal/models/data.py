@@ -19,6 +19,18 @@ from endocal.models._kernels import count_reversals
 
 #: Extra column holding the other bending axis's knob command (deg), used by ``coupling``.
 OTHER_CMD = "other_cmd_deg"
+#: The least travel back from an extreme that counts as a direction reversal (deg), whatever the
+#: command's span: below it a command is not moving but rounding (an inverse model holding a knob
+#: still computes its goal to about 1e-12 deg, which counted as thousands of reversals).
+REVERSAL_TOL_MIN_DEG = 1e-6
+
+
+def reversals(u: np.ndarray, tol_frac: float = 0.01) -> int:
+    """Direction reversals of the command ``u`` (deg), ignoring wiggles below ``tol_frac`` of its
+    span or :data:`REVERSAL_TOL_MIN_DEG`."""
+    u = np.ascontiguousarray(u, dtype=float)
+    span = float(u.max() - u.min()) if u.size else 0.0
+    return int(count_reversals(u, max(tol_frac * span, REVERSAL_TOL_MIN_DEG))) if span > 0.0 else 0
 
 
 def _as_1d(name: str, values, n: int | None = None) -> np.ndarray:
@@ -203,14 +215,8 @@ class HysteresisData:
         return self.t_s
 
     def n_reversals(self, tol_frac: float = 0.01) -> int:
-        """Direction reversals of the command, ignoring wiggles below ``tol_frac`` of its span (per run)."""
-        total = 0
-        for s in self.run_slices():
-            u = self.cmd_deg[s]
-            span = float(u.max() - u.min())
-            if span > 0.0:
-                total += int(count_reversals(u, tol_frac * span))
-        return total
+        """Direction reversals of the command per run (:func:`reversals`), summed."""
+        return sum(reversals(self.cmd_deg[s], tol_frac) for s in self.run_slices())
 
     def fingerprint(self) -> list[dict]:
         """Per-run SHA-256 of the command, measurement and time bytes (recorded in model files)."""

@@ -5,8 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
+from endocal.models.data import reversals
 from endocal.runs.aligned import CMD, MEAS, load_aligned
 
 
@@ -50,14 +49,12 @@ def summarize(path: str | Path) -> DataSummary:
     axes = []
     for axis in data.axes:
         cmd, meas = data.table[axis + CMD].to_numpy(float), data.table[axis + MEAS].to_numpy(float)
-        direction = np.sign(np.diff(cmd))
-        direction = direction[direction != 0]
         axes.append(
             AxisSummary(
                 axis,
                 (float(cmd.min()), float(cmd.max())),
                 (float(meas.min()), float(meas.max())),
-                int(np.count_nonzero(np.diff(direction))),
+                reversals(cmd),
             )
         )
     meta = data.meta

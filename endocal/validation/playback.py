@@ -155,11 +155,16 @@ def task_space_trajectory(traj: Trajectory, probe: ProbeConfig, models: dict, pl
     Raises
     ------
     ModelError
-        A model for an axis the probe does not have.
+        A model for an axis the probe does not have, or none for an axis the protocol moves.
     """
     for axis in models:
         if axis not in probe.bending_axes:
             raise ModelError(f"a model is for axis {axis!r}, but probe '{probe.name}' has {', '.join(probe.bending_axes)}")
+    moving = [a for a in probe.bending_axes if a in traj.moving_dofs]
+    if moving and not set(models) & set(moving):
+        raise ModelError(f"the model(s) are for axis {', '.join(repr(a) for a in models)}, but this protocol moves "
+                         f"{', '.join(moving)}: give the model of a moving axis, or move this one "
+                         f"(excite --axes {next(iter(models))})")
     if planes is not None:
         traj = compensate_trajectory(traj, probe, planes)
     first, second = probe.bending_axes

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from endocal.models.data import OTHER_CMD, HysteresisData
+from endocal.models.data import OTHER_CMD, REVERSAL_TOL_MIN_DEG, HysteresisData
 from endocal.validation.data import is_constant, speed_dps
 from endocal.validation.metrics import ErrorMetrics, error_metrics
 
@@ -79,14 +79,15 @@ def turning_points(data: HysteresisData, tol_frac: float = 0.01) -> np.ndarray:
     """Indices (into the concatenated samples) of the command's direction reversals.
 
     A reversal is a turning point of the command that it then leaves by more than
-    ``tol_frac`` of its run's span (wiggles below that are ignored).
+    ``tol_frac`` of its run's span (wiggles below that, or below
+    :data:`~endocal.models.data.REVERSAL_TOL_MIN_DEG`, are ignored).
     """
     out = []
     for sl in data.run_slices():
         u = data.cmd_deg[sl]
-        tol = tol_frac * float(np.ptp(u))
-        if tol <= 0:
+        if not np.ptp(u) > 0:
             continue
+        tol = max(tol_frac * float(np.ptp(u)), REVERSAL_TOL_MIN_DEG)
         ext_i, direction = 0, 0
         for k in range(1, u.size):
             if direction == 0:
