@@ -89,3 +89,18 @@ def test_several_runs_restart_operator_state():
     joint = m.predict([a, b])
     assert np.array_equal(joint[1], m.predict(b))  # not m.predict(u)[300:]
     assert not np.allclose(joint[1], m.predict(u)[300:])
+
+
+def test_reversals_ignore_rounding_and_wiggles_but_count_each_turn():
+    """A knob held still by an inverse model (its goal computed to ~1e-12 deg) does not reverse;
+    a back-and-forth sweep with encoder noise reverses once per turn, as every command counts."""
+    from endocal.models.data import reversals
+
+    rng = np.random.default_rng(0)
+    held = 1e-12 * rng.standard_normal(2000)
+    assert reversals(held) == 0
+    t = np.linspace(0.0, 1.0, 2001)
+    sweep = 40.0 * np.sin(2 * np.pi * t) + 0.05 * rng.standard_normal(t.size)  # 0 -> +40 -> -40 -> 0
+    assert reversals(sweep) == 2
+    d = HysteresisData(np.concatenate([sweep, sweep]), meas_deg=np.zeros(2 * t.size), run_starts=np.array([0, t.size]))
+    assert d.n_reversals() == 4
