@@ -256,6 +256,21 @@ def test_a_sheath_curved_differently_between_the_records_is_named(sheaths):
     assert not any("no extra column" in n for n in without["notes"]), without["notes"]
 
 
+def test_a_friction_change_the_logged_condition_does_not_show_asks_for_what_is_not_logged(sheaths, tmp_path):
+    """The sheath curved twice as much but the log says 180 in both records: the experiment names
+    the logged column as unchanged instead of asking to log one (e.g. the very column it has)."""
+    from endocal.runs.aligned import load_aligned
+
+    table = load_aligned(sheaths / "w360b").table.copy()
+    table["sheath_wrap_deg"] = 180.0
+    table.to_csv(tmp_path / "unlogged.csv", index=False)
+    d = _validate_json(tmp_path, sheaths / "bs.json", tmp_path / "unlogged.csv")
+    load = [p for p in d["pointers"] if p["effect"] == "load"]
+    assert load, d["pointers"]
+    assert "'sheath_wrap_deg' is 180 in both records, so what changed is not what is logged" in load[0]["experiment"]
+    assert "e.g. sheath_wrap_deg" not in load[0]["experiment"]
+
+
 def test_a_zero_moved_between_the_records_is_named(sine_sweeps, tmp_path):
     """The base sensor re-seated between the records: the second sweep's angle is 3 deg off throughout."""
     tmp = sine_sweeps

@@ -36,7 +36,8 @@ from endocal.validation.suspects import (
     scan_split,
     split_errors,
 )
-from endocal.validation.shift import RecordShift, covariate_changes, moving_speed_dps, record_shift
+from endocal.validation.shift import (RecordShift, covariate_changes, covariates_held, moving_speed_dps,
+                                     record_shift)
 from endocal.validation.verdict import Pointer, residual_pointers, shift_pointers
 
 
@@ -369,7 +370,8 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
         shift = record_shift(model, data)
         named = {p.effect for p in pointers}
         speeds = (moving_speed_dps(est), moving_speed_dps(data))
-        pointers += [p for p in shift_pointers(shift, scan, covariate_changes(est, data), speeds)
+        pointers += [p for p in shift_pointers(shift, scan, covariate_changes(est, data), speeds,
+                                               covariates_held(est, data, axes_all))
                      if p.effect not in named]
     if est is not None:
         est_pred, _, est_starts = predict_scored(model, est)

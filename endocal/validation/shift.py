@@ -33,6 +33,7 @@ with speed, which a record at one speed cannot pin down; the verdict then names 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -41,6 +42,7 @@ from scipy.optimize import minimize_scalar
 from endocal.models import HysteresisData
 from endocal.models.base import HysteresisModel
 from endocal.models.start import with_lead_ins
+from endocal.probe import ROTATION, TRANSLATION
 from endocal.validation.data import speed_dps
 from endocal.validation.regimes import turning_points
 from endocal.validation.suspects import columns_read, predict_extrapolated, predict_scored
@@ -144,6 +146,24 @@ def covariate_changes(train: HysteresisData, data: HysteresisData) -> list[str]:
         tol = 1e-9 * max(1.0, abs(lo), abs(hi))
         if v_lo > hi + tol or v_hi < lo - tol:
             out.append(f"'{name}' is {_span(lo, hi)} in the estimation data and {_span(v_lo, v_hi)} here")
+    return out
+
+
+def covariates_held(train: HysteresisData, data: HysteresisData, axes: Sequence[str] = ()) -> list[str]:
+    """Extra columns of both records that hold one nonzero value, the same in both, in words: a
+    condition the lab logs that did not change between them (so a change of friction was something
+    else). The drives' own columns (``<axis>_...`` of ``axes`` and the probe's translation and
+    rotation, the other axis) are no condition, and a column that is 0 throughout is more often a
+    signal the rig did not log than a condition."""
+    drives = tuple(f"{a}_" for a in (*axes, TRANSLATION, ROTATION)) + ("other_",)
+    out = []
+    for name in sorted(set(train.extras) & set(data.extras)):
+        if name.startswith(drives):
+            continue
+        x_est, x_val = np.asarray(train.extras[name], float), np.asarray(data.extras[name], float)
+        if (x_est.size and x_val.size and np.ptp(x_est) == 0 and np.ptp(x_val) == 0 and x_est[0] == x_val[0]
+                and x_est[0] != 0):
+            out.append(f"'{name}' is {x_est[0]:.4g} in both records")
     return out
 
 

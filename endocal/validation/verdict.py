@@ -191,8 +191,8 @@ SHIFT_CUT = 0.7
 SPEED_RATIO = 1.5
 
 
-def shift_pointers(shift, scan, covariates: list[str] = (), speeds_dps: tuple[float, float] | None = None
-                   ) -> list[Pointer]:
+def shift_pointers(shift, scan, covariates: list[str] = (), speeds_dps: tuple[float, float] | None = None,
+                   held: list[str] = ()) -> list[Pointer]:
     """A condition that changed between the estimation and validation records, as a pointer.
 
     Parameters
@@ -206,6 +206,9 @@ def shift_pointers(shift, scan, covariates: list[str] = (), speeds_dps: tuple[fl
     speeds_dps : (float, float), optional
         Typical knob speed while moving in the estimation and the validation record
         (:func:`~endocal.validation.shift.moving_speed_dps`).
+    held : list of str
+        :func:`~endocal.validation.shift.covariates_held`, in words: logged conditions that did
+        not change, so the experiment does not ask to log one.
 
     Returns
     -------
@@ -264,6 +267,10 @@ def shift_pointers(shift, scan, covariates: list[str] = (), speeds_dps: tuple[fl
         column = covariates[0].split("'")[1]
         experiment = (f"record two or more conditions with '{column}' logged as here, fit load:{column} on them and "
                       "validate on another")
+    elif held:
+        experiment = (f"{'; '.join(held)}, so what changed is not what is logged: log that condition (tendon "
+                      "pretension, insertion-tube shape, lubrication) as a column of every record, record two or "
+                      "more conditions, fit load:COLUMN on them and validate on another")
     else:
         experiment = ("log the condition as a column of every record (e.g. sheath_wrap_deg), record two or more "
                       "conditions, fit load:COLUMN on them and validate on another")
