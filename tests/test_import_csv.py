@@ -409,6 +409,19 @@ def test_the_command_a_draft_prints_for_an_angles_log_runs_as_printed(bench_log,
     np.testing.assert_allclose(b["ap_cmd_deg"], a["ap_cmd_deg"][:len(b)], atol=1e-9)
 
 
+def test_a_draft_of_a_log_with_a_repeated_stamp_prints_a_command_with_dedupe(bench_log, tmp_path):
+    """A ROS bridge's row written twice: the draft says so and its `then:` command imports (without
+    --dedupe the import would stop at the repeated stamp)."""
+    log = pd.read_csv(bench_log[0])
+    pd.concat([log.iloc[:11], log.iloc[10:]]).to_csv(tmp_path / "twice.csv", index=False)
+    _, stdout = _draft(tmp_path / "twice.csv", tmp_path, "twice.toml")
+    assert "1 row(s) repeat an earlier row's time stamp" in stdout, stdout
+    argv = _then(stdout)
+    assert argv[-1] == "--dedupe", argv
+    proc = endocal(*argv)
+    assert proc.returncode == 0 and "--dedupe dropped 1 row(s)" in proc.stderr, proc.stderr
+
+
 def test_a_draft_that_could_not_place_a_role_says_so_and_the_import_refuses_it(tmp_path):
     t = np.arange(200) * 0.01
     pd.DataFrame({"a": t, "b": np.sin(t), "c": np.cos(t)}).to_csv(tmp_path / "opaque.csv", index=False)

@@ -97,5 +97,10 @@ def _draft(log: Path, path: Path, force: bool) -> None:
         out.print(f"  FILL IN {u}: no column looked like it", markup=False)
     # an [angles] map imports to an aligned table (a .parquet or .csv file), a map of EM poses to a run folder
     target = shlex.quote(str(import_out(log, d.angles)))
-    out.print(f"then: endocal import csv {shlex.quote(str(log))} --map {shlex.quote(str(path))} --out {target}",
+    dedupe = ""
+    if d.repeated_stamps:
+        out.print(f"  note: {d.repeated_stamps} row(s) repeat an earlier row's time stamp (ROS bridges write them, and "
+                  "a motor tick and a frame may share a millisecond): the import needs --dedupe", markup=False)
+        dedupe = " --dedupe"
+    out.print(f"then: endocal import csv {shlex.quote(str(log))} --map {shlex.quote(str(path))} --out {target}{dedupe}",
               markup=False)

@@ -83,6 +83,8 @@ class Draft:
     unmatched: list[str] = field(default_factory=list)
     #: the map gives measured ``[angles]`` (the import writes an aligned table), not EM poses (a run folder)
     angles: bool = False
+    #: rows whose time stamp an earlier row has already (the import refuses them without --dedupe)
+    repeated_stamps: int = 0
 
 
 def import_out(log: str | Path, angles: bool) -> Path:
@@ -237,6 +239,7 @@ class _Drafter:
         self.roles: dict[str, str] = {}
         self.unmatched: list[str] = []
         self.taken: set[str] = set()
+        self.repeated_stamps = 0
 
     def draft(self) -> Draft:
         w = self.w
@@ -263,7 +266,8 @@ class _Drafter:
             w.lines[5:5] = ["# further numeric columns, carried into the table (covariates for load:COLUMN): drop "
                             "what is not one", "extras = [" + "".join(f"\n    {_toml(c)}," for c in extras) + "\n]"]
             self.roles["extras"] = ", ".join(extras)
-        return Draft("\n".join(w.lines) + "\n", self.roles, w.checks, self.unmatched, angles=not poses)
+        return Draft("\n".join(w.lines) + "\n", self.roles, w.checks, self.unmatched, angles=not poses,
+                     repeated_stamps=self.repeated_stamps)
 
     def _time(self) -> None:
         df, w = self.df, self.w
@@ -281,6 +285,7 @@ class _Drafter:
             self.roles["time"] = "none (sample_rate_hz)"
             return
         self.taken.add(col)
+        self.repeated_stamps = int(df[col].dropna().duplicated().sum())
         unit, why = _time_unit(df, col)
         w.key("column", col, "the clock column", check=rising, where="[time] ")
         w.key("unit", unit, "s, ms, us, ns or datetime", check=why, where="[time] ")
