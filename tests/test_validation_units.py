@@ -305,3 +305,22 @@ def test_a_start_no_history_explains_is_not_called_nothing_missing():
     assert not res.clean and res.unexplained.startswith("the validation record's start is not explained"), \
         (res.unexplained, res.notes)
     assert any("No start tried predicts it" in n for n in res.notes)
+
+
+def test_time_quarters_of_several_records_are_quarters_of_each():
+    """Two records each restart the clock: a quarter of their concatenation spanned both, its
+    times out of order ("quarter 4 (15..60 s)" printed before "quarter 2 (45..90 s)")."""
+    from endocal.validation.regimes import regime_masks
+
+    t = np.arange(400) * 0.1
+    cmd = 30.0 * np.sin(2 * np.pi * t / 20.0)
+    one = HysteresisData(cmd, meas_deg=cmd, t_s=t)
+    two = HysteresisData(np.concatenate([cmd, cmd[:200]]), meas_deg=np.concatenate([cmd, cmd[:200]]),
+                         t_s=np.concatenate([t, t[:200]]), run_starts=np.array([0, 400]))
+    single = [(name, m) for kind, name, m in regime_masks(one) if kind == "time"]
+    assert [name for name, _ in single] == ["quarter 1 (0..9.9 s)", "quarter 2 (10..19.9 s)", "quarter 3 (20..29.9 s)",
+                                            "quarter 4 (30..39.9 s)"]
+    both = [(name, m) for kind, name, m in regime_masks(two) if kind == "time"]
+    assert [name for name, _ in both] == [f"quarter {q} of each of the 2 records" for q in (1, 2, 3, 4)]
+    # each quarter holds a quarter of every record: 100 + 50 samples
+    assert all(m.sum() == 150 and m[:400].sum() == 100 for _, m in both)

@@ -175,12 +175,22 @@ def regime_masks(data: HysteresisData, *, reversal_frac: float = 0.1, hold_min_s
         out += [("other axis", f"other knob {name}", m)
                 for name, m in _bands(data.extras[OTHER_CMD], np.ones(n, bool), ".3g", "deg")]
     t = data.t_s if data.t_s is not None else np.arange(n, dtype=float)
-    idx = np.arange(n)
+    unit_t = "s" if data.t_s is not None else "samples"
+    runs = data.run_slices()
     for q in range(4):
-        a, b = q * n // 4, (q + 1) * n // 4
-        if b > a:
-            unit_t = "s" if data.t_s is not None else "samples"
-            out.append(("time", f"quarter {q + 1} ({t[a]:.4g}..{t[b - 1]:.4g} {unit_t})", (idx >= a) & (idx < b)))
+        # quarters of each record (several records each restart the clock: one quarter of the
+        # concatenation would span records, its times out of order)
+        m = np.zeros(n, bool)
+        for sl in runs:
+            k = sl.stop - sl.start
+            m[sl.start + q * k // 4: sl.start + (q + 1) * k // 4] = True
+        if not m.any():
+            continue
+        if len(runs) == 1:
+            a, b = np.flatnonzero(m)[[0, -1]]
+            out.append(("time", f"quarter {q + 1} ({t[a]:.4g}..{t[b]:.4g} {unit_t})", m))
+        else:
+            out.append(("time", f"quarter {q + 1} of each of the {len(runs)} records", m))
     return out
 
 
