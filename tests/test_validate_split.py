@@ -380,7 +380,8 @@ def test_the_refit_folds_the_validation_data_in_only_when_asked(sine_sweeps):
     default = shlex.split(_validate_json(tmp, tmp / "pe.json", tmp / "val")["suspects"][0]["command"])
     assert str(tmp / "val") not in default
     out = tmp / "all.json"
-    _run("validate", tmp / "pe.json", tmp / "val", "--refit-on", "all", "--json-out", out)
+    res = _run("validate", tmp / "pe.json", tmp / "val", "--refit-on", "all", "--json-out", out)
+    assert "then validate the new model on a third record" in res.stdout, res.stdout
     cmd = shlex.split(json.loads(out.read_text())["suspects"][0]["command"])
     assert cmd[3:5] == [str(tmp / "est"), str(tmp / "val")], cmd
     # another model than the one the scan scored: not written under that one's name

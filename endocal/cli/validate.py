@@ -79,8 +79,9 @@ def _scheme_word(result) -> str:
     return "in-sample" if result.in_sample else "validation"
 
 
-def render(result) -> None:
-    """Print the terminal summary of a :class:`~endocal.validation.offline.ValidationResult`."""
+def render(result, folded: bool = False) -> None:
+    """Print the terminal summary of a :class:`~endocal.validation.offline.ValidationResult` (``folded``: its
+    refit commands fold the validation data in, --refit-on all)."""
     m = result.model
     scan = result.scan
     out.print(f"[bold]{m['label']}[/] on axis {result.axis}: {sum(d['n_samples'] for d in result.data)} samples "
@@ -145,8 +146,9 @@ def render(result) -> None:
             out.print("[bold]Next:[/] refit on data that covers this record's commands (most of it lies beyond the "
                       "model's range, where the candidates above are scored on an extrapolation), then validate again")
         else:
-            out.print("[bold]Next:[/] refit with the first " + ("candidate" if thin else "suspect") +
-                      ", then validate the new model:")
+            then = ("then validate the new model on a third record (this one is in its fit now)" if folded else
+                    "then validate the new model")
+            out.print("[bold]Next:[/] refit with the first " + ("candidate" if thin else "suspect") + f", {then}:")
             out.print("  " + result.suspects[0].command, markup=False)
     elif scan.scheme == "none":
         out.print("[bold]Which effect is missing:[/] not tested: " + escape(scan.scheme_reason))
@@ -277,7 +279,7 @@ def validate(
         d["compare"]["path"] = str(old_path)
     if emit_json(d, as_json, json_out):
         return
-    render(result)
+    render(result, folded=bool(suffix))
     if old_path is not None and compare_path is None:
         err.print(f"compared with {old_path} (the model this one was refitted from)")
 
