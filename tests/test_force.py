@@ -16,8 +16,10 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 
 import numpy as np
+import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
@@ -150,6 +152,16 @@ def test_bad_input_is_one_line_and_exit_2(calibrated, tmp_path):
         assert not (tmp_path / "bad").exists()
     res = cli("fit", "force", runs[0], runs[2], "--out", tmp_path / "f.json")
     assert res.exit_code == 2 and "loaded run" in res.output
+    # a run without the knob motor's current (a CSV log imported without one has 0 throughout)
+    for i in (0, 2):
+        shutil.copytree(runs[i], tmp_path / f"nocur{i}")
+        table = pd.read_parquet(tmp_path / f"nocur{i}" / "aligned.parquet")
+        table["ap_current_ma"] = 0.0
+        table.to_parquet(tmp_path / f"nocur{i}" / "aligned.parquet")
+    res = cli("fit", "force", tmp_path / "nocur0", tmp_path / "nocur2", "--out", tmp_path / "f.json")
+    assert res.exit_code == 2 and "'ap_current_ma' is 0 throughout" in res.output and "[knobs.ap] current" in \
+        res.output, res.output
+    assert not (tmp_path / "f.json").exists()
 
 
 def test_guard_refuses_nonsense_directly(calibrated):

@@ -304,6 +304,11 @@ def read_trial(run_dir: str | Path, axis: str | None = None, torque_constant_nm_
     for col in (f"{axis}_pos_deg", f"{axis}_vel_degps", f"{axis}_current_ma"):
         if col not in tab.columns:
             raise RunFormatError(f"{run_dir}: column '{col}' is missing; fit force needs the knob's position, speed and current")
+    if not tab[f"{axis}_current_ma"].to_numpy(float).any():
+        # a motor's current is never exactly 0 throughout a run that moves: a log without one
+        # (endocal import csv fills an unmapped current with 0)
+        raise RunFormatError(f"{run_dir}: column '{axis}_current_ma' is 0 throughout: fit force needs the knob motor's "
+                             f"current (when importing a CSV log, map it: [knobs.{axis}] current = COLUMN)")
     first, second = axes[0], axes[1]
     bx, by = bend_from_angles_rad(data.meas_deg(first), data.meas_deg(second))
     true_f = tab["contact_force_n"].to_numpy(float) if "contact_force_n" in tab.columns else None
