@@ -135,6 +135,10 @@ def test_train_equal_to_the_validation_data_warns_the_scores_are_in_sample(sine_
     assert any(ln.startswith("warning: the estimation data includes the record validated here") for ln in lines)
     assert not any("validation RMSE" in ln for ln in lines), res.stdout
     assert any(ln.startswith("in-sample RMSE") for ln in lines), res.stdout
+    # its refit commands fit the validated record too: not under the name of a refit on estimation data
+    d = _validate_json(tmp, tmp / "pe.json", tmp / "est", "--train", tmp / "est")
+    outs = [shlex.split(s["command"]) for s in d["suspects"]]
+    assert outs and all(c[c.index("--out") + 1].endswith("-insample.json") for c in outs), outs
     # a model refitted on estimation + validation data (--refit-on all) finds both in its file
     _run("fit", "hysteresis", tmp / "est", tmp / "val", "--axis", "ap", "--model", "linear", "--out", tmp / "both.json")
     d = _validate_json(tmp, tmp / "both.json", tmp / "val")

@@ -30,11 +30,12 @@ _UNITS = {"rmse_deg": "deg", "mae_deg": "deg", "max_deg": "deg", "median_deg": "
 
 def previous_model_path(model_path: Path, effects: list[str]) -> Path | None:
     """The model this one was refitted from, by the naming of the refit command (``M-EFFECT.json``, or
-    ``M-EFFECT-all.json`` under ``--refit-on all``, from ``M.json``)."""
+    ``M-EFFECT-all.json`` under ``--refit-on all``, ``M-EFFECT-insample.json`` from estimation data
+    that holds the validated record, from ``M.json``)."""
     name = model_path.name
     if not name.endswith(".json"):
         return None
-    stem = name[:-5].removesuffix("-all")
+    stem = name[:-5].removesuffix("-all").removesuffix("-insample")
     for e in effects:
         tag = "-" + e.replace(":", "-")
         if stem.endswith(tag):

@@ -342,6 +342,9 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
         if same:
             notes.append("the estimation data includes the validation data itself: the scores are in-sample and "
                          "flatter the model; validate on a record the model was not fitted on")
+            # the refit is fitted on the validated record too: not under the name a refit on
+            # estimation data alone would take (that model, if made, is the one to keep)
+            refit_suffix = refit_suffix or "-insample"
         scan = scan_split(model, est, data, alpha=alpha, min_gain_pct=min_gain_pct, load_columns=load_columns,
                           bending_axes=axes_all, max_samples=max_scan_samples, data_paths=list(train_paths),
                           model_path=model_path, refit_args=refit_args,
