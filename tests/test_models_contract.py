@@ -50,6 +50,9 @@ def test_contract(case, data, fitted, tmp_path):
     y_des = m.predict(0.8 * runs[0].cmd_deg)
     u = m.inverse(y_des)
     assert np.max(np.abs(m.predict(u) - y_des)) < 1e-8
+    # a held target holds the command (test_a_held_target_holds_the_command for a flat band)
+    y_hold = np.concatenate([y_des[:300], np.full(200, y_des[299])])
+    assert np.ptp(m.inverse(y_hold)[300:]) < 1e-9
     # the streaming compensator gives the batch inverse sample by sample
     comp = m.compensator()
     streamed = np.array([comp.step(v) for v in y_des[:400]])
@@ -199,3 +202,19 @@ def test_a_fit_from_a_smaller_model_is_never_worse_than_that_model(monkeypatch):
     monkeypatch.setattr(type(back), "fit", lambda self, *a, **k: fits.append(1) or fit(self, *a, **k))
     back.fit_from(bigger, d)
     assert back.fit_report_.rmse_deg > bigger.fit_report_.rmse_deg and len(fits) == 1
+
+
+@pytest.mark.parametrize("base", ["linear", "bspline"])
+def test_a_held_target_holds_the_command(data, base):
+    """A direction-dependent model with a flat backlash band (transition slope 0, as fits of slack
+    reach): a rounding error of 1e-15 deg in the present output sent the inverse across the band,
+    and a held target made the command jump between the branches every sample (17.8 deg at 100 Hz
+    on the demo's B-spline, played by `excite --model` while the other knob held still)."""
+    runs, _ = data
+    m = make_model(base, axis="lr", fixed={f"{base}_transition_slope": 0.0}).fit(runs)
+    y_des = m.predict(0.8 * runs[0].cmd_deg)
+    for held in (0.0, float(y_des[299])):
+        y = np.concatenate([y_des[:300], np.full(300, held)])
+        u = m.inverse(y)
+        assert np.ptp(u[301:]) < 1e-9, np.unique(np.round(u[301:], 6))
+        assert np.max(np.abs(m.predict(u) - y)) < 1e-8

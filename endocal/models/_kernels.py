@@ -242,17 +242,25 @@ def _gplay_g(u, u_prev, y_prev, slope, t_up, c_up, t_dn, c_dn, deg):
     return y
 
 
+#: Relative difference between a target and the present output below which the inverse holds
+#: the command (:func:`gplay_inverse_step`): rounding, not a request to move.
+HOLD_TOL = 1e-9
+
+
 @njit(cache=True)
 def gplay_inverse_step(target, u_prev, y_prev, slope, t_up, c_up, t_dn, c_dn, deg, u_min, u_max):
     """Command ``u`` whose generalised-play output from state (``u_prev``, ``y_prev``) is ``target``.
 
     The step map is non-decreasing in ``u``, so bisection is exact to the tolerance;
     among equal outputs the command closest to ``u_prev`` is returned (no needless
-    motion inside the backlash band). Unreachable targets give the nearest bound.
-    Returns ``(u, y)``.
+    motion inside the backlash band). A target within :data:`HOLD_TOL` (relative) of the
+    present output is the present output: with a flat backlash band (slope 0) a rounding
+    error of 1e-15 deg would otherwise send the command across the band, and a held target
+    made it jump between the branches every sample (17.8 deg at 100 Hz on the demo's
+    B-spline). Unreachable targets give the nearest bound. Returns ``(u, y)``.
     """
     g0 = _gplay_g(u_prev, u_prev, y_prev, slope, t_up, c_up, t_dn, c_dn, deg)
-    if g0 == target:
+    if abs(g0 - target) <= HOLD_TOL * max(1.0, abs(target)):
         return u_prev, g0
     if target > g0:
         a = u_prev
