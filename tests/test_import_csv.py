@@ -428,7 +428,14 @@ def test_a_draft_that_could_not_place_a_role_says_so_and_the_import_refuses_it(t
     draft, stdout = _draft(tmp_path / "opaque.csv", tmp_path)
     assert "FILL IN [knobs.ap] position" in stdout and "FILL IN [angles.ap] column" in stdout
     one_line_exit_2(endocal("import", "csv", tmp_path / "opaque.csv", "--map", draft, "--out", tmp_path / "r.csv"),
-                    "a column is still 'FILL IN' (a drafted map)")
+                    "is still 'FILL IN' (a drafted map)")
+    # with the columns named the units are still to give: no unit is guessed for a column no name placed
+    text = draft.read_text().replace('position = "FILL IN"', 'position = "b"').replace('column = "FILL IN"',
+                                                                                       'column = "c"')
+    draft.write_text(text.replace('"b",', "").replace('"c",', ""))
+    one_line_exit_2(endocal("import", "csv", tmp_path / "opaque.csv", "--map", draft, "--out", tmp_path / "r.csv"),
+                    "[knobs.ap]: the unit is still 'FILL IN' (a drafted map)", "deg, rad, ticks")
+    assert not (tmp_path / "r.csv").exists()
     # the options: a draft imports nothing, an import needs a map and an output, a draft is not overwritten
     one_line_exit_2(endocal("import", "csv", tmp_path / "opaque.csv", "--draft-map", tmp_path / "x.toml", "--map",
                             draft), "--draft-map writes a map and imports nothing")

@@ -252,7 +252,15 @@ def _table(d, key: str, where: str, known: set[str]) -> dict:
     return v
 
 
+def _unfilled(where: str, role: str) -> RunFormatError:
+    return RunFormatError(f"{where}: {role}: a column is still '{UNFILLED}' (a drafted map): name the log's column "
+                          "for that role, or delete the role if the log has none")
+
+
 def _choice(value, choices, what: str, where: str):
+    if value == UNFILLED:
+        raise RunFormatError(f"{where}: the {what} is still '{UNFILLED}' (a drafted map): give the column's "
+                             f"{what}, one of {', '.join(map(str, choices))}")
     if value not in choices:
         raise RunFormatError(f"{where}: unknown {what} {value!r}; use one of {', '.join(map(str, choices))}")
     return value
@@ -343,6 +351,8 @@ def _angles(d: dict, probe: ProbeConfig, where: str) -> dict[str, _Angle]:
                                  f"(it has {', '.join(probe.bending_axes)})")
         a = _table(angles_d, axis, f"{where} [angles]", _ANGLE_KEYS)
         column = _column(a, "column", w, "the measured angle")
+        if column == UNFILLED:  # the column before its unit
+            raise _unfilled(where, f"[angles.{axis}] column")
         unit = _choice(a.get("unit", "deg"), ("deg", "rad"), "angle unit", w)
         zero = _number(a, "zero", w, 0.0, "the reading when the section is straight")
         out[axis] = _Angle(column, unit, _SCALE[unit], _direction(a, w), zero)
@@ -412,6 +422,8 @@ def read_map(path: str | Path) -> CsvMap:
         bad = sorted(set(k) - _KNOB_KEYS)
         if bad:
             raise RunFormatError(f"{w}: unknown key(s) {', '.join(bad)}; it takes {', '.join(sorted(_KNOB_KEYS))}")
+        if k.get("position") == UNFILLED:  # the column before its unit
+            raise _unfilled(where, f"[knobs.{dof}] position")
         unit = _choice(k.get("unit", "deg"), ANGLE_UNITS if dof != TRANSLATION else ("mm", "m"), "unit", w)
         if unit == "ticks" and ("zero_ticks" not in k or "ticks_per_rev" not in k):
             raise RunFormatError(f"{w}: unit 'ticks' needs zero_ticks and ticks_per_rev (e.g. 2048 and 4096)")
@@ -442,8 +454,7 @@ def read_map(path: str | Path) -> CsvMap:
                   _extras(d, where), where, d)
     unfilled = [role for role, c in cmap.roles() if c == UNFILLED]
     if unfilled:
-        raise RunFormatError(f"{where}: {unfilled[0]}: a column is still '{UNFILLED}' (a drafted map): name the log's "
-                             "column for that role, or delete the role if the log has none")
+        raise _unfilled(where, unfilled[0])
     valid = {p.valid for p in (tip, base) if p is not None and p.valid}  # one flag may serve both sensors
     named = [(role, c) for role, c in cmap.roles() if c not in valid]
     cols = [c for _, c in named]

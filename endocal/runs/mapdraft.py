@@ -341,7 +341,7 @@ class _Drafter:
             if axis not in found and f"[knobs.{axis}] position" not in self.unmatched:
                 self.w.table(f"knobs.{axis}")
                 self.w.key("position", FILL, "the knob's measured position: no column looked like it")
-                self.w.key("unit", "deg", "deg, rad or ticks")
+                self.w.key("unit", FILL, "deg, rad or ticks: that column's unit")
                 self.unmatched.append(f"[knobs.{axis}] position")
         return found
 
@@ -354,7 +354,7 @@ class _Drafter:
         self.w.table(f"knobs.{axes[0]}", "the one driven axis of a bench is the probe's first")
         if pos is None:
             self.w.key("position", FILL, "the driving knob or pulley, as its encoder reads it")
-            self.w.key("unit", "deg", "deg, rad or ticks")
+            self.w.key("unit", FILL, "deg, rad or ticks: that column's unit")
             self.unmatched.append(f"[knobs.{axes[0]}] position")
             return []
         self._knob(axes[0], pos, None if goal == pos else goal, None,
@@ -396,6 +396,10 @@ class _Drafter:
             w.table(f"angles.{axis}", "the measured bending angle (an encoder, a camera)")
             w.key("column", col or FILL, "")
             if col is None:
+                # no unit guessed for a column nobody named: one read wrongly imports at 57 times the angle
+                w.key("unit", FILL, "deg or rad: that column's unit")
+                w.key("zero", 0.0, "the reading when the section is straight (same unit)")
+                w.key("direction", 1, "1, or -1 when the sensor counts the other way")
                 self.unmatched.append(f"[angles.{axis}] column (or [tip] and [base] EM poses)")
                 continue
             measured.remove(col)
