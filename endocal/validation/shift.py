@@ -42,8 +42,7 @@ from scipy.optimize import minimize_scalar
 from endocal.models import HysteresisData
 from endocal.models.base import HysteresisModel
 from endocal.models.start import with_lead_ins
-from endocal.probe import ROTATION, TRANSLATION
-from endocal.validation.data import speed_dps
+from endocal.validation.data import load_candidates, speed_dps
 from endocal.validation.regimes import turning_points
 from endocal.validation.suspects import columns_read, predict_extrapolated, predict_scored
 
@@ -150,20 +149,16 @@ def covariate_changes(train: HysteresisData, data: HysteresisData) -> list[str]:
 
 
 def covariates_held(train: HysteresisData, data: HysteresisData, axes: Sequence[str] = ()) -> list[str]:
-    """Extra columns of both records that hold one nonzero value, the same in both, in words: a
-    condition the lab logs that did not change between them (so a change of friction was something
-    else). The drives' own columns (``<axis>_...`` of ``axes`` and the probe's translation and
-    rotation, the other axis) are no condition, and a column that is 0 throughout is more often a
-    signal the rig did not log than a condition."""
-    drives = tuple(f"{a}_" for a in (*axes, TRANSLATION, ROTATION)) + ("other_",)
+    """Conditions the lab logs that did not change between the records, in words: the extra columns
+    both hold constant (:func:`~endocal.validation.data.load_candidates`'s constant ones, so not
+    the drives' own readings) at the same nonzero value (a column that is 0 throughout is more
+    often a signal the rig did not log than a condition). A change of friction was something else."""
+    held = set(load_candidates(train, axes)[1]) & set(load_candidates(data, axes)[1])
     out = []
-    for name in sorted(set(train.extras) & set(data.extras)):
-        if name.startswith(drives):
-            continue
-        x_est, x_val = np.asarray(train.extras[name], float), np.asarray(data.extras[name], float)
-        if (x_est.size and x_val.size and np.ptp(x_est) == 0 and np.ptp(x_val) == 0 and x_est[0] == x_val[0]
-                and x_est[0] != 0):
-            out.append(f"'{name}' is {x_est[0]:.4g} in both records")
+    for name in sorted(held):
+        a, b = float(train.extras[name][0]), float(data.extras[name][0])
+        if a != 0.0 and abs(a - b) <= 1e-9 * abs(a):
+            out.append(f"'{name}' is {a:.4g} in both records")
     return out
 
 
