@@ -1,16 +1,16 @@
-# Two commands set everything up on a fresh machine: `make demo` and `make test`.
+# Two commands set everything up on a fresh machine: `make demo` and `make test`; `make docs` builds the site.
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 DEMO   := demo-out
 
-.PHONY: install test demo bench clean data-samples
+.PHONY: install test demo bench docs clean data-samples
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test,ros,aurora]'
+	$(BIN)/python -m pip install --quiet -e '.[test,ros,aurora,docs]'
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -25,9 +25,15 @@ demo: $(STAMP)
 bench: $(STAMP)
 	@for b in bench/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
 
+# The documentation site into site/ (open site/index.html; mkdocs.yml, docs/). Without the docs
+# extra installed: one line saying so, exit code 2.
+docs: $(STAMP)
+	@$(BIN)/python scripts/check_docs_extra.py
+	NO_MKDOCS_2_WARNING=1 $(BIN)/python -m mkdocs build --strict --site-dir site
+
 # Regenerates the small simulator runs in data_samples/ (see data_samples/README.md).
 data-samples: $(STAMP)
 	$(BIN)/python data_samples/make_samples.py
 
 clean:
-	rm -rf $(VENV) $(DEMO) .pytest_cache
+	rm -rf $(VENV) $(DEMO) .pytest_cache site

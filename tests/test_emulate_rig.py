@@ -107,7 +107,7 @@ def test_the_rig_with_its_udp_stage_plays_and_records_it(tmp_path):
 
 
 def test_one_emulated_rig_serves_run_after_run(tmp_path):
-    # the rehearsal of docs/hardware.md, repeated against one `endocal emulate rig`: every run
+    # the rehearsal of docs/how-to/connect-the-rig.md, repeated against one `endocal emulate rig`: every run
     # re-initialises the tracker, switches torque on and off again and drives the stage
     short = ["sine", "--set", "frequency_hz=1.0", "--set", "cycles=1", "--amplitude", "10", "--seed", "1"]
     events = []

@@ -191,7 +191,7 @@ class SafetyConfig:
 class HardwareConfig:
     """A rig: servo bus, tracker, translation/rotation stage and start-up safety (one TOML file).
 
-    See ``configs/hardware-example.toml`` for every key, and ``docs/hardware.md``.
+    See ``configs/hardware-example.toml`` for every key, and ``docs/how-to/connect-the-rig.md``.
     """
 
     dynamixel: DynamixelConfig
