@@ -11,7 +11,8 @@ from endocal.errors import ModelError
 from endocal.models import make_model
 from endocal.models.base import HysteresisModel
 from endocal.models.start import RecordStart
-from endocal.runs.aligned import load_aligned
+from endocal.runs.aligned import AlignedData, load_aligned
+from endocal.runs.probes import check_one_probe
 from endocal.validation.data import axis_data, glitch_note
 from endocal.validation.residuals import cut_start
 
@@ -27,6 +28,7 @@ class HysteresisFit:
     duration_s: float = 0.0  # summed over the records: with ``samples``, the rate a user can check
     cut_start: str = ""  # how records that did not start at rest were fitted (validation.residuals.cut_start)
     glitches: str = ""  # samples left out as glitches (validation.data.glitch_note)
+    probe: dict | None = None  # name and bending axes of the probe the runs were recorded on (None: bare tables)
 
     @property
     def rate_hz(self) -> float:
@@ -35,15 +37,16 @@ class HysteresisFit:
 
 
 def fit_hysteresis(
-    paths: list[Path], axis: str, base: str, effects: list[str] | None = None, planes=None,
+    paths: list[Path | AlignedData], axis: str, base: str, effects: list[str] | None = None, planes=None,
     start_from: HysteresisModel | None = None, **settings
 ) -> HysteresisFit:
     """Fit ``base`` + ``effects`` to ``axis`` of every run folder or aligned table in ``paths``.
 
     Parameters
     ----------
-    paths : list of Path
-        Run folders or aligned tables (.parquet / .csv).
+    paths : list of Path or AlignedData
+        Run folders or aligned tables (.parquet / .csv), or such data already loaded
+        (:func:`~endocal.runs.aligned.load_aligned`).
     axis : str
         Bending axis to model (must be in every table).
     base : {"linear", "bspline", "pi"}
@@ -64,13 +67,17 @@ def fit_hysteresis(
     ------
     ModelError
         ``start_from`` of another axis or base model.
+    RunFormatError
+        Runs recorded on two probes (:func:`~endocal.runs.probes.check_one_probe`), or a table
+        without ``axis``.
     """
     if start_from is not None:
         if start_from.base_name != base or (start_from.axis and start_from.axis != axis):
             raise ModelError(f"--start-from: that model is a {start_from.base_name} model of axis "
                              f"{start_from.axis or '(none)'}, this fit a {base} model of axis {axis}; start from a "
                              "model of the same axis and base model, or drop --start-from")
-    datas = [load_aligned(p) for p in paths]
+    datas = [p if isinstance(p, AlignedData) else load_aligned(p) for p in paths]
+    probe = check_one_probe(datas)
     dropped: list = []
     data = axis_data(datas, axis, planes, dropped)
     model = make_model(base, effects=effects or (), axis=axis, **settings)
@@ -79,4 +86,40 @@ def fit_hysteresis(
     starts = [RecordStart.from_dict(s) for s in model.fit_report_.estimated_starts]
     cut = cut_start(data, model.predict(data) - data.meas_deg, "fitted record", starts)
     return HysteresisFit(model, [d.source for d in datas], [d.sha256 for d in datas], len(data.cmd_deg), span, cut,
-                         glitch_note(dropped, axis))
+                         glitch_note(dropped, axis), probe)
+
+
+def fit_provenance(fit: HysteresisFit, *, command: str | None, planes_path: str | Path | None = None,
+                   start_from_path: str | Path | None = None) -> dict:
+    """What a model file records about its making (``"provenance"``; see :mod:`endocal.models.io`).
+
+    ``fit hysteresis`` and :func:`endocal.api.fit` write the same record: ``validate`` finds
+    the estimation data through its ``data`` paths (relative ones relative to ``cwd``) and
+    checks them by SHA-256, and the planes likewise.
+
+    Parameters
+    ----------
+    fit : HysteresisFit
+    command : str or None
+        The command line that made it (None from Python).
+    planes_path, start_from_path : path, optional
+        The bending planes the fit went through and the model it started from.
+    """
+    import os
+
+    from endocal.runs.format import sha256_of, software_versions, utc_now
+
+    prov = {
+        "software": software_versions(),
+        "created_utc": utc_now(),
+        "command": command,
+        "cwd": os.getcwd(),  # the folder the relative paths below are relative to
+        "data": [{"path": str(p), "sha256": h} for p, h in zip(fit.sources, fit.hashes)],
+        "planes": None if planes_path is None else str(planes_path),
+        "planes_sha256": None if planes_path is None else sha256_of(planes_path),
+    }
+    if fit.probe is not None:
+        prov["probe"] = dict(fit.probe)
+    if start_from_path is not None:
+        prov["start_from"] = {"path": str(start_from_path), "sha256": sha256_of(start_from_path)}
+    return prov

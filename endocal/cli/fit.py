@@ -73,12 +73,10 @@ def hysteresis(
     model prints as its equation with standard errors, and the fit report says how the
     optimiser stopped.
     """
-    import os
     import sys
 
-    from endocal.fitting import fit_hysteresis
+    from endocal.fitting import fit_hysteresis, fit_provenance
     from endocal.models import model_to_dict, save_model
-    from endocal.runs.format import sha256_of, software_versions, utc_now
 
     refuse_input_as_output("--out", out_path, [*data, planes_file, start_from])
     if out_path.exists() and not force:
@@ -96,17 +94,8 @@ def hysteresis(
     effect_list = [e.strip() for e in effects.split(",") if e.strip()]
     settings = _settings(model, sets)
     result = fit_hysteresis(data, axis, model, effect_list, planes=planes, start_from=start, **settings)
-    provenance = {
-        "software": software_versions(),
-        "created_utc": utc_now(),
-        "command": "endocal " + " ".join(sys.argv[1:]),
-        "cwd": os.getcwd(),  # the folder the relative paths below are relative to
-        "data": [{"path": str(p), "sha256": h} for p, h in zip(result.sources, result.hashes)],
-        "planes": None if planes_file is None else str(planes_file),
-        "planes_sha256": None if planes_file is None else sha256_of(planes_file),
-    }
-    if start_from is not None:
-        provenance["start_from"] = {"path": str(start_from), "sha256": sha256_of(start_from)}
+    provenance = fit_provenance(result, command="endocal " + " ".join(sys.argv[1:]), planes_path=planes_file,
+                                start_from_path=start_from)
     save_model(result.model, out_path, provenance=provenance)
     if as_json:
         d = model_to_dict(result.model)

@@ -30,19 +30,13 @@ def fit_force_cmd(
     take the file with `--force-model force.json --max-force-n F`.
     """
     from endocal.force import fit_force, save_force_model
-    from endocal.force.io import force_model_to_dict
-    from endocal.runs.format import sha256_of, software_versions, utc_now
+    from endocal.force.io import force_model_to_dict, force_provenance
 
     refuse_input_as_output("--out", out_path, runs)
     if out_path.exists() and not force:
         raise OutputExistsError(f"{out_path} already exists: choose another --out or pass --force")
     model = fit_force(runs, axis=axis, torque_constant_nm_per_a=torque_constant)
-    provenance = {
-        "software": software_versions(),
-        "created_utc": utc_now(),
-        "command": "endocal " + " ".join(sys.argv[1:]),
-        "data": [{"path": str(p), "sha256": sha256_of(p)} for p in runs],
-    }
+    provenance = force_provenance(runs, "endocal " + " ".join(sys.argv[1:]))
     save_force_model(model, out_path, provenance=provenance, force=force)
     if as_json:
         out.print_json(json.dumps(force_model_to_dict(model, provenance)))

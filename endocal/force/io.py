@@ -82,6 +82,19 @@ def force_model_from_dict(d: dict, where: str = "force model") -> ForceModel:
         raise ModelError(f"{where}: malformed force model ({type(exc).__name__}: {exc})") from None
 
 
+def force_provenance(runs, command: str | None) -> dict:
+    """What a force-model file records about its making: software, time, the command (None from
+    Python) and each run with its SHA-256 (``fit force`` and :func:`endocal.api.fit_force` alike)."""
+    from endocal.runs.format import sha256_of, software_versions, utc_now
+
+    return {
+        "software": software_versions(),
+        "created_utc": utc_now(),
+        "command": command,
+        "data": [{"path": str(p), "sha256": sha256_of(p)} for p in runs],
+    }
+
+
 def save_force_model(model: ForceModel, path: str | Path, *, provenance: dict | None = None, force: bool = False) -> Path:
     """Write ``model`` as versioned JSON.
 

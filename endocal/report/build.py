@@ -19,11 +19,11 @@ import numpy as np
 
 from endocal import __version__
 from endocal.errors import EndocalError, RunFormatError
-from endocal.models.data import OTHER_CMD
+from endocal.models.data import OTHER_CMD, HysteresisData
 from endocal.planes import PlanesCalibration, load_planes
 from endocal.planes.halfplanes import NOMINAL_AZIMUTH_DEG
 from endocal.report import figures as F
-from endocal.report.evaluate import DataEntry, Group, Progress, axis_planes, evaluate, load_inputs
+from endocal.report.evaluate import DataEntry, Progress, axis_planes, evaluate, load_inputs
 from endocal.report.ladder import ladder_size, model_ladder
 from endocal.report.planes import PlanesView, planes_view
 from endocal.report.result import Report, ReportFigure, check_output
@@ -35,8 +35,8 @@ def _slug(*parts: str) -> str:
     return "-".join(re.sub(r"[^A-Za-z0-9]+", "_", p).strip("_") for p in parts)
 
 
-def _other_axis(g: Group) -> tuple[str, np.ndarray] | None:
-    other = g.hdata.extras.get(OTHER_CMD)
+def _other_axis(hdata: HysteresisData) -> tuple[str, np.ndarray] | None:
+    other = hdata.extras.get(OTHER_CMD)
     if other is None or float(np.ptp(other)) < 1e-9:
         return None
     return ("other axis command", other)
@@ -66,8 +66,31 @@ def _walk_start(d: DataEntry) -> float:
     return float((d.meta.get("protocol", {}).get("walk_s") or [0.0])[0])
 
 
-def _planes_job(view: PlanesView) -> tuple[ReportFigure, callable]:
-    """The bending-plane figure, titled and captioned for what was measured and what is only fitted."""
+def model_figure(label: str, model, color: str) -> tuple[ReportFigure, callable]:
+    """The figure of a fitted model's parameters with their intervals, and the function that draws it.
+
+    Parameters
+    ----------
+    label : str
+        The model's name in the report (its file's stem).
+    model : HysteresisModel
+        Fitted.
+    color : str
+        Its colour in the report.
+    """
+    fixed = getattr(model, "fixed_", {})
+    params = {n: (float(v), None if not np.isfinite(model.stderr_[n]) else float(model.stderr_[n]), n in fixed)
+              for n, v in model.params_.items()}
+    name = "+".join([model.base_name] + [e.label for e in model.effects_])
+    return (ReportFigure(f"params-{_slug(label)}", "models", f"{label}: fitted parameters",
+                         "Each parameter with its 95 % interval (1.96 standard errors from the fit's "
+                         "Jacobian), relative to its estimate; red: the interval includes zero.", b"", label),
+            lambda: F.parameters(params, f"{label} ({model.axis}): {name}", color))
+
+
+def planes_figure(view: PlanesView) -> tuple[ReportFigure, callable]:
+    """The bending-plane figure, titled and captioned for what was measured and what is only fitted,
+    and the function that draws it."""
     cal = view.calibration
     b, a = view.before, view.after
     if b is not None:
@@ -95,9 +118,75 @@ def _planes_job(view: PlanesView) -> tuple[ReportFigure, callable]:
     if b is None:
         title += " (fitted geometry only)"
     return (ReportFigure("planes", "planes", title, caption, b""),
-            lambda: F.planes(None if b is None else b.tip_xy_mm, None if a is None else a.tip_xy_mm,
+            lambda: F.planes_figure(None if b is None else b.tip_xy_mm, None if a is None else a.tip_xy_mm,
                              cal.deviation_signed_deg, cal.deviation_signed_ci_deg, cal.residual_deviation_signed_deg,
                              NOMINAL_AZIMUTH_DEG, (t0, t1), title, offset_line=cal.model == "bend_line"))
+
+
+def record_figures(data: str, signal: str, axis: str, hdata: HysteresisData, predicted: dict[str, np.ndarray],
+                   regimes: dict, colors: dict[str, str], *, comparison=None, unit_rmse_deg: dict | None = None,
+                   units: str = "unit") -> list[tuple[ReportFigure, callable]]:
+    """The report's figures of one record and axis, each with the function that draws it.
+
+    The report draws them for every record group; :meth:`endocal.api.Validation.plot` draws
+    the same figures of the record a model was validated on.
+
+    Parameters
+    ----------
+    data, signal, axis : str
+        The record's label, its protocol's signal, and the axis.
+    hdata : HysteresisData
+        The axis's command, measured angle and time (and the other axis's command).
+    predicted : dict of label to (n,) array
+        Each model's predicted angle (deg).
+    regimes : dict of label to RegimeBreakdown
+        Each model's error by regime.
+    colors : dict of label to colour
+    comparison : Comparison, optional
+        The models' paired tests on per-unit errors: with ``unit_rmse_deg`` (label -> per-unit
+        RMSE, deg) and ``units`` (their kind), adds the figure of the error per unit.
+
+    Returns
+    -------
+    list of (ReportFigure, callable)
+        The figure's identity and words (``png`` still empty), and a function drawing its
+        :class:`matplotlib.figure.Figure`: time series, loops, error per unit (with a
+        comparison), residuals, regimes.
+    """
+    key, slug = f"{data}/{axis}", _slug(data, axis)
+    t, cmd, meas = hdata.t_s, hdata.cmd_deg, hdata.meas_deg
+    errs = {m: p - meas for m, p in predicted.items()}
+    head = f"{data} ({signal}), axis {axis}"
+    jobs = [
+        (ReportFigure(f"ts-{slug}", "records", f"{head}: time series",
+                      "Knob command (dashed), measured bending angle (black) and each model's prediction; below, "
+                      "each model's error (predicted - measured).", b"", key),
+         lambda: F.time_series(t, cmd, meas, predicted, colors, head)),
+        (ReportFigure(f"loops-{slug}", "records", f"{head}: hysteresis loops",
+                      "Bending angle against knob command: measured, then each model (colour) over the measured "
+                      "loop (grey).", b"", key),
+         lambda: F.loops(cmd, meas, predicted, colors, head)),
+    ]
+    if comparison is not None:
+        jobs.append(
+            (ReportFigure(f"box-{slug}", "records", f"{head}: error per {units}",
+                          f"RMSE of each {units} per model (dots: units). Brackets: paired Wilcoxon "
+                          f"signed-rank tests{' with Holm correction' if comparison.test == 'friedman' else ''}; "
+                          "* p < 0.05, ** p < 0.01, *** p < 0.001, ns not significant.", b"", key),
+             lambda: F.error_boxes(unit_rmse_deg, comparison, colors, head)))
+    jobs += [
+        (ReportFigure(f"resid-{slug}", "records", f"{head}: residuals",
+                      "Error against knob speed, knob command, the other axis and time (dots: samples; lines: "
+                      "mean per bin). A slope against speed points to rate, a step at zero speed to dead zone, "
+                      "a trend in time to drift or creep, a slope against the other axis to coupling.", b"", key),
+         lambda: F.residuals(t, cmd, _other_axis(hdata), errs, colors, head)),
+        (ReportFigure(f"regime-{slug}", "records", f"{head}: error by regime",
+                      "RMSE of each model by regime of the motion, as `endocal validate` breaks it down: near "
+                      "reversals vs steady motion and holds, by speed band (terciles), by amplitude (thirds of "
+                      "the half-span), by the other knob's position and over time (quarters).", b"", key),
+         lambda: F.regimes(regimes, colors, head)),
+    ]
+    return jobs
 
 
 def build_report(
@@ -114,6 +203,7 @@ def build_report(
     command: str | None = None,
     folds: int = 5,
     planes_runs: Sequence[str | Path] = (),
+    keep_figures: bool = False,
 ) -> Report:
     """Evaluate and compare models on records and build the report (optionally writing it).
 
@@ -144,6 +234,9 @@ def build_report(
     planes_runs : sequence of path
         Where else to look for the planes runs (run folders or folders holding them) besides
         the planes file's folder and the records' folders (see :mod:`endocal.report.planes`).
+    keep_figures : bool
+        Keep each drawn :class:`matplotlib.figure.Figure` as ``ReportFigure.figure`` (for a
+        notebook); otherwise only its PNG is kept.
 
     Returns
     -------
@@ -204,38 +297,10 @@ def build_report(
     jobs: list[tuple[str, callable]] = []
 
     for g in groups:
-        key = f"{g.data}/{g.axis}"
-        t, cmd, meas = g.hdata.t_s, g.hdata.cmd_deg, g.hdata.meas_deg
-        preds = {e.model: e.predicted_deg for e in g.evaluations}
-        errs = {m: p - meas for m, p in preds.items()}
         signal = next(d.signal for d in data_entries if d.label == g.data)
-        head = f"{g.data} ({signal}), axis {g.axis}"
-        jobs += [
-            (ReportFigure(f"ts-{_slug(g.data, g.axis)}", "records", f"{head}: time series",
-                          "Knob command (dashed), measured bending angle (black) and each model's prediction; below, "
-                          "each model's error (predicted - measured).", b"", key),
-             lambda t=t, cmd=cmd, meas=meas, preds=preds, head=head: F.time_series(t, cmd, meas, preds, colors, head)),
-            (ReportFigure(f"loops-{_slug(g.data, g.axis)}", "records", f"{head}: hysteresis loops",
-                          "Bending angle against knob command: measured, then each model (colour) over the measured "
-                          "loop (grey).", b"", key),
-             lambda cmd=cmd, meas=meas, preds=preds, head=head: F.loops(cmd, meas, preds, colors, head)),
-            (ReportFigure(f"box-{_slug(g.data, g.axis)}", "records", f"{head}: error per {g.units.kind}",
-                          f"RMSE of each {g.units.kind} per model (dots: units). Brackets: paired Wilcoxon "
-                          f"signed-rank tests{' with Holm correction' if g.comparison.test == 'friedman' else ''}; "
-                          "* p < 0.05, ** p < 0.01, *** p < 0.001, ns not significant.", b"", key),
-             lambda g=g, head=head: F.error_boxes({e.model: e.unit_rmse_deg for e in g.evaluations}, g.comparison,
-                                                  colors, head)),
-            (ReportFigure(f"resid-{_slug(g.data, g.axis)}", "records", f"{head}: residuals",
-                          "Error against knob speed, knob command, the other axis and time (dots: samples; lines: "
-                          "mean per bin). A slope against speed points to rate, a step at zero speed to dead zone, "
-                          "a trend in time to drift or creep, a slope against the other axis to coupling.", b"", key),
-             lambda g=g, t=t, cmd=cmd, errs=errs, head=head: F.residuals(t, cmd, _other_axis(g), errs, colors, head)),
-            (ReportFigure(f"regime-{_slug(g.data, g.axis)}", "records", f"{head}: error by regime",
-                          "RMSE of each model by regime of the motion, as `endocal validate` breaks it down: near "
-                          "reversals vs steady motion and holds, by speed band (terciles), by amplitude (thirds of "
-                          "the half-span), by the other knob's position and over time (quarters).", b"", key),
-             lambda g=g, head=head: F.regimes({e.model: e.regimes for e in g.evaluations}, colors, head)),
-        ]
+        jobs += record_figures(g.data, signal, g.axis, g.hdata, {e.model: e.predicted_deg for e in g.evaluations},
+                               {e.model: e.regimes for e in g.evaluations}, colors, comparison=g.comparison,
+                               unit_rmse_deg={e.model: e.unit_rmse_deg for e in g.evaluations}, units=g.units.kind)
     for axis in dict.fromkeys(s["axis"] for s in ladder):
         steps = [dict(s, model=s["step"]) for s in ladder if s["axis"] == axis]
         if len({s["model"] for s in steps}) >= 2:
@@ -249,15 +314,9 @@ def build_report(
                                       "step is significant (one-sided paired test, Holm).", b""),
                          lambda steps=steps, axis=axis: F.ladder(steps, data_colors, f"Model ladder, axis {axis}")))
     for m in model_entries:
-        fixed = getattr(m.model, "fixed_", {})
-        params = {n: (float(v), None if not np.isfinite(m.model.stderr_[n]) else float(m.model.stderr_[n]), n in fixed)
-                  for n, v in m.model.params_.items()}
-        jobs.append((ReportFigure(f"params-{_slug(m.label)}", "models", f"{m.label}: fitted parameters",
-                                  "Each parameter with its 95 % interval (1.96 standard errors from the fit's "
-                                  "Jacobian), relative to its estimate; red: the interval includes zero.", b"", m.label),
-                     lambda m=m, params=params: F.parameters(params, f"{m.label} ({m.axis}): {m.name}", colors[m.label])))
+        jobs.append(model_figure(m.label, m.model, colors[m.label]))
     if view is not None:
-        jobs.append(_planes_job(view))
+        jobs.append(planes_figure(view))
     paths = {}
     for d in data_entries:
         try:
@@ -293,7 +352,10 @@ def build_report(
     for k, (fig, draw) in enumerate(jobs, start=1):
         if progress:
             progress(f"figure: {fig.title}", n_done + k, total)
-        fig.png = draw()
+        drawn = draw()
+        fig.png = F.to_png(drawn)
+        if keep_figures:
+            fig.figure = drawn
         figs.append(fig)
 
     provenance = {

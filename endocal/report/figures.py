@@ -1,8 +1,10 @@
-"""The report's figures, drawn with matplotlib's object API and returned as PNG bytes.
+"""The report's figures, drawn with matplotlib's object API.
 
-No ``pyplot``: each function builds its own :class:`matplotlib.figure.Figure` on an Agg
-canvas, so nothing leaks into a global figure registry and the functions are safe to call
-from any thread or from a program that has its own pyplot state. Inputs are plain arrays and
+No ``pyplot``: each function builds and returns its own :class:`matplotlib.figure.Figure` on
+an Agg canvas, so nothing leaks into a global figure registry and the functions are safe to
+call from any thread or from a program that has its own pyplot state. The report embeds them
+as PNG (:func:`to_png`); the Python API (:mod:`endocal.api`) hands the same figures to a
+notebook, where they show themselves (:class:`NotebookFigure`). Inputs are plain arrays and
 result objects; every number drawn was computed elsewhere (the figures compute nothing the
 tables do not show, except bin means that only guide the eye in residual plots).
 """
@@ -30,13 +32,25 @@ def palette(labels: Sequence[str]) -> dict[str, str]:
     return {lbl: _PALETTE[i % len(_PALETTE)] for i, lbl in enumerate(labels)}
 
 
+class NotebookFigure(Figure):
+    """A :class:`~matplotlib.figure.Figure` that a notebook shows as its PNG without pyplot.
+
+    IPython draws a plain figure only once pyplot's inline backend has registered itself;
+    ``_repr_png_`` lets a figure of the report display wherever it is the cell's value.
+    """
+
+    def _repr_png_(self) -> bytes:
+        return to_png(self)
+
+
 def _new(width_in: float, height_in: float) -> Figure:
-    fig = Figure(figsize=(width_in, height_in), dpi=DPI, layout="constrained")
+    fig = NotebookFigure(figsize=(width_in, height_in), dpi=DPI, layout="constrained")
     FigureCanvasAgg(fig)
     return fig
 
 
-def _png(fig: Figure) -> bytes:
+def to_png(fig: Figure) -> bytes:
+    """The figure as PNG bytes, at the report's resolution (``DPI``)."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=DPI)
     return buf.getvalue()
@@ -48,7 +62,7 @@ def _thin(n: int, keep: int = 4000) -> np.ndarray:
 
 
 def time_series(t_s: np.ndarray, cmd_deg: np.ndarray, meas_deg: np.ndarray, predicted: Mapping[str, np.ndarray],
-                colors: Mapping[str, str], title: str) -> bytes:
+                colors: Mapping[str, str], title: str) -> Figure:
     """Command, measured and predicted bending angle over time, and each model's error below.
 
     Parameters
@@ -75,11 +89,11 @@ def time_series(t_s: np.ndarray, cmd_deg: np.ndarray, meas_deg: np.ndarray, pred
     ax.legend(loc="upper right", fontsize=8, ncols=min(4, 2 + len(predicted)))
     for a in (ax, ax_e):
         a.grid(alpha=0.3)
-    return _png(fig)
+    return fig
 
 
 def loops(cmd_deg: np.ndarray, meas_deg: np.ndarray, predicted: Mapping[str, np.ndarray], colors: Mapping[str, str],
-          title: str) -> bytes:
+          title: str) -> Figure:
     """Hysteresis loops: measured angle against command, then each model's over the measured one."""
     n = 1 + len(predicted)
     ncols = min(n, 4)
@@ -101,11 +115,11 @@ def loops(cmd_deg: np.ndarray, meas_deg: np.ndarray, predicted: Mapping[str, np.
         if i >= n - ncols:
             ax.set_xlabel("knob command (deg)")
     fig.suptitle(title, x=0.01, ha="left", fontsize=11)
-    return _png(fig)
+    return fig
 
 
 def error_boxes(unit_rmse_deg: Mapping[str, np.ndarray], comparison: Comparison, colors: Mapping[str, str],
-                title: str) -> bytes:
+                title: str) -> Figure:
     """Per-unit RMSE of each model as box plots, with significance brackets (thesis fig. 7 style).
 
     A bracket joins two models whose paired Wilcoxon test (Holm-adjusted when more than two
@@ -141,11 +155,11 @@ def error_boxes(unit_rmse_deg: Mapping[str, np.ndarray], comparison: Comparison,
     ax.set_title(f"{title}\n{comparison.n_units} {comparison.unit_kind}s; {test}", loc="left", fontsize=10)
     ax.grid(axis="y", alpha=0.3)
     ax.tick_params(axis="x", labelrotation=15 if len(labels) > 3 else 0)
-    return _png(fig)
+    return fig
 
 
 def residuals(t_s: np.ndarray, cmd_deg: np.ndarray, other: tuple[str, np.ndarray] | None,
-              errors: Mapping[str, np.ndarray], colors: Mapping[str, str], title: str) -> bytes:
+              errors: Mapping[str, np.ndarray], colors: Mapping[str, str], title: str) -> Figure:
     """Each model's error (predicted - measured) against knob speed, command, other axis and time.
 
     Dots are a thinned sample of the error; lines are the mean error in 20 bins, which is where
@@ -184,10 +198,10 @@ def residuals(t_s: np.ndarray, cmd_deg: np.ndarray, other: tuple[str, np.ndarray
         ax.set_ylabel("error (deg)")
     axes[0].legend(fontsize=8, loc="upper left")
     fig.suptitle(title, x=0.01, ha="left", fontsize=11)
-    return _png(fig)
+    return fig
 
 
-def regimes(rows: Mapping[str, object], colors: Mapping[str, str], title: str) -> bytes:
+def regimes(rows: Mapping[str, object], colors: Mapping[str, str], title: str) -> Figure:
     """RMSE per regime of motion, one bar per model.
 
     Parameters
@@ -219,10 +233,10 @@ def regimes(rows: Mapping[str, object], colors: Mapping[str, str], title: str) -
     ax.grid(axis="x", alpha=0.3)
     ax.legend(fontsize=8, loc="lower right")
     ax.set_title(title, loc="left", fontsize=10)
-    return _png(fig)
+    return fig
 
 
-def ladder(steps: Sequence[dict], colors_by_data: Mapping[str, str], title: str) -> bytes:
+def ladder(steps: Sequence[dict], colors_by_data: Mapping[str, str], title: str) -> Figure:
     """The model ladder: held-out and in-sample RMSE of base, base+effect, ... on each record.
 
     Parameters
@@ -266,10 +280,10 @@ def ladder(steps: Sequence[dict], colors_by_data: Mapping[str, str], title: str)
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=7.5, ncols=max(1, len(datas)))
     ax.set_title(title, loc="left", fontsize=10)
-    return _png(fig)
+    return fig
 
 
-def parameters(params: Mapping[str, tuple[float, float | None, bool]], title: str, color: str) -> bytes:
+def parameters(params: Mapping[str, tuple[float, float | None, bool]], title: str, color: str) -> Figure:
     """Fitted parameters with 95 % intervals, each relative to its own estimate.
 
     Parameters have different units, so each row shows ``(value +- 1.96 SE) / |value|``: a bar
@@ -312,7 +326,7 @@ def parameters(params: Mapping[str, tuple[float, float | None, bool]], title: st
     ax.set_xlabel("estimate with 95 % interval, relative to |estimate| (red: interval includes 0)")
     ax.grid(axis="x", alpha=0.3)
     ax.set_title(title, loc="left", fontsize=10)
-    return _png(fig)
+    return fig
 
 
 _HALF_COLORS = {"y+": "#1f77b4", "y-": "#2ca02c", "x+": "#d62728", "x-": "#ff7f0e"}
@@ -410,12 +424,7 @@ def planes_figure(before_mm: Mapping[str, np.ndarray] | None, after_mm: Mapping[
     return fig
 
 
-def planes(*args, **kwargs) -> bytes:
-    """:func:`planes_figure` as PNG bytes."""
-    return _png(planes_figure(*args, **kwargs))
-
-
-def tip_paths(paths_mm: Mapping[str, np.ndarray], title: str) -> bytes:
+def tip_paths(paths_mm: Mapping[str, np.ndarray], title: str) -> Figure:
     """Measured tip trajectories in the base sensor's frame: top view (x-y) and side view (x-z, y-z)."""
     fig = _new(10.5, 3.8)
     axes = fig.subplots(1, 3)
@@ -432,11 +441,11 @@ def tip_paths(paths_mm: Mapping[str, np.ndarray], title: str) -> bytes:
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=7, markerscale=5)
     fig.suptitle(title, x=0.01, ha="left", fontsize=11)
-    return _png(fig)
+    return fig
 
 
 def tip_path_errors(desired_mm: np.ndarray, reached_mm: np.ndarray, s_mm: np.ndarray, error_mm: np.ndarray,
-                    title: str, stops_s_mm: Sequence[float] = ()) -> bytes:
+                    title: str, stops_s_mm: Sequence[float] = ()) -> Figure:
     """A walked tip path: desired (dashed) and reached tip seen from above, and the error along the path.
 
     ``stops_s_mm``: where along the path the contact-force guard stopped the bending (marked).
@@ -461,4 +470,4 @@ def tip_path_errors(desired_mm: np.ndarray, reached_mm: np.ndarray, s_mm: np.nda
     along.grid(alpha=0.3)
     along.legend(fontsize=7)
     fig.suptitle(title, x=0.01, ha="left", fontsize=11)
-    return _png(fig)
+    return fig

@@ -44,6 +44,9 @@ class ReportFigure:
     png : bytes
     group : str or None
         ``data/axis`` of the record group it belongs to.
+    figure : matplotlib Figure or None
+        The drawn figure itself, kept when the report was built with ``keep_figures``
+        (:func:`~endocal.report.build.build_report`; the Python API does); not serialised.
     """
 
     id: str
@@ -52,6 +55,7 @@ class ReportFigure:
     caption: str
     png: bytes
     group: str | None = None
+    figure: object = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict:
         return {"id": self.id, "section": self.section, "title": self.title, "caption": self.caption,

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from endocal.models.data import reversals
-from endocal.runs.aligned import CMD, MEAS, load_aligned
+from endocal.runs.aligned import CMD, MEAS, AlignedData, load_aligned
 
 
 @dataclass
@@ -42,9 +42,10 @@ class DataSummary:
         return d
 
 
-def summarize(path: str | Path) -> DataSummary:
-    """Summarise the run folder or aligned table at ``path`` (see :func:`load_aligned` for errors)."""
-    data = load_aligned(path)
+def summarize(path: str | Path | AlignedData) -> DataSummary:
+    """Summarise the run folder or aligned table at ``path``, or one already loaded (see
+    :func:`load_aligned` for errors)."""
+    data = path if isinstance(path, AlignedData) else load_aligned(path)
     t = data.t_s
     axes = []
     for axis in data.axes:

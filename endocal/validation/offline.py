@@ -7,7 +7,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -115,6 +115,10 @@ class ValidationResult:
         rather than noise (:func:`~endocal.validation.residuals.unexplained_shape`), what it says.
     beyond_samples : int
         Samples whose command lies beyond the model's fitted range (predicted by extrapolation).
+    hdata : HysteresisData or None
+        The validation data of the axis as scored (not serialised: for figures).
+    predicted_deg : (n,) array or None
+        The model's prediction of it, what every metric above scores (deg; not serialised).
     """
 
     axis: str
@@ -131,6 +135,8 @@ class ValidationResult:
     shift: RecordShift | None = None
     unexplained: str = ""
     beyond_samples: int = 0
+    hdata: HysteresisData | None = field(default=None, repr=False, compare=False)
+    predicted_deg: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def suspects(self):
@@ -406,4 +412,4 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
                             unexplained="; and ".join(x for x in (
                                 "" if starts else unexplained_start(data, data.meas_deg - pred),
                                 unexplained_shape(data, resid)) if x),
-                            beyond_samples=beyond)
+                            beyond_samples=beyond, hdata=data, predicted_deg=pred)

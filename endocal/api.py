@@ -1,0 +1,1141 @@
+"""The Python API: the calibration loop from a notebook, as objects.
+
+``import endocal as ec`` exports everything here (lazily: ``import endocal`` itself stays
+instant). Each function is a thin layer over the library function its command calls, and
+each result renders from the same result object the command prints, so a notebook and the
+command line can never disagree::
+
+    import endocal as ec
+
+    train = ec.load_run("demo-out/train")                    # endocal info
+    model = ec.fit([train, "demo-out/chirp"], axis="ap",      # endocal fit hysteresis
+                   model="pi", effects=["envelope"])
+    v = ec.validate(model, ["demo-out/test", "demo-out/check"])  # endocal validate
+    v.suggestions[0]                 # the effect most likely missing, with its gain and p
+    model2 = v.suggestions[0].refit()   # fitted as the command validate prints would
+    v2 = ec.validate(model2, ["demo-out/test", "demo-out/check"])  # compared with model
+    rep = ec.make_report([model, model2], ["demo-out/check"])   # endocal report
+    rep.plot("ladder-ap")
+
+Every result has a short ``repr`` (the verdict first), ``to_dict()`` and ``to_json()`` (the
+content of the command's ``--json``) and ``plot()`` (a :class:`matplotlib.figure.Figure`
+drawn by the report's own figure functions, :mod:`endocal.report.figures`). Nothing here
+prints; bad input raises an :class:`~endocal.errors.EndocalError` (a ``ValueError`` or an
+``OSError`` too) whose message is one line: what was wrong, where, what to do.
+
+======================  =========================  ==================================
+function                returns                    command
+======================  =========================  ==================================
+:func:`load_run`        :class:`Run`               ``endocal info``
+:func:`run_protocol`    :class:`Run`               ``endocal excite``
+:func:`fit`             :class:`Model`             ``endocal fit hysteresis``
+:func:`load_model`      :class:`Model`             (a model file)
+:func:`validate`        :class:`Validation`        ``endocal validate MODEL DATA``
+:func:`make_report`     :class:`Report`            ``endocal report``
+:func:`fit_planes`      :class:`Planes`            ``endocal fit planes``
+:func:`load_planes`     :class:`Planes`            (a planes file)
+:func:`fit_force`       :class:`ForceModel`        ``endocal fit force``
+======================  =========================  ==================================
+
+Why ``make_report`` and ``run_protocol`` rather than ``report`` and ``excite``: those names
+are subpackages of ``endocal`` (:mod:`endocal.report`, :mod:`endocal.excite`), and Python
+binds a subpackage to its parent's attribute once anything imports it, so ``ec.report``
+would stop being the function halfway through a session.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+from endocal.errors import ModelError, OutputExistsError
+
+__all__ = [
+    "ForceModel", "Model", "Planes", "Report", "Run", "Suggestion", "Validation",
+    "fit", "fit_force", "fit_planes", "load_model", "load_planes", "load_run", "make_report", "run_protocol",
+    "validate",
+]
+
+
+def _json(d: dict) -> str:
+    """Strict JSON (NaN and infinity as null, numpy scalars as numbers), indented."""
+    from endocal.report.result import _clean
+
+    return json.dumps(_clean(d), indent=2, allow_nan=False)
+
+
+def _call(name: str, *args, **kwargs) -> str:
+    """How a call is recorded in a file's provenance (``command``), e.g. ``endocal.api.fit(['a'], axis='ap')``."""
+    parts = [repr(a) for a in args] + [f"{k}={v!r}" for k, v in kwargs.items()]
+    return f"endocal.api.{name}({', '.join(parts)})"
+
+
+def _refuse_existing(path: Path, force: bool) -> None:
+    if path.exists() and not force:
+        raise OutputExistsError(f"{path} already exists: choose another path or pass force=True")
+
+
+# ---------------------------------------------------------------------------- runs
+class Run:
+    """A run folder or aligned table, loaded and checked (what ``endocal info`` shows).
+
+    Made by :func:`load_run` and :func:`run_protocol`; every function that takes data takes a
+    ``Run`` or a path.
+
+    Attributes
+    ----------
+    path : Path
+        The run folder or table file.
+    axes : list of str
+        Bending axes with both a command and a measured angle.
+    table : pandas.DataFrame
+        The aligned table: ``t_s``, ``<axis>_cmd_deg``, ``<axis>_meas_deg``, extra columns.
+    meta : dict
+        ``run.json`` (empty for a bare table).
+    probe : dict or None
+        ``name`` and ``bending_axes`` of the probe it was recorded on (None for a bare table).
+    protocol : str or None
+        The protocol it played (or what was imported).
+    sha256 : str
+        Hash of the data, as model files record it.
+    aligned : AlignedData
+        The library's object (:func:`endocal.runs.aligned.load_aligned`).
+    """
+
+    def __init__(self, aligned) -> None:
+        from endocal.runs.probes import probe_of
+
+        self.aligned = aligned
+        self.path = Path(aligned.source)
+        self.axes = list(aligned.axes)
+        self.table = aligned.table
+        self.meta = aligned.meta
+        self.sha256 = aligned.sha256
+        self.probe = probe_of(aligned.meta)
+        proto = self.meta.get("protocol") if isinstance(self.meta.get("protocol"), dict) else {}
+        self.protocol = proto.get("name")
+        self._summary = None
+
+    @property
+    def summary(self):
+        """:class:`endocal.runs.summary.DataSummary`: rows, span, rate, ranges and reversals per axis."""
+        if self._summary is None:
+            from endocal.runs.summary import summarize
+
+            self._summary = summarize(self.aligned)
+        return self._summary
+
+    def to_dict(self) -> dict:
+        """What ``endocal info RUN --json`` prints."""
+        return self.summary.to_dict()
+
+    def to_json(self) -> str:
+        return _json(self.to_dict())
+
+    def __repr__(self) -> str:
+        s = self.summary
+        what = ", ".join(x for x in (f"{self.protocol} on {s.backend}" if self.protocol else "aligned table",
+                                     f"probe {self.probe['name']}" if self.probe else "",
+                                     f"status {s.status}" if s.status else "") if x)
+        lines = [f"Run {str(self.path)!r}: {what}",
+                 f"  {s.rows} samples, {s.duration_s:.4g} s at {s.rate_hz:.3g} Hz"]
+        for a in s.axes:
+            lines.append(f"  {a.axis}: command {a.cmd_range_deg[0]:.1f} .. {a.cmd_range_deg[1]:.1f} deg, measured "
+                         f"{a.meas_range_deg[0]:.1f} .. {a.meas_range_deg[1]:.1f} deg, {a.reversals} reversals")
+        return "\n".join(lines)
+
+    def _moving_axis(self, axis: str | None) -> str:
+        import numpy as np
+
+        if axis is not None:
+            if axis not in self.axes:
+                raise ModelError(f"{self.path}: no axis '{axis}' (it has {', '.join(self.axes)})")
+            return axis
+        spans = {a: float(np.ptp(self.aligned.cmd_deg(a))) for a in self.axes}
+        return max(self.axes, key=lambda a: spans[a])
+
+    def plot(self, axis: str | None = None, kind: str = "loops"):
+        """The measured record as the report draws it.
+
+        Parameters
+        ----------
+        axis : str, optional
+            Default: the axis whose command moves most.
+        kind : {"loops", "time_series"}
+            The hysteresis loop (measured angle against command), or command and measured
+            angle over time.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from endocal.report import figures as F
+
+        ax = self._moving_axis(axis)
+        a = self.aligned
+        title = f"{self.path.name} ({self.protocol or 'table'}), axis {ax}"
+        if kind == "loops":
+            return F.loops(a.cmd_deg(ax), a.meas_deg(ax), {}, {}, title)
+        if kind == "time_series":
+            return F.time_series(a.t_s, a.cmd_deg(ax), a.meas_deg(ax), {}, {}, title)
+        raise ValueError(f"kind must be 'loops' or 'time_series', got {kind!r}")
+
+
+def load_run(path: str | Path) -> Run:
+    """Load a run folder (``endocal excite``, ``import csv``, ``import ros``) or an aligned table.
+
+    Parameters
+    ----------
+    path : str or Path
+        A run folder, or a ``.parquet`` / ``.csv`` aligned table (``t_s``,
+        ``<axis>_cmd_deg``, ``<axis>_meas_deg``).
+
+    Returns
+    -------
+    Run
+
+    Raises
+    ------
+    RunFormatError
+        The path does not exist, or what it holds breaks the run format (the message says
+        which column or row).
+    """
+    from endocal.runs.aligned import load_aligned
+
+    return Run(load_aligned(path))
+
+
+def _aligned(data, what: str = "data") -> list:
+    """Runs or paths (one, or a sequence) as the library's AlignedData, loaded once."""
+    from endocal.runs.aligned import AlignedData, load_aligned
+
+    items = [data] if isinstance(data, (str, Path, Run, AlignedData)) else list(data)
+    if not items:
+        raise ModelError(f"no {what} given: pass run folders, aligned tables or Run objects")
+    out = []
+    for d in items:
+        if isinstance(d, Run):
+            out.append(d.aligned)
+        elif isinstance(d, AlignedData):
+            out.append(d)
+        elif isinstance(d, (str, Path)):
+            out.append(load_aligned(d))
+        else:
+            raise ModelError(f"{what}: expected a run folder, an aligned table or a Run, got {type(d).__name__}")
+    return out
+
+
+def run_protocol(protocol: str, out: str | Path, *, backend: str = "sim", probe: str = "tee", seed: int = 0,
+                 sim_config: str | Path | None = None, hardware_config: str | Path | None = None,
+                 realtime: bool = False, tip_load_n: float | None = None, force: bool = False, **params) -> Run:
+    """Play an excitation protocol on the simulator (or the rig) and load the run it logged.
+
+    What ``endocal excite PROTOCOL --out OUT`` does (without ``--planes``, ``--model`` and
+    the force guard, which stay on the command line).
+
+    Parameters
+    ----------
+    protocol : str
+        A protocol name (``endocal protocols``) or a protocol ``.toml`` file.
+    out : str or Path
+        The run folder to create.
+    backend : {"sim", "hardware"}
+    probe : str
+        A probe preset (``tee``: axes ap, ml; ``duodenoscope``: ud, lr) or a probe ``.toml``.
+    seed : int
+        Seed of every random draw (simulator noise, random protocols; a protocol's own unset
+        ``seed`` parameter takes it).
+    sim_config, hardware_config : path, optional
+        Simulator TOML (its effects and physics); rig TOML for ``backend="hardware"``.
+    realtime : bool
+        Pace the simulator to the wall clock.
+    tip_load_n : float, optional
+        A known load hung at the tip (N), for ``fit_force``.
+    force : bool
+        Replace ``out`` if it exists.
+    **params
+        Protocol parameters, e.g. ``amplitude_deg=85, period_s=10, sample_rate_hz=25``
+        (``endocal protocols show NAME`` lists them; an unknown one raises).
+
+    Returns
+    -------
+    Run
+
+    Raises
+    ------
+    ProtocolError, ConfigError, LimitError
+        Unknown protocol or parameter, bad configuration, goals beyond the probe's limits
+        (checked before anything moves).
+    OutputExistsError
+        ``out`` exists and ``force`` is False.
+    """
+    from endocal.backends.registry import make_backend
+    from endocal.excite import prepare_backend, run_excitation
+    from endocal.probe import load_probe
+    from endocal.protocols import load_protocol
+
+    probe_cfg = load_probe(probe)
+    proto = load_protocol(protocol, overrides=dict(params) or None)
+    trajectory = proto.trajectory(probe_cfg, seed=seed)
+    trajectory.check_limits(probe_cfg)  # before any backend is built or anything moves
+    be = make_backend(backend, probe_cfg, seed=seed, sim_config=sim_config, hardware_config=hardware_config)
+    be, record = prepare_backend(be, proto, probe_cfg, tip_load_n=tip_load_n)
+    info = proto.to_dict()
+    info.update(record)
+    command = _call("run_protocol", protocol, str(out), backend=backend, probe=probe, seed=seed, **params)
+    result = run_excitation(trajectory, be, probe_cfg, Path(out), protocol_info=info, seed=seed, realtime=realtime,
+                            force=force, command=command)
+    return load_run(result.run_dir)
+
+
+# ---------------------------------------------------------------------------- models
+class Model:
+    """A fitted hysteresis model of one axis, with how it was fitted (``endocal fit hysteresis``).
+
+    Made by :func:`fit`, :func:`load_model` and :meth:`Suggestion.refit`. It prints as its
+    equation with standard errors, then the fit's RMSE and warnings.
+
+    Attributes
+    ----------
+    estimator : HysteresisModel
+        The scikit-learn-style model itself (``predict``, ``inverse``, ``compensator``;
+        :mod:`endocal.models`).
+    axis, base : str
+        Bending axis and base model (``pi``, ``bspline``, ``linear``).
+    effects : list of str
+        Its effect terms as ``effects=`` takes them (``["envelope", "delay"]``).
+    settings : dict
+        The base model's settings (``n_operators``, ...).
+    params, stderr : dict of str to float
+        Fitted parameters and their standard errors.
+    equation : str
+    rmse_deg : float
+        RMSE of the fit on its own data (deg).
+    warnings : list of str
+        What the fit said: parameters at a bound or not pinned down, samples left out as
+        glitches, records that did not start at rest.
+    provenance : dict
+        What the model file records (data paths and SHA-256, planes, software, time).
+    path : Path or None
+        The file it was loaded from or saved to.
+    start_from : Model or None
+        The model its fit started from (:meth:`Suggestion.refit` sets it); :func:`validate`
+        compares with it.
+    """
+
+    def __init__(self, estimator, *, provenance: dict | None = None, path: str | Path | None = None,
+                 fit_info=None, start_from: Model | None = None) -> None:
+        self.estimator = estimator
+        self.provenance = dict(provenance if provenance is not None else getattr(estimator, "provenance_", None) or {})
+        estimator.provenance_ = self.provenance  # validate finds the estimation data through it
+        self.path = None if path is None else Path(path)
+        self.start_from = start_from
+        self._fit = fit_info
+
+    axis = property(lambda self: self.estimator.axis, doc="Bending axis.")
+    base = property(lambda self: self.estimator.base_name, doc="Base model name.")
+    settings = property(lambda self: self.estimator.get_settings(), doc="Base-model settings.")
+    params = property(lambda self: dict(self.estimator.params_), doc="Fitted parameters.")
+    stderr = property(lambda self: dict(self.estimator.stderr_), doc="Standard errors of the parameters.")
+
+    @property
+    def effects(self) -> list[str]:
+        """Effect terms as ``effects=`` takes them."""
+        return [e.label for e in self.estimator.effects_]
+
+    @property
+    def label(self) -> str:
+        """``base+effect+...``, how ``validate`` and the model ladder name a structure."""
+        return "+".join([self.base, *self.effects])
+
+    @property
+    def equation(self) -> str:
+        return self.estimator.equation()
+
+    @property
+    def fit_report(self):
+        """:class:`endocal.models.base.FitReport`: how the optimiser stopped, RMSE, samples."""
+        return self.estimator.fit_report_
+
+    @property
+    def rmse_deg(self) -> float:
+        rep = self.fit_report
+        return float("nan") if rep is None else rep.rmse_deg
+
+    @property
+    def warnings(self) -> list[str]:
+        rep = self.fit_report
+        out = list(rep.warnings) if rep is not None else []
+        if self._fit is not None:
+            out += [w for w in (self._fit.glitches, self._fit.cut_start) if w]
+        return out
+
+    def to_dict(self) -> dict:
+        """The model file's content: what ``endocal fit hysteresis --json`` prints (:mod:`endocal.models.io`)."""
+        from endocal.models import model_to_dict
+
+        d = model_to_dict(self.estimator)
+        if self.provenance:
+            d["provenance"] = self.provenance
+        return d
+
+    def to_json(self) -> str:
+        return _json(self.to_dict())
+
+    def save(self, path: str | Path, *, force: bool = False) -> Path:
+        """Write the model file (versioned JSON, as ``endocal fit hysteresis --out`` writes it).
+
+        Parameters
+        ----------
+        path : str or Path
+        force : bool
+            Overwrite an existing file.
+
+        Returns
+        -------
+        Path
+
+        Raises
+        ------
+        OutputExistsError
+            ``path`` exists and ``force`` is False.
+        OutputPathError
+            It cannot be written.
+        """
+        from endocal.models import save_model
+
+        path = Path(path)
+        _refuse_existing(path, force)
+        save_model(self.estimator, path, provenance=self.provenance or None)
+        self.path = path
+        return path
+
+    def __repr__(self) -> str:
+        rep = self.fit_report
+        lines = [f"Model {self.label} of axis {self.axis}" + (f" ({self.path})" if self.path else ""),
+                 f"  {self.equation}"]
+        if rep is not None:
+            if self._fit is not None and self._fit.duration_s > 0:
+                span = f" ({self._fit.duration_s:.4g} s, {self._fit.rate_hz:.3g} Hz)"
+            else:
+                span = ""
+            state = "converged" if rep.status > 0 else f"stopped before converging ({rep.message})"
+            lines.append(f"  fit: RMSE {rep.rmse_deg:.3g} deg on {rep.n_samples} samples{span} from {rep.n_runs} "
+                         f"record(s); {state}")
+        lines += [f"  warning: {w}" for w in self.warnings]
+        return "\n".join(lines)
+
+    def plot(self):
+        """The report's figure of the fitted parameters with their 95 % intervals.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from endocal.report import figures as F
+        from endocal.report.build import model_figure
+
+        label = self.path.stem if self.path is not None else self.label
+        return model_figure(label, self.estimator, F.palette([label])[label])[1]()
+
+
+def _model(m, what: str = "model") -> Model:
+    if isinstance(m, Model):
+        return m
+    if isinstance(m, (str, Path)):
+        return load_model(m)
+    raise ModelError(f"{what}: expected a Model or a model file, got {type(m).__name__}")
+
+
+def load_model(path: str | Path) -> Model:
+    """Read a model file (``endocal fit hysteresis --out``, :meth:`Model.save`).
+
+    Raises
+    ------
+    ModelError
+        Missing or unreadable file, not a model file, unknown version or fields.
+    """
+    from endocal.models import load_model as _load
+
+    return Model(_load(path), path=path)
+
+
+def _planes_path(planes) -> Path | None:
+    """``planes=`` (a saved Planes or a path) as the file's path: a model records the planes it was
+    fitted through by path and SHA-256, which ``validate`` and ``report`` read them back by."""
+    if planes is None:
+        return None
+    if isinstance(planes, Planes):
+        if planes.path is None:
+            raise ModelError("planes: save the Planes first (planes.save('planes.json')): a model records the file "
+                             "it was fitted through, and validate reads the planes back from it")
+        return planes.path
+    return Path(planes)
+
+
+def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = (), planes=None,
+        start_from: Model | str | Path | None = None, settings: Mapping | None = None) -> Model:
+    """Fit a hysteresis model of one axis to runs (``endocal fit hysteresis``).
+
+    Parameters
+    ----------
+    data : Run, path, or a sequence of them
+        Estimation records, fitted together (one run each: operator states restart).
+    axis : str
+        Bending axis to model (``ap``, ``ml``, ``ud``, ``lr``, a table's own name).
+    model : {"pi", "bspline", "linear"}
+        Base model: ``pi`` with ``effects=["envelope"]`` is the duodenoscope paper's modified
+        Prandtl-Ishlinskii model (eqs. 5-8, analytic inverse eqs. 9-11); ``bspline`` the
+        thesis's direction-dependent B-splines; ``linear`` a piecewise-linear model.
+    effects : sequence of str, or a comma-separated str
+        Effect terms (``endocal effects`` lists the catalogue), e.g. ``["envelope", "delay"]``,
+        ``"load:sheath_wrap_deg"``.
+    planes : Planes or path, optional
+        Bending planes (:func:`fit_planes`): measured angles are mapped into the twisted
+        planes the knob drives first.
+    start_from : Model or path, optional
+        A fitted model of the same axis and base: the effects it has start at its values
+        (what ``validate``'s refits do).
+    settings : mapping, optional
+        Base-model settings, e.g. ``{"n_operators": 30}`` (``--set`` on the command line).
+
+    Returns
+    -------
+    Model
+        Not yet saved (:meth:`Model.save`); its provenance records the data as
+        ``validate`` will look it up.
+
+    Raises
+    ------
+    ModelError
+        Unknown base, effect or setting; data no model can be fitted on; ``start_from`` of
+        another axis or base.
+    RunFormatError
+        A missing or malformed record, a record without ``axis``, or runs recorded on two
+        probes.
+    """
+    from endocal.fitting import fit_hysteresis, fit_provenance
+
+    datas = _aligned(data)
+    start = None if start_from is None else _model(start_from, "start_from")
+    planes_path = _planes_path(planes)
+    cal = None
+    if planes_path is not None:
+        from endocal.planes import load_planes as _load
+
+        cal = _load(planes_path)
+    result = fit_hysteresis(datas, axis, model, list(effects) if not isinstance(effects, str) else effects,
+                            planes=cal, start_from=None if start is None else start.estimator, **dict(settings or {}))
+    command = _call("fit", [str(d.source) for d in datas], axis=axis, model=model,
+                    effects=[e.label for e in result.model.effects_], **({"settings": dict(settings)} if settings else {}))
+    prov = fit_provenance(result, command=command, planes_path=planes_path,
+                          start_from_path=None if start is None else start.path)
+    return Model(result.model, provenance=prov, fit_info=result, start_from=start)
+
+
+# ---------------------------------------------------------------------------- validation
+class Suggestion:
+    """An effect the validation suggests adding, tested: its gain on held-out data and its p-value.
+
+    Attributes
+    ----------
+    effect : str
+        As ``effects=`` takes it (``deadzone``, ``load:sheath_wrap_deg``).
+    gain_pct : float
+        How much the candidate lowers the validation (held-out) RMSE, percent.
+    p_value : float
+        Holm-corrected one-sided p-value of that gain (sign-flip test on half-cycle units).
+    significant : bool
+        ``p_value`` below alpha and the gain above the bar; otherwise it is listed on its
+        gain alone and ``evidence`` says why.
+    rmse_heldout_deg, base_rmse_heldout_deg : float
+        Held-out RMSE with and without it (deg).
+    evidence, cause, signature, caution : str
+        Why it is (not) significant; the effect's physics and residual signature; what its
+        fit left at a bound.
+    suspect : Suspect
+        The library's object (:class:`endocal.validation.suspects.Suspect`).
+    """
+
+    def __init__(self, suspect, validation: Validation) -> None:
+        self.suspect = suspect
+        self._validation = validation
+        for k in ("effect", "gain_pct", "p_value", "significant", "rmse_heldout_deg", "base_rmse_heldout_deg",
+                  "evidence", "cause", "signature", "caution"):
+            setattr(self, k, getattr(suspect, k))
+
+    def to_dict(self) -> dict:
+        """One entry of ``suspects`` in ``endocal validate --json``."""
+        return self.suspect.to_dict()
+
+    def to_json(self) -> str:
+        return _json(self.to_dict())
+
+    @property
+    def effects(self) -> list[str]:
+        """The refit's effects: the validated model's, then this one."""
+        return [*self._validation.model.effects, self.effect]
+
+    def refit(self) -> Model:
+        """Fit the validated model's structure with this effect added, as the scan scored it.
+
+        On the estimation data the validation used (with ``refit_on="all"`` the validation
+        data too; under rolling-origin cross-validation the validation data), through the same
+        planes, starting from the validated model: the command ``validate`` prints.
+
+        Returns
+        -------
+        Model
+            Its ``start_from`` is the validated model, so :func:`validate` shows the error
+            falling.
+        """
+        v = self._validation
+        m = v.model
+        return fit(v._refit_data, axis=m.axis, model=m.base, effects=self.effects, planes=v._planes_path,
+                   start_from=m, settings=m.settings)
+
+    def __repr__(self) -> str:
+        stat = f"p = {self.p_value:.2g}" if self.significant else self.evidence
+        return (f"Suggestion: add {self.effect}: {-self.gain_pct:+.0f} % validation RMSE "
+                f"({self.base_rmse_heldout_deg:.3g} -> {self.rmse_heldout_deg:.3g} deg), {stat}")
+
+
+_KINDS = {"time_series": "ts-", "loops": "loops-", "residuals": "resid-", "regimes": "regime-"}
+
+
+class Validation:
+    """A model held against measurements: how far off, where, what is missing (``endocal validate``).
+
+    Made by :func:`validate`. Its ``repr`` is the verdict: the RMSE with its interval, the
+    worst regime, the first suggestion or "nothing missing", the untested suspects, the
+    error beside the previous model's.
+
+    Attributes
+    ----------
+    model : Model
+        The model validated.
+    result : ValidationResult
+        The library's object (:class:`endocal.validation.offline.ValidationResult`), which the
+        command's terminal view and ``--json`` render too.
+    rmse_deg : float
+        RMSE of the model on the validation data (deg); ``metrics.ci["rmse_deg"]`` its 95 %
+        block-bootstrap interval.
+    heldout_rmse_deg : float
+        RMSE of the model's structure refitted on the estimation data (or rolling origin) and
+        scored on the validation data: what the suggestions' gains compare against.
+    metrics, regimes, residuals
+        Error metrics, error by regime, residual tests.
+    suggestions : list of Suggestion
+        Effects most likely missing, best first (empty: nothing clears the bar).
+    untested : list of Pointer
+        Effects the residual points at that the scan could not confirm, with the experiment
+        that would (:class:`endocal.validation.verdict.Pointer`).
+    compare : Comparison or None
+        The previous model's error beside this one's.
+    notes : list of str
+    clean : bool
+        Nothing is missing.
+    """
+
+    def __init__(self, result, model: Model, *, refit_data, planes_path, records: Sequence, compare_path=None) -> None:
+        self.result = result
+        self.model = model
+        self._refit_data = refit_data
+        self._planes_path = planes_path
+        self._records = list(records)
+        self._compare_path = compare_path
+        self.suggestions = [Suggestion(s, self) for s in result.suspects]
+
+    axis = property(lambda self: self.result.axis)
+    metrics = property(lambda self: self.result.metrics)
+    regimes = property(lambda self: self.result.regimes)
+    residuals = property(lambda self: self.result.residuals)
+    compare = property(lambda self: self.result.compare)
+    clean = property(lambda self: self.result.clean)
+    rmse_deg = property(lambda self: self.result.metrics.rmse_deg)
+    heldout_rmse_deg = property(lambda self: self.result.scan.baseline_rmse_heldout_deg)
+    untested = property(lambda self: list(self.result.pointers))
+    notes = property(lambda self: list(self.result.notes))
+
+    def to_dict(self) -> dict:
+        """What ``endocal validate MODEL DATA --json`` prints."""
+        d = self.result.to_dict()
+        if self._compare_path is not None and d["compare"] is not None:
+            d["compare"]["path"] = str(self._compare_path)
+        return d
+
+    def to_json(self) -> str:
+        return _json(self.to_dict())
+
+    def __repr__(self) -> str:
+        r = self.result
+        scan = r.scan
+        n = sum(d["n_samples"] for d in r.data)
+        what = "in-sample" if r.in_sample else "validation" if scan.scheme == "estimation/validation" else "held-out"
+        lo, hi = r.metrics.ci.get("rmse_deg", (float("nan"), float("nan")))
+        lines = [f"Validation of {r.model['label']} on axis {r.axis}: {len(r.data)} record(s), {n} samples",
+                 f"  RMSE {r.metrics.rmse_deg:.3g} deg (95 % CI {lo:.3g} .. {hi:.3g})"
+                 + (f"; {what} RMSE {scan.baseline_rmse_heldout_deg:.3g} deg" if scan.scheme != "none" else "")]
+        c = r.compare
+        if c is not None:
+            lines.append(f"  vs {c.old_label}: {what} RMSE {c.old_heldout_rmse_deg:.3g} -> {c.new_heldout_rmse_deg:.3g} "
+                         f"deg ({'fell' if c.change_pct < 0 else 'rose'} {abs(c.change_pct):.0f} %)")
+        worst = r.regimes.worst(1)
+        if worst:
+            w = worst[0]
+            lines.append(f"  worst regime: {w.group}: {w.name}: RMSE {w.metrics.rmse_deg:.3g} deg ({w.ratio:.2f}x)")
+        if self.suggestions:
+            more = f" (+{len(self.suggestions) - 1} more)" if len(self.suggestions) > 1 else ""
+            lines.append(f"  missing: {self.suggestions[0]!r}{more}".replace("Suggestion: ", ""))
+            lines.append("  next: .suggestions[0].refit(), then validate the new model")
+        elif scan.scheme == "none":
+            lines.append(f"  missing: not tested: {scan.scheme_reason}")
+        elif r.clean:
+            lines.append(f"  missing: nothing (no catalog effect lowers the {what} RMSE by {scan.min_gain_pct:g} % or "
+                         "more, and the residual points at nothing untested)")
+        else:
+            lines.append("  missing: no catalog effect confirmed" + (f"; {r.unexplained}" if r.unexplained else ""))
+        if r.pointers:
+            lines.append("  untested suspects: " + ", ".join(p.effect for p in r.pointers) + " (see .untested)")
+        if r.notes:
+            lines.append(f"  {len(r.notes)} note(s) (see .notes)")
+        return "\n".join(lines)
+
+    def _record_figures(self):
+        from endocal.report import figures as F
+        from endocal.report.build import record_figures
+
+        r = self.result
+        label = r.model["label"]
+        runs = [Run(d) for d in self._records]
+        data = "+".join(run.path.name for run in runs)
+        signal = ", ".join(dict.fromkeys(run.protocol or "table" for run in runs))
+        return record_figures(data, signal, r.axis, r.hdata, {label: r.predicted_deg}, {label: r.regimes},
+                              F.palette([label]))
+
+    def plot(self, kind: str = "time_series"):
+        """A figure of the validation data and the model, as the report draws each record.
+
+        Parameters
+        ----------
+        kind : {"time_series", "loops", "residuals", "regimes"}
+            Command, measured and predicted angle over time with the error below; the
+            hysteresis loops, measured and predicted; the error against speed, command, the
+            other axis and time; the error by regime of the motion.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        if kind not in _KINDS:
+            raise ValueError(f"kind must be one of {', '.join(_KINDS)}, got {kind!r}")
+        return next(draw for fig, draw in self._record_figures() if fig.id.startswith(_KINDS[kind]))()
+
+
+def validate(model: Model | str | Path, data, *, train=None, compare: Model | str | Path | bool | None = None,
+             cv: str = "auto", refit_on: str = "estimation", folds: int = 5, seed: int = 0, planes=None,
+             load_columns: Sequence[str] | None = None) -> Validation:
+    """Hold a model against validation records: how far off, where it fails, which effect is missing.
+
+    What ``endocal validate MODEL DATA...`` does offline: error metrics with 95 %
+    block-bootstrap intervals, the error by regime, residual tests, and every catalog effect
+    the model lacks fitted on the estimation data (the records the model was fitted on,
+    found through its provenance, or ``train``) and scored on ``data``, half-cycle by
+    half-cycle, Holm-corrected.
+
+    Parameters
+    ----------
+    model : Model or path
+    data : Run, path, or a sequence of them
+        Validation records (not used by the fit, for an honest score).
+    train : Run, path, or a sequence of them, optional
+        Estimation data (``--train``); default: what the model was fitted on.
+    compare : Model, path or bool, optional
+        A previous model, shown beside this one under the same scheme. Default (None): the
+        model this one was refitted from (:attr:`Model.start_from`), if any; False: none.
+    cv : {"auto", "rolling", "split"}
+        How effects are tested: the estimation/validation split when there is estimation
+        data (``auto``), rolling-origin cross-validation on ``data`` alone (``rolling``), or
+        require the split (``split``).
+    refit_on : {"estimation", "all"}
+        What :meth:`Suggestion.refit` fits on: the estimation data (as the candidates were
+        scored), or the estimation and validation data (a final model, to be validated on a
+        third record).
+    folds : int
+        Held-out blocks of the rolling-origin scan (2 or more).
+    seed : int
+        Seed of the bootstrap intervals.
+    planes : Planes or path, optional
+        Overrides the bending planes the model was fitted through.
+    load_columns : sequence of str, optional
+        Columns to try ``load:COLUMN`` on (default: every varying extra column).
+
+    Returns
+    -------
+    Validation
+
+    Raises
+    ------
+    ModelError
+        Bad ``cv``, ``refit_on`` or ``folds``; a model of an axis the data lacks; estimation
+        data the model file names that is missing or changed; a ``compare`` model of another
+        axis; records too short to validate on.
+    RunFormatError
+        A missing or malformed record, or a validation run of another probe than the model's.
+    """
+    from endocal.runs.probes import check_one_probe
+    from endocal.validation.estimation import plan_estimation
+    from endocal.validation.offline import validate_offline
+
+    if folds < 2:
+        raise ModelError(f"folds must be 2 or more (held-out blocks of the rolling-origin scan), got {folds}")
+    if refit_on not in ("estimation", "all"):
+        raise ModelError(f"refit_on must be 'estimation' or 'all', got {refit_on!r}")
+    m = _model(model)
+    tables = _aligned(data, "validation data")
+    check_one_probe(tables, expected=m.provenance.get("probe"), what="validation runs",
+                    expected_is="the model was fitted on runs of")
+    train_paths = [] if train is None else [str(a.source) for a in _aligned(train, "estimation data")]
+    plan = plan_estimation(m.estimator, tables, model_path=m.path, train_paths=train_paths, cv=cv,
+                           planes_path=_planes_path(planes))
+    old = m.start_from if compare is None else None if compare is False else _model(compare, "compare")
+    if old is not None and old.axis != m.axis:
+        raise ModelError(f"compare: that model is of axis '{old.axis}', this one of axis '{m.axis}': compare with a "
+                         "model of the same axis")
+    data_paths = [str(a.source) for a in tables]
+    refit_data, refit_paths, suffix = tables, data_paths, ""
+    if plan.train is not None:
+        refit_data, refit_paths = plan.train, plan.train_paths
+        if refit_on == "all":  # asked for: the validation data folded into the refits
+            refit_data = list({str(a.source): a for a in [*plan.train, *tables]}.values())
+            refit_paths, suffix = [str(a.source) for a in refit_data], "-all"
+    result = validate_offline(m.estimator, tables, train=plan.train, train_paths=refit_paths, planes=plan.planes,
+                              refit_args=plan.refit_args, scheme_reason=plan.reason, folds=folds, seed=seed,
+                              compare=None if old is None else old.estimator,
+                              model_path=None if m.path is None else str(m.path), data_paths=data_paths,
+                              load_columns=load_columns, refit_suffix=suffix)
+    return Validation(result, m, refit_data=refit_data, planes_path=plan.planes_path, records=tables,
+                      compare_path=None if old is None else old.path)
+
+
+# ---------------------------------------------------------------------------- reports
+class Report:
+    """Models compared on records: metrics, paired tests, the model ladder, figures (``endocal report``).
+
+    Made by :func:`make_report`. Its ``repr`` is the report's summary.
+
+    Attributes
+    ----------
+    report : endocal.report.Report
+        The library's object, which the HTML page, ``report.json`` and the CSV render from.
+    figures : list of ReportFigure
+        Every figure: ``id``, ``section``, ``title``, ``caption`` (and ``figure``).
+    files : dict or None
+        ``html``, ``json``, ``csv`` paths when written (``out``).
+    summary : list of str
+        The summary sentences the command prints.
+    """
+
+    def __init__(self, report, files=None) -> None:
+        self.report = report
+        self.files = files
+
+    figures = property(lambda self: list(self.report.figures))
+    summary = property(lambda self: self.report.summary_lines())
+
+    def to_dict(self) -> dict:
+        """``report.json``'s content; ``endocal report --json`` prints its ``summary``, ``not_evaluated``,
+        ``metrics``, ``ladder`` and ``notes``."""
+        return self.report.to_dict()
+
+    def to_json(self) -> str:
+        return self.report.to_json()
+
+    def write(self, out: str | Path, *, force: bool = False) -> dict:
+        """Write the HTML page with its ``.json`` and ``_metrics.csv`` beside it.
+
+        Returns
+        -------
+        dict
+            ``html``, ``json``, ``csv`` paths.
+
+        Raises
+        ------
+        OutputExistsError, OutputPathError
+        """
+        self.files = self.report.write(out, force=force)
+        return self.files
+
+    def __repr__(self) -> str:
+        lines = self.summary
+        shown = lines[:8] + ([f"... {len(lines) - 8} more line(s) (see .summary)"] if len(lines) > 8 else [])
+        head = (f"Report: {len(self.report.models)} model(s) on {len(self.report.datas)} record(s), "
+                f"{len(self.report.figures)} figures (.plot(ID); ids in .figures)")
+        if self.files:
+            head += f", written to {self.files['html']}"
+        return "\n".join([head, *(f"  {s}" for s in shown)])
+
+    def plot(self, which: int | str = 0):
+        """One of the report's figures.
+
+        Parameters
+        ----------
+        which : int or str
+            Its index in :attr:`figures`, or its ``id`` (``ladder-ap``, ``loops-check-ap``,
+            ``params-pi-envelope``, ``planes``...).
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        figs = self.report.figures
+        if isinstance(which, int):
+            if not -len(figs) <= which < len(figs):
+                raise IndexError(f"figure {which}: the report has {len(figs)} figures")
+            return figs[which].figure
+        for f in figs:
+            if f.id == which:
+                return f.figure
+        raise KeyError(f"no figure '{which}'; the report has {', '.join(f.id for f in figs)}")
+
+
+def make_report(models, data, *, planes=None, out: str | Path | None = None, force: bool = False,
+                bootstrap: int = 400, seed: int = 0) -> Report:
+    """Compare hysteresis models on records (``endocal report``).
+
+    Every model is scored on every record of its axis; models are compared on per-half-cycle
+    errors (Wilcoxon signed-rank for two, Friedman with Holm-corrected pairwise tests for
+    more); every model structure is cross-validated for the model ladder.
+
+    Parameters
+    ----------
+    models : Model, path, or a sequence of them
+        Saved models are named by their file's stem, others by ``base+effects``.
+    data : Run, path, or a sequence of them
+    planes : Planes or path, optional
+        Adds the bending-plane figure before and after orthogonal compensation.
+    out : str or Path, optional
+        Write the HTML page there, with ``NAME.json`` and ``NAME_metrics.csv`` beside it
+        (checked before any work).
+    force : bool
+        Overwrite those files.
+    bootstrap, seed : int
+        Block-bootstrap replicates and seed of the 95 % intervals (``validate``'s defaults).
+
+    Returns
+    -------
+    Report
+
+    Raises
+    ------
+    ModelError, RunFormatError
+        Missing or invalid inputs, models for axes no record has, or nothing that could be
+        evaluated (the message lists why).
+    OutputExistsError, OutputPathError
+        ``out`` exists (without ``force``) or cannot be written.
+    """
+    from endocal.report import build_report, side_files
+
+    items = [models] if isinstance(models, (str, Path, Model)) else list(models)
+    ms = []
+    for m in items:
+        m = _model(m)  # a saved model goes in by its file: named by its stem, its hash recorded
+        ms.append(m.path if m.path is not None else m.estimator)
+    if isinstance(planes, Planes):  # the figure only: each model reads its data through the planes it records
+        planes = planes.path if planes.path is not None else planes.calibration
+    rep = build_report(ms, _aligned(data), planes=planes, out=out, force=force, n_boot=bootstrap, seed=seed,
+                       command=_call("make_report", [str(m) if isinstance(m, Path) else repr(m) for m in ms],
+                                     out=None if out is None else str(out)),
+                       keep_figures=True)
+    return Report(rep, None if out is None else side_files(out))
+
+
+# ---------------------------------------------------------------------------- planes and force
+class Planes:
+    """A bending-plane calibration: the four half-planes' deviations, the twist delta and the
+    orthogonal compensator (``endocal fit planes``; duodenoscope eqs. 1-4).
+
+    Attributes
+    ----------
+    calibration : PlanesCalibration
+        The library's object (:class:`endocal.planes.calibration.PlanesCalibration`).
+    deviation_deg, residual_deviation_deg : dict
+        Per half-plane (``y+``, ``y-``, ``x+``, ``x-``): the fitted deviation and what is left
+        after compensation (deg).
+    delta_deg : float
+        The thesis's twist between the planes (deg).
+    path : Path or None
+        The file it was loaded from or saved to.
+    runs : list of Path
+        The sweeps it was fitted on (where :meth:`plot` looks for the measured points).
+    """
+
+    def __init__(self, calibration, *, path: str | Path | None = None, runs: Sequence = ()) -> None:
+        self.calibration = calibration
+        self.path = None if path is None else Path(path)
+        self.runs = [Path(r) for r in runs]
+
+    deviation_deg = property(lambda self: dict(self.calibration.deviation_deg))
+    residual_deviation_deg = property(lambda self: dict(self.calibration.residual_deviation_deg))
+    delta_deg = property(lambda self: self.calibration.delta_deg)
+
+    def to_dict(self) -> dict:
+        """The planes file's content: what ``endocal fit planes --json`` prints."""
+        return self.calibration.to_json()
+
+    def to_json(self) -> str:
+        return _json(self.to_dict())
+
+    def save(self, path: str | Path, *, force: bool = False) -> Path:
+        """Write ``planes.json`` (what ``fit hysteresis --planes``, ``excite --planes`` and ``report --planes`` read).
+
+        Raises
+        ------
+        OutputExistsError
+            ``path`` exists and ``force`` is False.
+        """
+        from endocal.planes import save_planes
+
+        path = Path(path)
+        _refuse_existing(path, force)
+        save_planes(self.calibration, path, force=force)
+        self.path = path
+        return path
+
+    def __repr__(self) -> str:
+        return "Planes: " + str(self.calibration)
+
+    def plot(self):
+        """The report's bending-plane figure: measured sweeps seen down the probe axis, before
+        and after compensation, with the fitted half-planes (duodenoscope fig. 8).
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from endocal.report.build import planes_figure
+        from endocal.report.planes import planes_view
+
+        view = planes_view(self.calibration, self.path, places=self.runs)
+        return planes_figure(view)[1]()
+
+
+def fit_planes(runs, *, after=(), bootstrap: int = 200, seed: int = 0) -> Planes:
+    """Fit the bending planes from runs of the ``planes`` protocol (``endocal fit planes``).
+
+    Parameters
+    ----------
+    runs : Run, path, or a sequence of them
+        Run folders of single-knob sweeps of every half-plane.
+    after : Run, path, or a sequence of them
+        Sweeps recorded through the compensator: their deviations become the measured residuals.
+    bootstrap, seed : int
+        Bootstrap replicates over sweeps for the 95 % intervals, and their seed.
+
+    Returns
+    -------
+    Planes
+
+    Raises
+    ------
+    RunFormatError
+        A missing path, an aligned table (the fit needs the tracker's poses), runs of two probes.
+    """
+    from endocal.planes.from_runs import calibrate_planes
+
+    def paths(x):
+        items = [x] if isinstance(x, (str, Path, Run)) else list(x)
+        return [i.path if isinstance(i, Run) else Path(i) for i in items]
+
+    before, comp = paths(runs), paths(after)
+    cal, _ = calibrate_planes(before, after=comp or None, n_bootstrap=bootstrap, seed=seed)
+    return Planes(cal, runs=[*before, *comp])
+
+
+def load_planes(path: str | Path) -> Planes:
+    """Read ``planes.json`` (``endocal fit planes --out``, :meth:`Planes.save`)."""
+    from endocal.planes import load_planes as _load
+
+    return Planes(_load(path), path=path, runs=[Path(path).parent])
+
+
+class ForceModel:
+    """A contact-force model of one knob (``endocal fit force``; duodenoscope paper, eqs. 12-15).
+
+    The report draws no figure of it, so it has no ``plot``.
+
+    Attributes
+    ----------
+    model : endocal.force.ForceModel
+        The library's object (``predict``, the guard's evaluator).
+    provenance : dict
+    path : Path or None
+    """
+
+    def __init__(self, model, *, provenance: dict | None = None, path: str | Path | None = None) -> None:
+        self.model = model
+        self.provenance = dict(provenance or {})
+        self.path = None if path is None else Path(path)
+
+    def to_dict(self) -> dict:
+        """The force-model file's content: what ``endocal fit force --json`` prints."""
+        from endocal.force.io import force_model_to_dict
+
+        return force_model_to_dict(self.model, self.provenance or None)
+
+    def to_json(self) -> str:
+        return _json(self.to_dict())
+
+    def save(self, path: str | Path, *, force: bool = False) -> Path:
+        """Write ``force.json`` (what ``--force-model`` reads).
+
+        Raises
+        ------
+        OutputExistsError
+            ``path`` exists and ``force`` is False.
+        """
+        from endocal.force import save_force_model
+
+        path = save_force_model(self.model, path, provenance=self.provenance or None, force=force)
+        self.path = Path(path)
+        return self.path
+
+    def __repr__(self) -> str:
+        m = self.model
+        lines = [f"ForceModel {m}", f"  G = {m.g_:.3f} +- {m.g_se_:.3f} at knob {m.g_theta_ref_deg * m.side:+.0f} deg"]
+        lines += [f"  held out {h.source}: load {h.load_n:.3f} N -> predicted {h.pred_mean_n:.3f} N ({h.error_pct:+.1f} %)"
+                  for h in m.heldout_]
+        return "\n".join(lines)
+
+
+def fit_force(runs, *, axis: str | None = None, torque_constant_nm_per_a: float | None = None) -> ForceModel:
+    """Fit the contact-force model from unloaded and loaded ``force-calibration`` runs (``endocal fit force``).
+
+    Parameters
+    ----------
+    runs : Run, path, or a sequence of them
+        At least one run with no tip load and two with known loads
+        (``run_protocol("force-calibration", ..., tip_load_n=F)``).
+    axis : str, optional
+        Default: the one the runs' loads name.
+    torque_constant_nm_per_a : float, optional
+        Motor torque per current (N m/A); default: the simulator's, from ``run.json``.
+
+    Returns
+    -------
+    ForceModel
+
+    Raises
+    ------
+    ModelError
+        Too few unloaded or loaded runs; runs of different probes, axes or torque constants.
+    """
+    from endocal.force import fit_force as _fit
+    from endocal.force.io import force_provenance
+
+    items = [runs] if isinstance(runs, (str, Path, Run)) else list(runs)
+    paths = [i.path if isinstance(i, Run) else Path(i) for i in items]
+    model = _fit(paths, axis=axis, torque_constant_nm_per_a=torque_constant_nm_per_a)
+    prov = force_provenance(paths, _call("fit_force", [str(p) for p in paths], axis=axis))
+    return ForceModel(model, provenance=prov)
