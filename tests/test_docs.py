@@ -145,3 +145,14 @@ def test_a_jupytext_notebook_renders_as_text_and_code(tmp_path):
     assert "# Title\n\nSome *text*." in md and "```python\nimport endocal\nprint(1)\n```" in md
     assert "kernelspec" not in md
     assert "Not in this checkout" in hooks.notebook_markdown(tmp_path / "absent.py", "absent.py")
+
+
+def test_api_reference_renders_the_docstrings_rst_as_markdown(site):
+    page = (site / "reference" / "api.html").read_text()
+    text = _text(site / "reference" / "api.html")
+    assert ":func:`" not in text and ":class:`" not in text  # Sphinx roles rewritten (docs/hooks/griffe_rst.py)
+    assert re.search(r"<td><code>fit_planes</code></td>\s*<td><code>Planes</code></td>", page)  # the simple table
+    ids = set(re.findall(r'id="([\w.]+)"', page))
+    for name in ("endocal.api.load_run", "endocal.api.fit", "endocal.api.validate", "endocal.api.Validation",
+                 "endocal.validation.offline.validate_offline", "endocal.runs.aligned.load_aligned"):
+        assert name in ids, name

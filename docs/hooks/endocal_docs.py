@@ -14,6 +14,8 @@
 
 from __future__ import annotations
 
+import functools
+import importlib.util
 import re
 import sys
 import textwrap
@@ -52,8 +54,7 @@ def notebook_markdown(path: Path, shown: str) -> str:
             cells[-1][1].append(line)
         elif line.strip():
             cells.append(("code", [line]))
-    out = [f"The notebook below is `{shown}`, a [jupytext](https://jupytext.readthedocs.io) percent script: "
-           "open it in Jupyter with jupytext installed, or run it as a script.", ""]
+    out: list[str] = []
     for kind, body in cells:
         text = "\n".join(body).strip("\n")
         if not text.strip():
@@ -180,4 +181,13 @@ def docstring_markdown(doc: str) -> str:
             continue
         out.append(line)
         i += 1
-    return "\n".join(out).strip()
+    return _griffe_rst().rst_to_markdown("\n".join(out).strip())
+
+
+@functools.cache
+def _griffe_rst():
+    """``griffe_rst.py`` beside this file (the rewrite mkdocstrings applies to docstrings)."""
+    spec = importlib.util.spec_from_file_location("endocal_docs_griffe_rst", Path(__file__).with_name("griffe_rst.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
