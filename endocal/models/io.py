@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from endocal.errors import ModelError, OutputPathError
+from endocal.json_files import read_json_document, refuse_non_finite
 from endocal.models.base import FitReport, HysteresisModel
 from endocal.models.effects import EFFECTS
 from endocal.runs.format import atomic_write_bytes
@@ -147,23 +148,6 @@ def _first_line(exc: BaseException) -> str:
     return text.splitlines()[0] if text else type(exc).__name__
 
 
-def _non_finite(node, path: str = "") -> str | None:
-    """The path of the first NaN or infinity in a parsed JSON document, or None."""
-    if isinstance(node, float) and not math.isfinite(node):
-        return path or "/"
-    if isinstance(node, dict):
-        items = node.items()
-    elif isinstance(node, list):
-        items = enumerate(node)
-    else:
-        return None
-    for k, v in items:
-        hit = _non_finite(v, f"{path}/{k}")
-        if hit:
-            return hit
-    return None
-
-
 def _is_number(x) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
@@ -179,10 +163,7 @@ def _check_shape(d: dict, where: str) -> None:
     ------
     ModelError
     """
-    bad = _non_finite(d)
-    if bad:
-        raise ModelError(f"{where}: field {bad} holds NaN or infinity (endocal writes undefined numbers as null); "
-                         "restore the file or refit the model")
+    refuse_non_finite(d, where, ModelError)
 
     def need(ok: bool, field: str, what: str) -> None:
         if not ok:
@@ -357,17 +338,5 @@ def load_model(path) -> HysteresisModel:
     ModelError
         Missing or unreadable file, invalid JSON, wrong format, version or fields.
     """
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ModelError(f"model file {p} does not exist") from None
-    except OSError as exc:
-        raise ModelError(f"cannot read model file {p}: {exc.strerror or exc}") from None
-    except UnicodeDecodeError as exc:
-        raise ModelError(f"{p}: not a text file (byte {exc.start} is no UTF-8); is it a model file?") from None
-    try:
-        d = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ModelError(f"{p}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
-    return model_from_dict(d, where=str(p))
+    d = read_json_document(path, "model file", ModelError)
+    return model_from_dict(d, where=str(path))
