@@ -393,9 +393,12 @@ def read_path_file(path: str | Path, overrides: dict | None = None) -> TipPath:
         raise ProtocolError(f"{where}: unknown field(s) {', '.join(map(repr, unknown))}; a path file has "
                             f"{', '.join(_FILE_KEYS)}")
     kind = data.get("path")
-    if kind not in SHAPES:
+    if not isinstance(kind, str) or kind not in SHAPES:
         raise ProtocolError(f"{where}: 'path' must be one of {', '.join(SHAPES)}, got {kind!r}")
-    params = dict(data.get("params") or {})
+    params = data.get("params") or {}
+    if not isinstance(params, dict):
+        raise ProtocolError(f"{where}: 'params' must be a table ([params]), got {params!r}")
+    params = dict(params)
     if "points_file" in params:
         csv = (path.parent / str(params.pop("points_file"))).resolve()
         params["points_mm"] = _read_points_csv(csv.read_bytes(), str(csv))
