@@ -134,45 +134,72 @@ def _toml_safe(node, drop_none: bool = True):
     return node
 
 
+def mutate_frame(table, rng: np.random.Generator):
+    """One change of a table: a cell, a column (dropped, renamed, all NaN/inf/0, text), rows
+    (cut, shuffled, repeated); ``(label, frame)``, or ``(None, None)`` for a byte-level change."""
+    import pandas as pd
+
+    cells = ["", "nan", "inf", "-inf", "x", "1e308", "-1e308", "0", "1,5", "--"]
+    op = int(rng.integers(9))
+    t = table.copy()
+    col = t.columns[int(rng.integers(len(t.columns)))]
+    if op == 0:
+        r = int(rng.integers(len(t)))
+        v = cells[int(rng.integers(len(cells)))]
+        t[col] = t[col].astype(object)
+        t.iloc[r, t.columns.get_loc(col)] = v
+        return f"row {r} {col!r} = {v!r}", t
+    if op == 1:
+        return f"column {col!r} dropped", t.drop(columns=[col])
+    if op == 2:
+        return f"column {col!r} renamed", t.rename(columns={col: f"{col}_renamed"})
+    if op == 3:
+        k = int(rng.integers(len(t)))
+        return f"first {k} rows kept", t.iloc[:k]
+    if op == 4:
+        return "rows shuffled", t.sample(frac=1.0, random_state=int(rng.integers(2**31)))
+    if op == 5:
+        v = [math.nan, math.inf, 0.0, 1e308, -1e308][int(rng.integers(5))]
+        t[col] = v
+        return f"column {col!r} all {v}", t
+    if op == 6:
+        r = int(rng.integers(len(t)))
+        return f"row {r} repeated", pd.concat([t.iloc[:r + 1], t.iloc[r:]])
+    if op == 7:
+        t[col] = t[col].astype(str)
+        return f"column {col!r} as text", t
+    return None, None
+
+
 def csv_mutations(raw: bytes, seed: int, n: int) -> Iterator[tuple[str, bytes]]:
     """``n`` mutations of a CSV table: cells, columns, rows, headers, bytes."""
     import pandas as pd
 
     table = pd.read_csv(io.BytesIO(raw))
     rng = np.random.default_rng(seed)
-    cells = ["", "nan", "inf", "-inf", "x", "1e308", "-1e308", "0", "1,5", "--"]
-    for i in range(n):
-        op = int(rng.integers(8))
-        t = table.copy()
-        col = t.columns[int(rng.integers(len(t.columns)))]
-        if op == 0:
-            r = int(rng.integers(len(t)))
-            v = cells[int(rng.integers(len(cells)))]
-            t[col] = t[col].astype(object)
-            t.iloc[r, t.columns.get_loc(col)] = v
-            label = f"row {r} {col!r} = {v!r}"
-        elif op == 1:
-            t = t.drop(columns=[col])
-            label = f"column {col!r} dropped"
-        elif op == 2:
-            t = t.rename(columns={col: f"{col}_renamed"})
-            label = f"column {col!r} renamed"
-        elif op == 3:
-            k = int(rng.integers(len(t)))
-            t = t.iloc[:k]
-            label = f"first {k} rows kept"
-        elif op == 4:
-            t = t.sample(frac=1.0, random_state=int(rng.integers(2**31)))
-            label = "rows shuffled"
-        elif op == 5:
-            v = [math.nan, math.inf, 0.0, 1e308][int(rng.integers(4))]
-            t[col] = v
-            label = f"column {col!r} all {v}"
-        elif op == 6:
-            r = int(rng.integers(len(t)))
-            t = pd.concat([t.iloc[:r + 1], t.iloc[r:]])
-            label = f"row {r} repeated"
-        else:
+    for _ in range(n):
+        label, t = mutate_frame(table, rng)
+        yield mutate_bytes(raw, rng) if t is None else (label, t.to_csv(index=False).encode())
+
+
+def parquet_mutations(raw: bytes, seed: int, n: int) -> Iterator[tuple[str, bytes]]:
+    """``n`` mutations of a Parquet table (written back with pyarrow), or of its bytes."""
+    import pandas as pd
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(io.BytesIO(raw))
+    frame = table.to_pandas()
+    rng = np.random.default_rng(seed)
+    for _ in range(n):
+        label, t = mutate_frame(frame, rng)
+        if t is None:
             yield mutate_bytes(raw, rng)
             continue
-        yield label, t.to_csv(index=False).encode()
+        t = pd.DataFrame(t)
+        for c in t.columns[t.dtypes == object]:  # a column with one text cell is a text column in Parquet
+            t[c] = t[c].astype(str)
+        buf = io.BytesIO()
+        out = pa.Table.from_pandas(t, preserve_index=False)
+        pq.write_table(out.replace_schema_metadata({**(table.schema.metadata or {}), **(out.schema.metadata or {})}), buf)
+        yield label, buf.getvalue()

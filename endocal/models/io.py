@@ -101,7 +101,7 @@ def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
                          f"missing {sorted(missing)})")
     _check_shape(d, where)
     base = d["base"]
-    if base not in BASES:
+    if not isinstance(base, str) or base not in BASES:
         raise ModelError(f"{where}: unknown base model '{base}' (known: {', '.join(BASES)})")
     try:
         effects = []
@@ -195,6 +195,12 @@ def _check_shape(d: dict, where: str) -> None:
     need(len(corr["matrix"]) == n and all(isinstance(r, list) and len(r) == n
                                           and all(x is None or _is_number(x) for x in r) for r in corr["matrix"]),
          "correlation/matrix", f"{n} rows of {n} numbers (null: undefined)")
+    # the structure's counts (operators, knots) index parameters: a count out of all proportion with
+    # the file's parameters is a damaged file, refused before it sizes any array
+    limit = 10 * len(d["parameters"]) + 100
+    for key, value in d["structure"].items():
+        need(not (isinstance(value, int) and not isinstance(value, bool) and abs(value) > limit),
+             f"structure/{key}", f"a count in proportion with the file's {len(d['parameters'])} parameters")
     need(d["fit"] is None or isinstance(d["fit"], dict), "fit", "null or an object")
     need(isinstance(d["training_data"], list), "training_data", "a list")
 

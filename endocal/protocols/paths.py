@@ -56,6 +56,8 @@ _FILE_KEYS = ("description", "path", "params")
 _POINTS_PER_TURN = 720
 #: Longest step between the densified points of a path (on the dome, a chord this long sags < 1e-3 mm).
 _MAX_STEP_MM = 0.2
+#: Most points a path is walked through (200 m at that step): a coordinate changed by mistake is refused here.
+_MAX_DENSE_POINTS = 1_000_000
 
 SPEED = positive_param("speed_mmps", 5.0, "Tip speed along the path, mm/s.")
 APPROACH = positive_param("approach_s", 4.0, "From rest to the first point (and from the last back to rest), "
@@ -182,6 +184,10 @@ class TipPath:
         pts = np.array(pts, float)
         if closed and np.linalg.norm(np.nan_to_num(pts[-1] - pts[0])) > 1e-9:
             pts = np.vstack([pts, pts[:1]])
+        steps = np.linalg.norm(np.nan_to_num(np.diff(pts, axis=0), nan=0.0), axis=1) / _MAX_STEP_MM
+        if not (np.isfinite(pts[:, :2]).all() and np.sum(steps) < _MAX_DENSE_POINTS):
+            raise ProtocolError(f"path '{self.name}': its waypoints are not finite or span more than "
+                                f"{_MAX_DENSE_POINTS * _MAX_STEP_MM / 1e3:g} m; check the path's coordinates (mm)")
         dense = [pts[:1]]
         for a, b in zip(pts[:-1], pts[1:]):
             n = max(int(np.ceil(np.linalg.norm(np.nan_to_num(b - a)) / _MAX_STEP_MM)), 1)
