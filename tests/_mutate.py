@@ -20,10 +20,15 @@ from __future__ import annotations
 import io
 import json
 import math
+import os
 import tomllib
 from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
+
+#: ``ENDOCAL_MUTATIONS=K`` multiplies every count of cases (a longer run on demand).
+SCALE = int(os.environ.get("ENDOCAL_MUTATIONS", "1"))
 
 #: Values a field may be turned into: other types, non-finite and extreme numbers.
 ODD_VALUES: list = [None, True, "x", "", [], {}, [1, 2], {"a": 1}, 0, -1, 1e308, -1e308, 1e-308, math.nan,
@@ -203,3 +208,11 @@ def parquet_mutations(raw: bytes, seed: int, n: int) -> Iterator[tuple[str, byte
         out = pa.Table.from_pandas(t, preserve_index=False)
         pq.write_table(out.replace_schema_metadata({**(table.schema.metadata or {}), **(out.schema.metadata or {})}), buf)
         yield label, buf.getvalue()
+
+
+def written(tmp_path: Path, name: str, gen, raw: bytes, seed: int, n: int):
+    """Mutations of ``raw`` written one after another to ``tmp_path/name``: ``(path, label)``."""
+    path = tmp_path / name
+    for i, (label, content) in enumerate(gen(raw, seed, n)):
+        path.write_bytes(content)
+        yield path, f"#{i} {label}"

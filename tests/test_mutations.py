@@ -7,12 +7,11 @@ a field deleted, added, retyped, NaN, infinite, huge; bytes cut, flipped, repeat
 must end with a result or one :class:`~endocal.errors.EndocalError` line, never another
 exception; a command must end with exit code 0, or 2 and one line, and leave no output.
 
-Two tiers, so ten thousand cases fit the suite's time:
-- the bulk runs each reader and what every command does first with what it read (a model
-  predicts and inverts over its range, a force model feeds the guard, a protocol renders its
-  trajectory, a planes file compensates one), in this process, a few ms a case;
-- a sample goes through the real commands (`validate`, `excite --model/--planes`,
-  `protocols show`, `import csv`, `info`, `fit hysteresis`), in-process as tests/_cli.py runs them.
+Two tiers, so ten thousand cases fit the suite's time: here, the bulk runs each reader and
+what every command does first with what it read (a model predicts and inverts over its range,
+a force model feeds the guard, a protocol renders its trajectory, a planes file compensates
+one), a few ms a case; tests/test_mutations_commands.py sends a sample through the real
+commands.
 
 ``ENDOCAL_MUTATIONS=K`` multiplies every count by K for a longer run on demand; the seed
 is fixed, so a failure names its case (kind, index and the change) and replays.
@@ -20,8 +19,6 @@ is fixed, so a failure names its case (kind, index and the change) and replays.
 
 from __future__ import annotations
 
-import os
-import shutil
 import traceback
 import warnings
 from pathlib import Path
@@ -31,10 +28,11 @@ import pytest
 
 from endocal.errors import EndocalError
 from tests import _mutate
+from tests._mutate import written as _written
 
 REPO = Path(__file__).resolve().parents[1]
 FIXTURES = REPO / "tests" / "fixtures" / "mutate"
-SCALE = int(os.environ.get("ENDOCAL_MUTATIONS", "1"))
+SCALE = _mutate.SCALE
 
 #: Cases run per kind in this session (the module's last test checks the total).
 COUNTS: dict[str, int] = {}
@@ -59,14 +57,6 @@ def _bulk(kind: str, cases, use) -> None:
             crashes.append(f"{label}: {type(exc).__name__} at {Path(where.filename).name}:{where.lineno}: {exc}"[:300])
     COUNTS[kind] = COUNTS.get(kind, 0) + n
     assert not crashes, f"{len(crashes)} of {n} mutated {kind} files crashed a reader:\n" + "\n".join(crashes[:10])
-
-
-def _written(tmp_path: Path, name: str, gen, raw: bytes, seed: int, n: int):
-    """Mutations of ``raw`` written one after another to ``tmp_path/name``: ``(path, label)``."""
-    path = tmp_path / name
-    for i, (label, content) in enumerate(gen(raw, seed, n)):
-        path.write_bytes(content)
-        yield path, f"#{i} {label}"
 
 
 # ----------------------------------------------------------------------------- models
@@ -106,27 +96,6 @@ def _use_model(path: Path) -> None:
 def test_mutated_model_files_never_crash_a_reader(model_files, base, tmp_path):
     raw = model_files[base].read_bytes()
     _bulk("model JSON", _written(tmp_path, "m.json", _mutate.json_mutations, raw, 1, 1500 * SCALE), _use_model)
-
-
-def test_mutated_model_files_through_the_commands(model_files, tmp_path):
-    """`validate` and `excite --model`: exit 0, or 2 with one line and nothing written."""
-    from tests._cli import endocal, one_line_exit_2
-
-    raw = model_files["linear"].read_bytes()
-    run = REPO / "data_samples" / "sim-triangle"
-    n = 0
-    for path, label in _written(tmp_path, "m.json", _mutate.json_mutations, raw, 2, 12 * SCALE):
-        out = tmp_path / f"run{n}"
-        for args in (["excite", "triangle", "--model", path, "--set", "cycles=1", "--amplitude", "10",
-                      "--out", out, "-q"], ["validate", path, run, "--json"]):
-            proc = endocal(*args)
-            assert proc.returncode in (0, 2), (label, args[0], proc.stderr[-2000:])
-            if proc.returncode == 2:
-                one_line_exit_2(proc)
-                assert not out.exists(), (label, "half-written run folder")
-            n += 1
-        shutil.rmtree(out, ignore_errors=True)
-    COUNTS["model JSON (commands)"] = n
 
 
 # ----------------------------------------------------------------------------- planes and force
@@ -219,106 +188,6 @@ def test_mutated_toml_files_never_crash_a_reader(kind, src, use, n, tmp_path):
     name = Path(src).name
     (tmp_path / "paths").mkdir()  # a path file names a points CSV relative to itself: none is there
     _bulk(f"{kind} TOML", _written(tmp_path, name, _mutate.toml_mutations, raw, 5, n * SCALE), use)
-
-
-def test_mutated_protocols_through_the_command(tmp_path):
-    from tests._cli import endocal, one_line_exit_2
-
-    raw = (REPO / "protocols" / "damped-sine.toml").read_bytes()
-    n = 0
-    for path, label in _written(tmp_path, "p.toml", _mutate.toml_mutations, raw, 6, 60 * SCALE):
-        proc = endocal("protocols", "show", path)
-        assert proc.returncode in (0, 2), (label, proc.stderr[-2000:])
-        if proc.returncode == 2:
-            one_line_exit_2(proc)
-        n += 1
-    COUNTS["protocol TOML (commands)"] = n
-
-
-# ----------------------------------------------------------------------------- CSV logs and aligned tables
-def test_mutated_csv_logs_through_import(small_run, tmp_path):
-    """`import csv` of a mutated bench log (the columns of configs/csv-map.angles.example.toml):
-    a table, or one line and nothing written."""
-    import pandas as pd
-
-    from tests._cli import endocal, one_line_exit_2
-
-    a = pd.read_parquet(small_run / "aligned.parquet").iloc[:400]
-    log = pd.DataFrame({"time_ms": a["t_s"] * 1e3, "motor_rad": np.radians(a["ap_cmd_deg"]),
-                        "joint_deg": a["ap_meas_deg"], "sheath_deg": 180.0})
-    raw = log.to_csv(index=False).encode()
-    mapping = REPO / "configs" / "csv-map.angles.example.toml"
-    n = 0
-    for path, label in _written(tmp_path, "log.csv", _mutate.csv_mutations, raw, 7, 150 * SCALE):
-        out = tmp_path / f"imported{n}.parquet"
-        proc = endocal("import", "csv", path, "--map", mapping, "--out", out)
-        assert proc.returncode in (0, 2), (label, proc.stderr[-2000:])
-        if proc.returncode == 2:
-            one_line_exit_2(proc)
-            assert not out.exists(), (label, "half-written table")
-        n += 1
-        out.unlink(missing_ok=True)
-    COUNTS["CSV log (import csv)"] = n
-
-
-def test_mutated_aligned_tables_through_fit(tmp_path):
-    """A mutated aligned table (the real piezo slice, as CSV) read by `fit hysteresis`."""
-    from tests._cli import endocal, one_line_exit_2
-
-    src = REPO / "data_samples" / "piezo" / "piezo_aligned.csv"
-    raw = b"".join(src.read_bytes().splitlines(keepends=True)[:600])
-    n = 0
-    for path, label in _written(tmp_path, "table.csv", _mutate.csv_mutations, raw, 9, 80 * SCALE):
-        model = tmp_path / f"m{n}.json"
-        proc = endocal("fit", "hysteresis", path, "--axis", "piezo", "--model", "linear", "--out", model)
-        assert proc.returncode in (0, 2), (label, proc.stderr[-2000:])
-        if proc.returncode == 2:
-            one_line_exit_2(proc)
-            assert not model.exists(), (label, "half-written model")
-        n += 1
-    COUNTS["aligned table CSV (fit)"] = n
-
-
-# ----------------------------------------------------------------------------- run folders
-@pytest.fixture(scope="module")
-def small_run(tmp_path_factory) -> Path:
-    from tests._cli import endocal
-
-    run = tmp_path_factory.mktemp("runs") / "triangle"
-    proc = endocal("excite", "triangle", "--set", "cycles=1", "--out", run, "-q", "--seed", 1)
-    assert proc.returncode == 0, proc.stderr
-    return run
-
-
-RUN_PARTS = [("aligned.parquet", _mutate.parquet_mutations, 50), ("run.json", _mutate.json_mutations, 50),
-             ("motor/part-000000.parquet", _mutate.parquet_mutations, 40),
-             ("tracker/part-000000.parquet", _mutate.parquet_mutations, 40)]
-
-
-@pytest.mark.parametrize("part,gen,n", RUN_PARTS, ids=[p[0].split("/")[0] for p in RUN_PARTS])
-def test_mutated_run_folders_through_info_and_fit(small_run, part, gen, n, tmp_path):
-    """`info` and `fit hysteresis` on a run with one file mutated (and, every other case, its
-    aligned table gone, so the table is rebuilt from the mutated stream)."""
-    from tests._cli import endocal, one_line_exit_2
-
-    raw = (small_run / part).read_bytes()
-    cases = 0
-    for i, (label, content) in enumerate(gen(raw, 8, n * SCALE)):
-        run = tmp_path / f"run{i}"
-        shutil.copytree(small_run, run)
-        (run / part).write_bytes(content)
-        if part != "aligned.parquet" and i % 2:
-            (run / "aligned.parquet").unlink()
-        model = tmp_path / f"m{i}.json"
-        for args in (["info", run], ["fit", "hysteresis", run, "--model", "linear", "--axis", "ap", "--out", model]):
-            proc = endocal(*args)
-            assert proc.returncode in (0, 2), (f"#{i} {label}", args[0], proc.stderr[-2000:])
-            if proc.returncode == 2:
-                one_line_exit_2(proc)
-                assert not model.exists(), (f"#{i} {label}", "half-written model")
-            cases += 1
-        shutil.rmtree(run)
-    COUNTS[f"run folder {part} (info, fit)"] = cases
 
 
 def test_zz_the_count(request):
