@@ -212,15 +212,22 @@ class HardwareConfig:
         for section in ("dynamixel", "tracker", "stage", "safety"):
             if section in d and not isinstance(d[section], dict):
                 raise ConfigError(f"{where}: [{section}] must be a table")
-        return cls(
-            dynamixel=DynamixelConfig.from_dict(d["dynamixel"], where),
-            tracker=AuroraConfig.from_dict(d["tracker"], where, base_dir=base_dir),
-            stage=StageConfig.from_dict(d.get("stage", {}), where),
-            safety=SafetyConfig.from_dict(d.get("safety", {}), where),
-            name=str(d.get("name", "rig")),
-            source=where,
-            raw=d,
-        )
+        try:
+            return cls(
+                dynamixel=DynamixelConfig.from_dict(d["dynamixel"], where),
+                tracker=AuroraConfig.from_dict(d["tracker"], where, base_dir=base_dir),
+                stage=StageConfig.from_dict(d.get("stage", {}), where),
+                safety=SafetyConfig.from_dict(d.get("safety", {}), where),
+                name=str(d.get("name", "rig")),
+                source=where,
+                raw=d,
+            )
+        except ConfigError:
+            raise
+        except (TypeError, ValueError, KeyError, IndexError, OverflowError, AttributeError) as exc:
+            # a value of the wrong type or size that a section's own checks did not name
+            raise ConfigError(f"{where}: a value has the wrong type or size ({type(exc).__name__}: {exc}); "
+                              "compare with configs/hardware-example.toml") from None
 
     @classmethod
     def from_toml(cls, path: str | Path) -> HardwareConfig:
@@ -233,11 +240,13 @@ class HardwareConfig:
         """
         path = Path(path)
         try:
-            text = path.read_text()
+            text = path.read_text(encoding="utf-8")
         except FileNotFoundError:
             raise ConfigError(f"hardware config {path} does not exist") from None
         except OSError as exc:
             raise ConfigError(f"hardware config {path} cannot be read: {exc.strerror or exc}") from None
+        except UnicodeDecodeError as exc:
+            raise ConfigError(f"hardware config {path} is not a text file (byte {exc.start} is no UTF-8)") from None
         try:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from endocal.errors import ModelError, OutputExistsError, OutputPathError
+from endocal.json_files import read_json_document
 from endocal.force.model import ForceModel
 from endocal.runs.format import atomic_write_bytes
 
@@ -65,7 +66,7 @@ def force_model_from_dict(d: dict, where: str = "force model") -> ForceModel:
         tables = [np.asarray(p[k], float) for k in ("m_r_loading_nmm", "m_r_unloading_nmm", "bend0_rad")]
         if len({t.size for t in tables}) != 1 or tables[0].size < 2:
             raise ValueError("tables of different lengths")
-        return ForceModel(
+        model = ForceModel(
             probe=str(d["probe"]), axis=str(d["axis"]), side=int(p["side"]),
             torque_constant_nm_per_a=float(p["torque_constant_nm_per_a"]),
             bending_length_mm=float(p["bending_length_mm"]), theta0_deg=float(p["theta0_deg"]),
@@ -78,8 +79,32 @@ def force_model_from_dict(d: dict, where: str = "force model") -> ForceModel:
                       for h in d.get("heldout", [])],
             loads_n=list(p.get("loads_n", [])), theta_min_deg=float(p.get("theta_min_deg", 0.0)), source=where,
         )
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
         raise ModelError(f"{where}: malformed force model ({type(exc).__name__}: {exc})") from None
+    used = {"torque_constant_nm_per_a": model.torque_constant_nm_per_a, "bending_length_mm": model.bending_length_mm,
+            "theta0_deg": model.theta0_deg, "bin_deg": model.bin_deg, "g": model.g_,
+            "g_theta_ref_deg": model.g_theta_ref_deg, "g_slope_per_deg": model.g_slope_per_deg_,
+            "compliance_rad_per_nmm": model.compliance_rad_per_nmm_, "theta_min_deg": model.theta_min_deg}
+    bad = [k for k, v in used.items() if not np.isfinite(v)]
+    bad += [k for k, t in (("m_r_loading_nmm", model.m_r_loading_nmm), ("m_r_unloading_nmm", model.m_r_unloading_nmm),
+                           ("bend0_rad", model.bend0_rad)) if not np.isfinite(t).all()]
+    if bad:
+        raise ModelError(f"{where}: force model parameter(s) {', '.join(bad)} are not finite numbers; "
+                         "refit with `endocal fit force`")
+    if model.side not in (-1, 1) or not (model.torque_constant_nm_per_a > 0 and model.bending_length_mm > 0
+                                         and model.bin_deg > 0 and model.compliance_rad_per_nmm_ >= 0):
+        raise ModelError(f"{where}: force model has side {model.side} (must be -1 or 1) or a torque constant, "
+                         "bending length, bin width or compliance that is not positive; refit with `endocal fit force`")
+    # the guard stops on the predicted force: a model predicting NaN would never stop anything
+    lo, hi = model.theta_range_deg
+    theta = np.linspace(lo, hi, 41)
+    with np.errstate(all="ignore"):
+        f = [model.force_from_torque(theta, np.full(theta.size, m), np.full(theta.size, loading))
+             for m in (0.0, 50.0, -50.0) for loading in (True, False)]
+    if not np.isfinite(f).all():
+        raise ModelError(f"{where}: the force model predicts non-finite forces over its {lo:+.0f}..{hi:+.0f} deg "
+                         "(a value changed by hand?); refit with `endocal fit force`")
+    return model
 
 
 def force_provenance(runs, command: str | None) -> dict:
@@ -124,11 +149,5 @@ def load_force_model(path: str | Path) -> ForceModel:
     ModelError
         Missing file, not JSON, or not a valid force model.
     """
-    path = Path(path)
-    try:
-        d = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ModelError(f"force model {path} does not exist") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ModelError(f"force model {path} cannot be read as JSON: {exc}") from None
+    d = read_json_document(path, "force model", ModelError)
     return force_model_from_dict(d, where=str(path))

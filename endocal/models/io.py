@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from endocal.errors import ModelError, OutputPathError
+from endocal.json_files import read_json_document, refuse_non_finite
 from endocal.models.base import FitReport, HysteresisModel
 from endocal.models.effects import EFFECTS
 from endocal.runs.format import atomic_write_bytes
@@ -98,8 +99,9 @@ def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
     if unknown or missing:
         raise ModelError(f"{where}: wrong fields for a version-{VERSION} model file (unknown {sorted(unknown)}, "
                          f"missing {sorted(missing)})")
+    _check_shape(d, where)
     base = d["base"]
-    if base not in BASES:
+    if not isinstance(base, str) or base not in BASES:
         raise ModelError(f"{where}: unknown base model '{base}' (known: {', '.join(BASES)})")
     try:
         effects = []
@@ -133,11 +135,131 @@ def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
         model.fit_report_ = None if d["fit"] is None else FitReport(**d["fit"])
         model.training_data_ = list(d["training_data"])
         model.provenance_ = dict(d.get("provenance") or {})
+        _check_works(model, where)
     except ModelError:
         raise
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ModelError(f"{where}: malformed model file ({type(exc).__name__}: {exc})") from None
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+        raise ModelError(f"{where}: malformed model file ({type(exc).__name__}: {_first_line(exc)})") from None
     return model
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def _is_number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def _check_shape(d: dict, where: str) -> None:
+    """Types of a model file's fields, before anything is built from them.
+
+    A file changed by hand or half copied must stop here, on one line naming the field,
+    not later inside numpy or matplotlib. :func:`save_model` writes every undefined or
+    infinite number as ``null``, so a NaN or an infinity in a file was not written by it.
+
+    Raises
+    ------
+    ModelError
+    """
+    refuse_non_finite(d, where, ModelError)
+
+    def need(ok: bool, field: str, what: str) -> None:
+        if not ok:
+            raise ModelError(f"{where}: field {field} must be {what}; restore the file or refit the model")
+
+    for key in ("settings", "structure"):
+        need(isinstance(d[key], dict), key, "an object")
+    need(isinstance(d["effects"], list) and all(isinstance(e, dict) and isinstance(e.get("name"), str)
+                                                 and isinstance(e.get("settings"), dict) for e in d["effects"]),
+         "effects", 'a list of {"name": ..., "settings": {...}}')
+    need(d["fixed"] is None or (isinstance(d["fixed"], dict) and all(_is_number(v) for v in d["fixed"].values())),
+         "fixed", "null or an object of numbers")
+    need(isinstance(d["parameters"], dict), "parameters", "an object")
+    for name, entry in d["parameters"].items():
+        need(isinstance(entry, dict) and set(entry) == {"value", "stderr", "fixed"}, f"parameters/{name}",
+             'an object {"value", "stderr", "fixed"}')
+        need(_is_number(entry["value"]), f"parameters/{name}/value", "a number")
+        need(entry["stderr"] is None or (_is_number(entry["stderr"]) and entry["stderr"] >= 0),
+             f"parameters/{name}/stderr", "a number >= 0 or null")
+        need(isinstance(entry["fixed"], bool), f"parameters/{name}/fixed", "true or false")
+    rng = d["cmd_range_deg"]
+    need(isinstance(rng, list) and len(rng) == 2 and all(x is None or _is_number(x) for x in rng)
+         and (None in rng or rng[0] < rng[1]), "cmd_range_deg", "[low, high] with low < high (null: unbounded)")
+    corr = d["correlation"]
+    need(isinstance(corr, dict) and isinstance(corr.get("names"), list) and isinstance(corr.get("matrix"), list),
+         "correlation", 'an object {"names": [...], "matrix": [[...]]}')
+    n = len(corr["names"])
+    need(all(isinstance(s, str) for s in corr["names"]), "correlation/names", "a list of parameter names")
+    need(len(corr["matrix"]) == n and all(isinstance(r, list) and len(r) == n
+                                          and all(x is None or _is_number(x) for x in r) for r in corr["matrix"]),
+         "correlation/matrix", f"{n} rows of {n} numbers (null: undefined)")
+    # the structure's counts (operators, knots) index parameters: a count out of all proportion with
+    # the file's parameters is a damaged file, refused before it sizes any array
+    limit = 10 * len(d["parameters"]) + 100
+    for key, value in d["structure"].items():
+        need(not (isinstance(value, int) and not isinstance(value, bool) and abs(value) > limit),
+             f"structure/{key}", f"a count in proportion with the file's {len(d['parameters'])} parameters")
+    need(d["fit"] is None or isinstance(d["fit"], dict), "fit", "null or an object")
+    need(isinstance(d["training_data"], list), "training_data", "a list")
+
+
+class _AnyColumn(dict):
+    """Extra columns for a smoke test: any column an effect asks for reads as zeros."""
+
+    def __init__(self, n: int):
+        super().__init__()
+        self._n = n
+
+    def __missing__(self, key):
+        return np.zeros(self._n)
+
+
+def _check_works(model: HysteresisModel, where: str) -> None:
+    """A loaded model predicts and inverts finite angles over its fitted range, or is refused.
+
+    Types alone do not make a working model: a weight of 1e308 overflows, a knot moved by
+    hand unsorts the spline. A short sine over the fitted command range (or +-10 deg when
+    unbounded) is run forward and back, as every command that reads a model would.
+
+    Raises
+    ------
+    ModelError
+    """
+    import warnings
+
+    lo, hi = model.cmd_range_deg_
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        lo, hi = -10.0, 10.0
+    t_s = np.arange(200) * 0.02
+    cmd = lo + (hi - lo) * (0.5 - 0.5 * np.cos(2 * np.pi * 0.5 * t_s))
+    setting, model.out_of_range = model.out_of_range, "clamp"  # a file may hold a model that cannot reach all
+    try:                                                         # it predicts (a falling version-1 B-spline)
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            y = np.asarray(model.predict(_smoke_data(cmd, t_s)), dtype=float)
+            ok = bool(np.isfinite(y).all()) and bool(np.isfinite(model.inverse(_smoke_data(y, t_s))).all())
+    except ModelError as exc:
+        raise ModelError(f"{where}: the model file does not make a working model ({_first_line(exc)}); "
+                         "restore the file or refit the model") from None
+    except (ArithmeticError, ValueError, TypeError, IndexError, KeyError, np.linalg.LinAlgError) as exc:
+        raise ModelError(f"{where}: the model file does not make a working model ({type(exc).__name__}: "
+                         f"{_first_line(exc)}); restore the file or refit the model") from None
+    finally:
+        model.out_of_range = setting
+    if not ok:
+        raise ModelError(f"{where}: the model's parameters predict non-finite angles over its fitted range "
+                         "(a value changed by hand?); restore the file or refit the model")
+
+
+def _smoke_data(x: np.ndarray, t_s: np.ndarray):
+    """A record of ``x`` (deg) at times ``t_s`` whose every extra column reads as zeros."""
+    from endocal.models.data import HysteresisData
+
+    data = HysteresisData(cmd_deg=x, t_s=t_s)
+    object.__setattr__(data, "extras", _AnyColumn(x.size))  # frozen: set past the checks, which need no columns
+    return data
 
 
 def upgrade_v1(d: dict, where: str = "model") -> dict:
@@ -222,15 +344,5 @@ def load_model(path) -> HysteresisModel:
     ModelError
         Missing or unreadable file, invalid JSON, wrong format, version or fields.
     """
-    p = Path(path)
-    try:
-        text = p.read_text()
-    except FileNotFoundError:
-        raise ModelError(f"model file {p} does not exist") from None
-    except OSError as exc:
-        raise ModelError(f"cannot read model file {p}: {exc.strerror or exc}") from None
-    try:
-        d = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ModelError(f"{p}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
-    return model_from_dict(d, where=str(p))
+    d = read_json_document(path, "model file", ModelError)
+    return model_from_dict(d, where=str(path))

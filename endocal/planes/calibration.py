@@ -272,7 +272,7 @@ class PlanesCalibration:
             )
         except KeyError as exc:
             raise CalibrationError(f"planes calibration lacks key {exc.args[0]!r}") from None
-        except (TypeError, ValueError, AttributeError) as exc:
+        except (TypeError, ValueError, AttributeError, OverflowError) as exc:
             if isinstance(exc, CalibrationError):
                 raise
             raise CalibrationError(f"planes calibration has a malformed value: {exc}") from None

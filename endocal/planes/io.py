@@ -15,6 +15,7 @@ import json
 from pathlib import Path
 
 from endocal.errors import ModelError, OutputExistsError, OutputPathError
+from endocal.json_files import read_json_document, refuse_non_finite
 from endocal.planes.calibration import PlanesCalibration
 from endocal.planes.halfplanes import CalibrationError
 from endocal.runs.format import atomic_write_bytes
@@ -41,6 +42,7 @@ def planes_from_dict(data: dict, where: str = "planes") -> PlanesCalibration:
         raise ModelError(f"{where}: not an endocal planes file (format {found!r}, expected {FORMAT!r})")
     if data.get("version") != VERSION:
         raise ModelError(f"{where}: planes file version {data.get('version')!r} is not supported (this endocal reads version {VERSION})")
+    refuse_non_finite(data, where, ModelError)
     body = {k: v for k, v in data.items() if k not in ("format", "version")}
     try:
         return PlanesCalibration.from_json(body)
@@ -89,13 +91,5 @@ def load_planes(path: str | Path) -> PlanesCalibration:
     ModelError
         Missing, unreadable, not JSON, wrong format or version, or malformed content.
     """
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise ModelError(f"planes file {path} does not exist") from None
-    except OSError as exc:
-        raise ModelError(f"cannot read planes file {path}: {exc.strerror or exc}") from None
-    except json.JSONDecodeError as exc:
-        raise ModelError(f"planes file {path} is not valid JSON: {exc}") from None
+    data = read_json_document(path, "planes file", ModelError)
     return planes_from_dict(data, where=str(path))

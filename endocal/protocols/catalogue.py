@@ -14,6 +14,7 @@ from typing import Callable
 
 import numpy as np
 
+from endocal.errors import ProtocolError
 from endocal.protocols import signals
 from endocal.protocols.params import (
     OFFSET,
@@ -28,6 +29,10 @@ from endocal.protocols.params import (
     positive_param,
 )
 from endocal.protocols.trajectory import Segment, Trajectory
+
+
+#: Most samples one protocol may render: a day of recording at about 230 Hz.
+MAX_SAMPLES = 20_000_000
 
 
 class Timeline:
@@ -52,8 +57,21 @@ class Timeline:
         self.now_s += duration_s
 
     def render(self, dofs: tuple[str, ...], sample_rate_hz: float, protocol: str) -> Trajectory:
+        """The goal of every degree of freedom sampled at ``sample_rate_hz``.
+
+        Raises
+        ------
+        ProtocolError
+            More than :data:`MAX_SAMPLES` samples (a duration or rate changed by a factor by
+            mistake would otherwise fill the memory before anything is checked).
+        """
         fs = sample_rate_hz
-        n = int(math.ceil(self.now_s * fs - 1e-9)) + 1
+        n_f = self.now_s * fs
+        if not (math.isfinite(n_f) and n_f < MAX_SAMPLES):
+            raise ProtocolError(f"protocol '{protocol}': {self.now_s:.4g} s at {fs:.4g} Hz is more than "
+                                f"{MAX_SAMPLES:,} samples (a day at {MAX_SAMPLES / 86400:.0f} Hz); "
+                                "check its duration, periods, cycles and sample_rate_hz")
+        n = int(math.ceil(n_f - 1e-9)) + 1
         t_s = np.arange(n) / fs
         goal = {d: np.zeros(n) for d in dofs}
         for axis, start, stop, fn in self.pieces:

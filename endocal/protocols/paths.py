@@ -56,6 +56,8 @@ _FILE_KEYS = ("description", "path", "params")
 _POINTS_PER_TURN = 720
 #: Longest step between the densified points of a path (on the dome, a chord this long sags < 1e-3 mm).
 _MAX_STEP_MM = 0.2
+#: Most points a path is walked through (200 m at that step): a coordinate changed by mistake is refused here.
+_MAX_DENSE_POINTS = 1_000_000
 
 SPEED = positive_param("speed_mmps", 5.0, "Tip speed along the path, mm/s.")
 APPROACH = positive_param("approach_s", 4.0, "From rest to the first point (and from the last back to rest), "
@@ -182,6 +184,10 @@ class TipPath:
         pts = np.array(pts, float)
         if closed and np.linalg.norm(np.nan_to_num(pts[-1] - pts[0])) > 1e-9:
             pts = np.vstack([pts, pts[:1]])
+        steps = np.linalg.norm(np.nan_to_num(np.diff(pts, axis=0), nan=0.0), axis=1) / _MAX_STEP_MM
+        if not (np.isfinite(pts[:, :2]).all() and np.sum(steps) < _MAX_DENSE_POINTS):
+            raise ProtocolError(f"path '{self.name}': its waypoints are not finite or span more than "
+                                f"{_MAX_DENSE_POINTS * _MAX_STEP_MM / 1e3:g} m; check the path's coordinates (mm)")
         dense = [pts[:1]]
         for a, b in zip(pts[:-1], pts[1:]):
             n = max(int(np.ceil(np.linalg.norm(np.nan_to_num(b - a)) / _MAX_STEP_MM)), 1)
@@ -393,9 +399,12 @@ def read_path_file(path: str | Path, overrides: dict | None = None) -> TipPath:
         raise ProtocolError(f"{where}: unknown field(s) {', '.join(map(repr, unknown))}; a path file has "
                             f"{', '.join(_FILE_KEYS)}")
     kind = data.get("path")
-    if kind not in SHAPES:
+    if not isinstance(kind, str) or kind not in SHAPES:
         raise ProtocolError(f"{where}: 'path' must be one of {', '.join(SHAPES)}, got {kind!r}")
-    params = dict(data.get("params") or {})
+    params = data.get("params") or {}
+    if not isinstance(params, dict):
+        raise ProtocolError(f"{where}: 'params' must be a table ([params]), got {params!r}")
+    params = dict(params)
     if "points_file" in params:
         csv = (path.parent / str(params.pop("points_file"))).resolve()
         params["points_mm"] = _read_points_csv(csv.read_bytes(), str(csv))

@@ -203,7 +203,7 @@ class Protocol:
 
 
 def _spec(signal: Any, where: str) -> SignalSpec:
-    if signal not in SIGNALS:
+    if not isinstance(signal, str) or signal not in SIGNALS:
         raise ProtocolError(f"{where}: field 'signal' must be one of {', '.join(SIGNALS)}, got {signal!r}")
     return SIGNALS[signal]
 

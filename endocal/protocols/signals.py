@@ -301,7 +301,15 @@ class BandLimitedRandom:
         seed always gives the same signal.
     """
 
+    #: Most cosine evaluations the construction may take (grid points x components, ~10 s here):
+    #: an hour-long record over 0-2 Hz needs 1.7e9.
+    MAX_WORK = 4e9
+
     def __init__(self, amplitude: float, f_lo_hz: float, f_hi_hz: float, duration_s: float, seed) -> None:
+        work = 32.0 * f_hi_hz * duration_s * max(f_hi_hz - f_lo_hz, 0.0) * duration_s
+        if not work <= self.MAX_WORK:
+            raise ValueError(f"a random signal of {duration_s:g} s over [{f_lo_hz:g}, {f_hi_hz:g}] Hz has too many "
+                             "components to build: shorten the record, narrow the band, or record it in parts")
         k = np.arange(int(np.ceil(f_lo_hz * duration_s - 1e-9)), int(np.floor(f_hi_hz * duration_s + 1e-9)) + 1)
         k = k[k > 0]
         if k.size == 0:
@@ -330,7 +338,13 @@ class BandLimitedRandom:
 
     def _multisine(self, t_s):
         t = np.asarray(t_s, float)
-        return np.cos(2.0 * np.pi * np.multiply.outer(t, self.frequencies_hz) + self.phases_rad).sum(axis=-1)
+        if t.ndim == 0:
+            return np.cos(2.0 * np.pi * t * self.frequencies_hz + self.phases_rad).sum()
+        # in blocks of rows, so a long record never holds the whole (time x component) table
+        rows = max(1, 4_000_000 // self.frequencies_hz.size)
+        return np.concatenate([
+            np.cos(2.0 * np.pi * np.multiply.outer(t[i:i + rows], self.frequencies_hz) + self.phases_rad).sum(axis=-1)
+            for i in range(0, max(t.size, 1), rows)]) if t.size else np.zeros(0)
 
     def __call__(self, t_s: np.ndarray) -> np.ndarray:
         """Signal values at ``t_s`` (s); zero outside ``[0, duration_s]``."""

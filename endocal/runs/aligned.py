@@ -96,7 +96,33 @@ def read_stream(run_dir: Path, name: str) -> pd.DataFrame:
     if not parts:
         raise RunFormatError(f"{run_dir}: no {name} samples were logged ({folder} is missing or empty)")
     df = read_parquet(parts if len(parts) > 1 else parts[0], where=str(folder))
+    _check_stream(df, name, str(folder))
     return df.sort_values("t_s", kind="stable").reset_index(drop=True)
+
+
+#: Columns every tracker stream has (a tracker may log more, e.g. its port status).
+TRACKER_COLUMNS = ("t_s", "sensor", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz", "valid")
+#: Name endings of the run format's units (:data:`endocal.runs.format.UNITS`): such a column holds numbers.
+_UNIT_SUFFIXES = ("_s", "_deg", "_mm", "_dps", "_degps", "_mmps", "_ma", "_n", "_rad")
+
+
+def _check_stream(df: pd.DataFrame, name: str, where: str) -> None:
+    """A stream's parts have the columns its readers need, and numbers where the name says a unit.
+
+    Raises
+    ------
+    RunFormatError
+    """
+    need = TRACKER_COLUMNS if name == TRACKER else ("t_s",)
+    missing = [c for c in need if c not in df.columns]
+    if missing:
+        raise RunFormatError(f"{where}: the {name} stream lacks column(s) {', '.join(missing)}; the parts were not "
+                             "written by endocal or were changed: record or import the run again")
+    numeric = [c for c in df.columns if c.endswith(_UNIT_SUFFIXES) or c in TRACKER_COLUMNS[2:]]
+    text = [c for c in numeric if not (pd.api.types.is_numeric_dtype(df[c]) or pd.api.types.is_bool_dtype(df[c]))]
+    if text:
+        raise RunFormatError(f"{where}: column(s) {', '.join(text)} of the {name} stream hold text where numbers "
+                             "belong; the parts were changed or damaged: record or import the run again")
 
 
 def measured_at(t_frames: np.ndarray, t: np.ndarray, max_gap_s: float) -> np.ndarray:
@@ -294,8 +320,13 @@ def load_aligned(path: str | Path, max_gap_s: float = 0.2) -> AlignedData:
             df = read_parquet(path / ALIGNED)
             digest = sha256_of(path / ALIGNED)
         else:
-            probe = ProbeConfig.from_dict(meta["probe"], where=str(path / RUN_JSON))
-            df = align(read_stream(path, MOTOR), read_stream(path, TRACKER), probe, max_gap_s).table
+            probe = ProbeConfig.from_dict(meta.get("probe"), where=str(path / RUN_JSON))
+            motor = read_stream(path, MOTOR)
+            try:
+                df = align(motor, read_stream(path, TRACKER), probe, max_gap_s).table
+            except KeyError as exc:
+                raise RunFormatError(f"{path / MOTOR}: the motor stream lacks column {exc.args[0]!r} for the probe "
+                                     f"'{probe.name}' its run.json names; record or import the run again") from None
             digest = sha256_of(path)
         axes = check_aligned(df, str(path))
         return AlignedData(df, axes, path, digest, meta)

@@ -261,7 +261,7 @@ def _choice(value, choices, what: str, where: str):
     if value == UNFILLED:
         raise RunFormatError(f"{where}: the {what} is still '{UNFILLED}' (a drafted map): give the column's "
                              f"{what}, one of {', '.join(map(str, choices))}")
-    if value not in choices:
+    if not isinstance(value, (str, int, float)) or value not in choices:
         raise RunFormatError(f"{where}: unknown {what} {value!r}; use one of {', '.join(map(str, choices))}")
     return value
 

@@ -173,12 +173,16 @@ def read_run_json(run_dir: Path) -> dict:
     """
     path = Path(run_dir) / RUN_JSON
     try:
-        meta = json.loads(path.read_text())
+        meta = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise RunFormatError(f"{run_dir} is not a run folder: it has no {RUN_JSON}") from None
+    except UnicodeDecodeError as exc:
+        raise RunFormatError(f"{path} is not a text file (byte {exc.start} is no UTF-8): record or import the run "
+                             "again") from None
     except json.JSONDecodeError as exc:
         raise RunFormatError(f"{path} is not valid JSON (line {exc.lineno}): {exc.msg}") from None
-    if meta.get("format") != FORMAT_NAME:
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
+        meta = meta if isinstance(meta, dict) else {}
         raise RunFormatError(f"{path} is not an endocal run file (format is {meta.get('format')!r}, expected {FORMAT_NAME!r})")
     version = meta.get("version")
     if version is None:
@@ -188,7 +192,15 @@ def read_run_json(run_dir: Path) -> dict:
         raise RunFormatError(
             f"{path} has run format version {version!r}; this endocal reads up to {FORMAT_VERSION}: upgrade endocal"
         )
+    wrong = [k for k in _RUN_JSON_OBJECTS if k in meta and not isinstance(meta[k], dict)]
+    if wrong:
+        raise RunFormatError(f"{path}: field(s) {', '.join(wrong)} must be objects; the file was edited or damaged: "
+                             "restore it, or record or import the run again")
     return meta
+
+
+#: Fields of run.json that are JSON objects when present.
+_RUN_JSON_OBJECTS = ("protocol", "probe", "backend", "software", "units", "streams", "counts")
 
 
 def _is_run_folder(path: Path) -> bool:

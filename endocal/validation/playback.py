@@ -14,7 +14,6 @@ The error is ``reached - desired`` per sample (thesis eq. 2), summarised by
 from __future__ import annotations
 
 import contextlib
-import json
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -252,7 +251,7 @@ def validate_on_backend(
             data = load_aligned(runs[name])
             keep = data.t_s >= PREROLL_S - 1e-9  # metrics over the protocol only, on its own clock
             reached[name] = (data.t_s[keep] - PREROLL_S, data.meas_deg(axis)[keep])
-            events[name] = json.loads((runs[name] / "run.json").read_text()).get("events", [])
+            events[name] = data.meta.get("events", [])
 
     t, reach = reached["compensated"]
     desired = np.interp(t, desired_traj.t_s, desired_traj.goal[axis])

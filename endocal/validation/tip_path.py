@@ -29,7 +29,7 @@ from endocal.excite import run_excitation
 from endocal.probe import ProbeConfig
 from endocal.protocols.paths import TipPath, path_trajectory
 from endocal.runs.aligned import read_stream
-from endocal.runs.format import MOTOR, TRACKER
+from endocal.runs.format import MOTOR, TRACKER, read_run_json
 from endocal.validation.metrics import block_length
 from endocal.validation.playback import PREROLL_S, task_space_trajectory
 from endocal.validation.units import Units
@@ -154,13 +154,11 @@ def evaluate_tip_run(run: Path, label: str = "", models: dict | None = None) -> 
     RunFormatError
         The run holds no desired tip positions, or no tracked frame falls on the walk.
     """
-    import json
-
     motor = read_stream(run, MOTOR)
     cols = [f"tip_desired_{c}_mm" for c in "xyz"]
     if any(c not in motor.columns for c in cols):
         raise RunFormatError(f"{run}: no tip_desired_x/y/z_mm columns: this run did not walk a tip path")
-    meta = json.loads((Path(run) / "run.json").read_text())
+    meta = read_run_json(Path(run))
     walk = meta.get("protocol", {}).get("walk_s")
     t_m = motor["t_s"].to_numpy(float)
     desired_m = motor[cols].to_numpy(float)
