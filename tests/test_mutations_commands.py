@@ -161,3 +161,33 @@ def test_zz_the_count():
     """Every command test above ran its cases (printed for the evidence page)."""
     print("\nmutated inputs through the commands:", sum(COUNTS.values()), COUNTS)
     assert sum(COUNTS.values()) >= 600 * SCALE or len(COUNTS) < 8, COUNTS
+
+
+def test_mutated_ros_bags_through_import(small_run, tmp_path):
+    """`import-ros` of a bag whose database or metadata is damaged: a run, or one line and no folder."""
+    pytest.importorskip("rosbags")
+    from tests._cli import endocal, one_line_exit_2
+    from tests.test_ros_import import write_bag
+
+    bag = tmp_path / "bag"
+    write_bag(small_run, bag, extra_joint=False)
+    files = sorted(p for p in bag.iterdir() if p.is_file())
+    n = 0
+    for k, target in enumerate(files):
+        raw = target.read_bytes()
+        rng = np.random.default_rng(10 + k)
+        for i in range(30 * SCALE):
+            label, content = _mutate.mutate_bytes(raw, rng)
+            copy = tmp_path / f"bag{n}"
+            shutil.copytree(bag, copy)
+            (copy / target.name).write_bytes(content)
+            out = tmp_path / f"run{n}"
+            proc = endocal("import-ros", copy, "--out", out, "--joint", "ap=knob_ap_joint", "--joint", "ml=knob_ml_joint")
+            assert proc.returncode in (0, 2), (target.name, f"#{i} {label}", proc.stderr[-2000:])
+            if proc.returncode == 2:
+                one_line_exit_2(proc)
+                assert not out.exists(), (target.name, f"#{i} {label}", "half-written run folder")
+            n += 1
+            shutil.rmtree(copy)
+            shutil.rmtree(out, ignore_errors=True)
+    COUNTS["ROS bag (import-ros)"] = n

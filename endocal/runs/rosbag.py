@@ -61,6 +61,11 @@ class ImportResult:
     alignment_error: str | None
 
 
+def _reason(exc: Exception) -> str:
+    """A third-party exception on one line (YAML and database errors span several)."""
+    return f"{type(exc).__name__}: {' '.join(str(exc).split())[:240]}"
+
+
 def _reader(bag: Path):
     try:
         from rosbags.highlevel import AnyReader
@@ -73,7 +78,7 @@ def _reader(bag: Path):
         reader = AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
         reader.open()
     except Exception as exc:  # rosbags raises its own error classes per format
-        raise RunFormatError(f"{bag} is not a readable ROS bag ({type(exc).__name__}: {exc})") from None
+        raise RunFormatError(f"{bag} is not a readable ROS bag ({_reason(exc)})") from None
     return reader
 
 
@@ -96,8 +101,13 @@ def _messages(reader, bag: Path, topic: str, types: tuple[str, ...]):
     wrong = [c.msgtype for c in conns if c.msgtype not in types]
     if wrong:
         raise RunFormatError(f"{bag}: topic '{topic}' carries {wrong[0]}, expected {' or '.join(types)}")
-    out = [(_stamp_ns(msg, ns), msg) for conn, ns, raw in reader.messages(connections=conns)
-           for msg in (reader.deserialize(raw, conn.msgtype),)]
+    try:
+        out = [(_stamp_ns(msg, ns), msg) for conn, ns, raw in reader.messages(connections=conns)
+               for msg in (reader.deserialize(raw, conn.msgtype),)]
+    except Exception as exc:  # noqa: BLE001 -- rosbags and its storage raise their own classes on damaged bytes
+        raise RunFormatError(f"{bag}: a message of topic '{topic}' cannot be read ({_reason(exc)}); "
+                             "the bag is damaged or was not closed: record it again, or cut the damaged part "
+                             "(ros2 bag convert)") from None
     if not out:
         raise RunFormatError(f"{bag}: topic '{topic}' has no messages")
     out.sort(key=lambda tm: tm[0])
