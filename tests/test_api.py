@@ -253,6 +253,8 @@ def test_bad_arguments_are_refused_before_any_work(loop):
         ec.fit(loop["est"], axis="ap", model="pie")
     with pytest.raises(ModelError, match="no data given"):
         ec.fit([], axis="ap")
+    with pytest.raises(ModelError, match="a DataFrame; write it as an aligned table"):
+        ec.fit(pd.read_csv(loop["est"][0]), axis="ap")
 
 
 # ---------------------------------------------------------------------------- the package
