@@ -557,19 +557,24 @@ class Suggestion:
     evidence, cause, signature, caution : str
         Why it is (not) significant; the effect's physics and residual signature; what its
         fit left at a bound.
+    plan : Refit
+        What to refit (`endocal.validation.refit.Refit`): the data, base, settings, effects
+        and planes of the fit the scan scored; `refit()` makes it.
     suspect : Suspect
         The library's object (`endocal.validation.suspects.Suspect`).
     """
 
     def __init__(self, suspect, validation: Validation) -> None:
         self.suspect = suspect
+        self.plan = suspect.refit
         self._validation = validation
         for k in ("effect", "gain_pct", "p_value", "significant", "rmse_heldout_deg", "base_rmse_heldout_deg",
                   "evidence", "cause", "signature", "caution"):
             setattr(self, k, getattr(suspect, k))
 
     def to_dict(self) -> dict:
-        """One entry of `suspects` in `endocal validate --json`."""
+        """One entry of `suspects` in `endocal validate --json` (without the shell `command` the
+        command line renders from `refit`)."""
         return self.suspect.to_dict()
 
     def to_json(self) -> str:
@@ -578,14 +583,15 @@ class Suggestion:
     @property
     def effects(self) -> list[str]:
         """The refit's effects: the validated model's, then this one."""
-        return [*self._validation.model.effects, self.effect]
+        return list(self.plan.effects)
 
     def refit(self) -> Model:
         """Fit the validated model's structure with this effect added, as the scan scored it.
 
         On the estimation data the validation used (with `refit_on="all"` the validation
         data too; under rolling-origin cross-validation the validation data), through the same
-        planes, starting from the validated model: the command `validate` prints.
+        planes, with the same settings, starting from the validated model: the fit whose
+        command `endocal validate` prints.
 
         Returns
         -------
@@ -593,10 +599,9 @@ class Suggestion:
             Its `start_from` is the validated model, so `validate` shows the error
             falling.
         """
-        v = self._validation
-        m = v.model
-        return fit(v._refit_data, axis=m.axis, model=m.base, effects=self.effects, planes=v._planes_path,
-                   start_from=m, settings=m.settings)
+        p = self.plan
+        return fit(list(p.data_paths), axis=p.axis, model=p.base, effects=list(p.effects), planes=p.planes_path,
+                   start_from=self._validation.model, settings=p.settings)
 
     def summary(self) -> str:
         """One line: the effect, its gain and its p-value (or why it is not significant)."""
@@ -645,11 +650,9 @@ class Validation:
         Nothing is missing.
     """
 
-    def __init__(self, result, model: Model, *, refit_data, planes_path, records: Sequence, compare_path=None) -> None:
+    def __init__(self, result, model: Model, *, records: Sequence, compare_path=None) -> None:
         self.result = result
         self.model = model
-        self._refit_data = refit_data
-        self._planes_path = planes_path
         self._records = list(records)
         self._compare_path = compare_path
         self.suggestions = [Suggestion(s, self) for s in result.suspects]
@@ -811,19 +814,15 @@ def validate(model: Model | str | Path, data, *, train=None, compare: Model | st
         raise ModelError(f"compare: that model is of axis '{old.axis}', this one of axis '{m.axis}': compare with a "
                          "model of the same axis")
     data_paths = [str(a.source) for a in tables]
-    refit_data, refit_paths, suffix = tables, data_paths, ""
-    if plan.train is not None:
-        refit_data, refit_paths = plan.train, plan.train_paths
-        if refit_on == "all":  # asked for: the validation data folded into the refits
-            refit_data = list({str(a.source): a for a in [*plan.train, *tables]}.values())
-            refit_paths, suffix = [str(a.source) for a in refit_data], "-all"
+    refit_paths, suffix = plan.train_paths, ""
+    if refit_on == "all" and plan.train is not None:  # asked for: the validation data folded into the refits
+        refit_paths, suffix = list(dict.fromkeys([*plan.train_paths, *data_paths])), "-all"
     result = validate_offline(m.estimator, tables, train=plan.train, train_paths=refit_paths, planes=plan.planes,
-                              refit_args=plan.refit_args, scheme_reason=plan.reason, folds=folds, seed=seed,
+                              planes_path=plan.planes_path, scheme_reason=plan.reason, folds=folds, seed=seed,
                               compare=None if old is None else old.estimator,
                               model_path=None if m.path is None else str(m.path), data_paths=data_paths,
                               load_columns=load_columns, refit_suffix=suffix)
-    return Validation(result, m, refit_data=refit_data, planes_path=plan.planes_path, records=tables,
-                      compare_path=None if old is None else old.path)
+    return Validation(result, m, records=tables, compare_path=None if old is None else old.path)
 
 
 # ---------------------------------------------------------------------------- reports

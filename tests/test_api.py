@@ -8,6 +8,7 @@ parameters, and end at the noise floor with nothing missing.
 
 from __future__ import annotations
 
+import ast
 import io
 import json
 import subprocess
@@ -68,7 +69,9 @@ def test_the_loop_names_the_missing_delay_and_its_refit_recovers_the_truth(loop)
     first = v.suggestions[0]
     assert first.effect == "delay" and first.significant and first.p_value < 0.01
     assert v.rmse_deg > 3 * NOISE_DEG
-    # the refit is the model's structure plus the delay, started from the validated model
+    # the refit is the model's structure plus the delay, on the estimation data the model file
+    # names, started from the validated model
+    assert first.plan.data_paths == tuple(map(str, loop["est"])) and first.plan.effects == ("envelope", "delay")
     assert model2.effects == ["delay", "envelope"] and model2.start_from is loop["model"]
     # every parameter of the truth within 4 standard errors (the fit fixes the gauge k1 = 1:
     # play operators are homogeneous, k -> k/k1, r -> r/k1, w -> w k1, beta -> beta k1)
@@ -275,3 +278,25 @@ def test_import_endocal_stays_light_and_exports_the_api():
     # names that are also subpackages would be shadowed once those are imported: none is
     assert not any((ROOT / "endocal" / name).exists() or (ROOT / "endocal" / f"{name}.py").exists()
                    for name in api.__all__)
+
+
+
+def _uses_the_api(path: Path) -> bool:
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import) and any(a.name.startswith("endocal.api") for a in node.names):
+            return True
+        if isinstance(node, ast.ImportFrom) and node.level == 0 and (
+                (node.module or "").startswith("endocal.api")
+                or node.module == "endocal" and any(a.name in ("api", *api.__all__) for a in node.names)):
+            return True
+    return False
+
+
+def test_the_api_sits_on_top_of_the_library_beside_the_cli():
+    # the API calls the library as the CLI does; no library module calls back into either
+    from tests.test_layers import _imports
+
+    assert not [n for n in _imports(ROOT / "endocal" / "api.py") if n.startswith("endocal.cli")]
+    callers = [str(p.relative_to(ROOT)) for p in sorted((ROOT / "endocal").rglob("*.py"))
+               if p != ROOT / "endocal" / "__init__.py" and _uses_the_api(p)]
+    assert callers == []
