@@ -89,10 +89,12 @@ def test_the_loop_names_the_missing_delay_and_its_refit_recovers_the_truth(loop)
     # validation samples alike (within 3 x 0.3/sqrt(2 x 3000) = 0.012 deg)
     assert model2.rmse_deg == pytest.approx(NOISE_DEG, abs=0.01)
     assert v2.rmse_deg == pytest.approx(NOISE_DEG, abs=0.012)
-    # the true structure: nothing missing, and the error fell from the model it came from
+    # the true structure: nothing missing
     assert v2.clean and v2.suggestions == [] and v2.untested == []
+    # and the error fell from the lag's (> 3x the noise, as first validated) to the noise floor
     assert v2.compare is not None and v2.compare.old_label == "pi+envelope"
-    assert v2.compare.new_heldout_rmse_deg < 0.25 * v2.compare.old_heldout_rmse_deg
+    assert v2.compare.old_heldout_rmse_deg == pytest.approx(v.heldout_rmse_deg)
+    assert v2.compare.new_heldout_rmse_deg == pytest.approx(NOISE_DEG, abs=0.012)
 
 
 # ---------------------------------------------------------------------------- the contract
@@ -184,7 +186,8 @@ def test_planes_and_force_from_python(tmp_path):
     planes_run = ec.run_protocol("planes", tmp_path / "planes", seed=1, sample_rate_hz=20, repetitions=1)
     planes = ec.fit_planes(planes_run, bootstrap=20)
     assert repr(planes).startswith("Planes: bending planes (direction, bend_line; 95 % CI, 4 sweeps)")
-    # the simulator twists the half-planes by 12.7, 20.2, 2.3 and 15.6 deg (README)
+    # the simulator twists the half-planes by 12.7, 20.2, 2.3 and 15.6 deg; the README's fit of three
+    # sweeps a half-plane at 100 Hz recovers them within 0.2 deg, one sweep at 20 Hz within 0.5
     assert planes.deviation_deg == pytest.approx({"y+": 12.7, "y-": 20.2, "x+": 2.3, "x-": 15.6}, abs=0.5)
     assert isinstance(planes.plot(), Figure)
     path = planes.save(tmp_path / "planes.json")
@@ -195,7 +198,8 @@ def test_planes_and_force_from_python(tmp_path):
                             tip_load_n=load) for i, load in enumerate(loads)]
     force = ec.fit_force(runs)
     assert repr(force).startswith("ForceModel ap: F_n = dM_knob / (G * L(beta))")
-    # each loaded run predicted by a model fitted without it: within 10 % of the hung load
+    # each loaded run predicted by a model fitted without it: within 10 % of the hung load (the README's
+    # five full-length runs: within 2 %; two passes of three runs here)
     assert [h.load_n for h in force.model.heldout_] == [0.5, 1.0]
     assert all(abs(h.error_pct) < 10 for h in force.model.heldout_)
     saved = force.save(tmp_path / "force.json")
