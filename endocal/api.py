@@ -1,46 +1,46 @@
 """The Python API: the calibration loop from a notebook, as objects.
 
-``import endocal as ec`` exports everything here (lazily: ``import endocal`` itself stays
-instant). Each function is a thin layer over the library function its command calls, and
-each result renders from the same result object the command prints, so a notebook and the
-command line can never disagree::
+`import endocal as ec` exports everything here (lazily: `import endocal` itself stays
+instant, and each function imports the libraries it needs when called). Each function is a
+thin layer over the library function its command calls, and each result renders from the
+same result object the command prints, so a notebook and the command line cannot disagree:
 
-    import endocal as ec
+```python
+import endocal as ec
 
-    train = ec.load_run("demo-out/train")                    # endocal info
-    model = ec.fit([train, "demo-out/chirp"], axis="ap",      # endocal fit hysteresis
-                   model="pi", effects=["envelope"])
-    v = ec.validate(model, ["demo-out/test", "demo-out/check"])  # endocal validate
-    v.suggestions[0]                 # the effect most likely missing, with its gain and p
-    model2 = v.suggestions[0].refit()   # fitted as the command validate prints would
-    v2 = ec.validate(model2, ["demo-out/test", "demo-out/check"])  # compared with model
-    rep = ec.make_report([model, model2], ["demo-out/check"])   # endocal report
-    rep.plot("ladder-ap")
+train = ec.load_run("demo-out/train")                               # endocal info
+model = ec.fit([train, "demo-out/chirp"], axis="ap", model="pi",    # endocal fit hysteresis
+               effects=["envelope"])
+v = ec.validate(model, ["demo-out/test", "demo-out/check"])         # endocal validate
+v.suggestions[0]            # the effect most likely missing, its gain and p-value
+model2 = v.suggestions[0].refit()                                   # the refit validate prints
+v2 = ec.validate(model2, ["demo-out/test", "demo-out/check"])       # compared with model
+rep = ec.make_report([model, model2], ["demo-out/check"])            # endocal report
+rep.plot("ladder-ap")
+```
 
-Every result has a short ``repr`` (the verdict first), ``to_dict()`` and ``to_json()`` (the
-content of the command's ``--json``) and ``plot()`` (a :class:`matplotlib.figure.Figure`
-drawn by the report's own figure functions, :mod:`endocal.report.figures`). Nothing here
-prints; bad input raises an :class:`~endocal.errors.EndocalError` (a ``ValueError`` or an
-``OSError`` too) whose message is one line: what was wrong, where, what to do.
+Every result has a short `repr` (the verdict first), `to_dict()` and `to_json()` (the
+content of the command's `--json`) and `plot()` (a `matplotlib.figure.Figure` drawn by the
+report's own figure functions, `endocal.report.figures`). Nothing here prints; bad input
+raises an `endocal.errors.EndocalError` (also a `ValueError` or `OSError`) whose message is
+one line: what was wrong, where, what to do.
 
-======================  =========================  ==================================
-function                returns                    command
-======================  =========================  ==================================
-:func:`load_run`        :class:`Run`               ``endocal info``
-:func:`run_protocol`    :class:`Run`               ``endocal excite``
-:func:`fit`             :class:`Model`             ``endocal fit hysteresis``
-:func:`load_model`      :class:`Model`             (a model file)
-:func:`validate`        :class:`Validation`        ``endocal validate MODEL DATA``
-:func:`make_report`     :class:`Report`            ``endocal report``
-:func:`fit_planes`      :class:`Planes`            ``endocal fit planes``
-:func:`load_planes`     :class:`Planes`            (a planes file)
-:func:`fit_force`       :class:`ForceModel`        ``endocal fit force``
-======================  =========================  ==================================
+| function         | returns      | command                    |
+|------------------|--------------|----------------------------|
+| `load_run`       | `Run`        | `endocal info`             |
+| `run_protocol`   | `Run`        | `endocal excite`           |
+| `fit`            | `Model`      | `endocal fit hysteresis`   |
+| `load_model`     | `Model`      | (a model file)             |
+| `validate`       | `Validation` | `endocal validate MODEL DATA` |
+| `make_report`    | `Report`     | `endocal report`           |
+| `fit_planes`     | `Planes`     | `endocal fit planes`       |
+| `load_planes`    | `Planes`     | (a planes file)            |
+| `fit_force`      | `ForceModel` | `endocal fit force`        |
 
-Why ``make_report`` and ``run_protocol`` rather than ``report`` and ``excite``: those names
-are subpackages of ``endocal`` (:mod:`endocal.report`, :mod:`endocal.excite`), and Python
-binds a subpackage to its parent's attribute once anything imports it, so ``ec.report``
-would stop being the function halfway through a session.
+Why `make_report` and `run_protocol` rather than `report` and `excite`: those names are
+subpackages of `endocal` (`endocal.report`, `endocal.excite`), and Python binds a
+subpackage to its parent's attribute once anything imports it, so `ec.report` would stop
+being the function halfway through a session.
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ def _json(d: dict) -> str:
 
 
 def _call(name: str, *args, **kwargs) -> str:
-    """How a call is recorded in a file's provenance (``command``), e.g. ``endocal.api.fit(['a'], axis='ap')``."""
+    """How a call is recorded in a file's provenance (`command`), e.g. `endocal.api.fit(['a'], axis='ap')`."""
     parts = [repr(a) for a in args] + [f"{k}={v!r}" for k, v in kwargs.items()]
     return f"endocal.api.{name}({', '.join(parts)})"
 
@@ -78,10 +78,10 @@ def _refuse_existing(path: Path, force: bool) -> None:
 
 # ---------------------------------------------------------------------------- runs
 class Run:
-    """A run folder or aligned table, loaded and checked (what ``endocal info`` shows).
+    """A run folder or aligned table, loaded and checked (what `endocal info` shows).
 
-    Made by :func:`load_run` and :func:`run_protocol`; every function that takes data takes a
-    ``Run`` or a path.
+    Made by `load_run` and `run_protocol`; every function that takes data takes a
+    `Run` or a path.
 
     Attributes
     ----------
@@ -90,17 +90,17 @@ class Run:
     axes : list of str
         Bending axes with both a command and a measured angle.
     table : pandas.DataFrame
-        The aligned table: ``t_s``, ``<axis>_cmd_deg``, ``<axis>_meas_deg``, extra columns.
+        The aligned table: `t_s`, `<axis>_cmd_deg`, `<axis>_meas_deg`, extra columns.
     meta : dict
-        ``run.json`` (empty for a bare table).
+        `run.json` (empty for a bare table).
     probe : dict or None
-        ``name`` and ``bending_axes`` of the probe it was recorded on (None for a bare table).
+        `name` and `bending_axes` of the probe it was recorded on (None for a bare table).
     protocol : str or None
         The protocol it played (or what was imported).
     sha256 : str
         Hash of the data, as model files record it.
     aligned : AlignedData
-        The library's object (:func:`endocal.runs.aligned.load_aligned`).
+        The library's object (`endocal.runs.aligned.load_aligned`).
     """
 
     def __init__(self, aligned) -> None:
@@ -119,7 +119,7 @@ class Run:
 
     @property
     def summary(self):
-        """:class:`endocal.runs.summary.DataSummary`: rows, span, rate, ranges and reversals per axis."""
+        """`endocal.runs.summary.DataSummary`: rows, span, rate, ranges and reversals per axis."""
         if self._summary is None:
             from endocal.runs.summary import summarize
 
@@ -127,7 +127,7 @@ class Run:
         return self._summary
 
     def to_dict(self) -> dict:
-        """What ``endocal info RUN --json`` prints."""
+        """What `endocal info RUN --json` prints."""
         return self.summary.to_dict()
 
     def to_json(self) -> str:
@@ -183,13 +183,13 @@ class Run:
 
 
 def load_run(path: str | Path) -> Run:
-    """Load a run folder (``endocal excite``, ``import csv``, ``import ros``) or an aligned table.
+    """Load a run folder (`endocal excite`, `import csv`, `import ros`) or an aligned table.
 
     Parameters
     ----------
     path : str or Path
-        A run folder, or a ``.parquet`` / ``.csv`` aligned table (``t_s``,
-        ``<axis>_cmd_deg``, ``<axis>_meas_deg``).
+        A run folder, or a `.parquet` / `.csv` aligned table (`t_s`,
+        `<axis>_cmd_deg`, `<axis>_meas_deg`).
 
     Returns
     -------
@@ -210,6 +210,9 @@ def _aligned(data, what: str = "data") -> list:
     """Runs or paths (one, or a sequence) as the library's AlignedData, loaded once."""
     from endocal.runs.aligned import AlignedData, load_aligned
 
+    if hasattr(data, "columns"):  # a DataFrame: iterating it would give its column names
+        raise ModelError(f"{what}: a DataFrame; write it as an aligned table (df.to_csv('run.csv', index=False)) and "
+                         "pass the path: a model file records its data by path and SHA-256")
     items = [data] if isinstance(data, (str, Path, Run, AlignedData)) else list(data)
     if not items:
         raise ModelError(f"no {what} given: pass run folders, aligned tables or Run objects")
@@ -231,32 +234,32 @@ def run_protocol(protocol: str, out: str | Path, *, backend: str = "sim", probe:
                  realtime: bool = False, tip_load_n: float | None = None, force: bool = False, **params) -> Run:
     """Play an excitation protocol on the simulator (or the rig) and load the run it logged.
 
-    What ``endocal excite PROTOCOL --out OUT`` does (without ``--planes``, ``--model`` and
+    What `endocal excite PROTOCOL --out OUT` does (without `--planes`, `--model` and
     the force guard, which stay on the command line).
 
     Parameters
     ----------
     protocol : str
-        A protocol name (``endocal protocols``) or a protocol ``.toml`` file.
+        A protocol name (`endocal protocols`) or a protocol `.toml` file.
     out : str or Path
         The run folder to create.
     backend : {"sim", "hardware"}
     probe : str
-        A probe preset (``tee``: axes ap, ml; ``duodenoscope``: ud, lr) or a probe ``.toml``.
+        A probe preset (`tee`: axes ap, ml; `duodenoscope`: ud, lr) or a probe `.toml`.
     seed : int
         Seed of every random draw (simulator noise, random protocols; a protocol's own unset
-        ``seed`` parameter takes it).
+        `seed` parameter takes it).
     sim_config, hardware_config : path, optional
-        Simulator TOML (its effects and physics); rig TOML for ``backend="hardware"``.
+        Simulator TOML (its effects and physics); rig TOML for `backend="hardware"`.
     realtime : bool
         Pace the simulator to the wall clock.
     tip_load_n : float, optional
-        A known load hung at the tip (N), for ``fit_force``.
+        A known load hung at the tip (N), for `fit_force`.
     force : bool
-        Replace ``out`` if it exists.
+        Replace `out` if it exists.
     **params
-        Protocol parameters, e.g. ``amplitude_deg=85, period_s=10, sample_rate_hz=25``
-        (``endocal protocols show NAME`` lists them; an unknown one raises).
+        Protocol parameters, e.g. `amplitude_deg=85, period_s=10, sample_rate_hz=25`
+        (`endocal protocols show NAME` lists them; an unknown one raises).
 
     Returns
     -------
@@ -268,7 +271,7 @@ def run_protocol(protocol: str, out: str | Path, *, backend: str = "sim", probe:
         Unknown protocol or parameter, bad configuration, goals beyond the probe's limits
         (checked before anything moves).
     OutputExistsError
-        ``out`` exists and ``force`` is False.
+        `out` exists and `force` is False.
     """
     from endocal.backends.registry import make_backend
     from endocal.excite import prepare_backend, run_excitation
@@ -291,22 +294,22 @@ def run_protocol(protocol: str, out: str | Path, *, backend: str = "sim", probe:
 
 # ---------------------------------------------------------------------------- models
 class Model:
-    """A fitted hysteresis model of one axis, with how it was fitted (``endocal fit hysteresis``).
+    """A fitted hysteresis model of one axis, with how it was fitted (`endocal fit hysteresis`).
 
-    Made by :func:`fit`, :func:`load_model` and :meth:`Suggestion.refit`. It prints as its
+    Made by `fit`, `load_model` and `Suggestion.refit`. It prints as its
     equation with standard errors, then the fit's RMSE and warnings.
 
     Attributes
     ----------
     estimator : HysteresisModel
-        The scikit-learn-style model itself (``predict``, ``inverse``, ``compensator``;
-        :mod:`endocal.models`).
+        The scikit-learn-style model itself (`predict`, `inverse`, `compensator`;
+        `endocal.models`).
     axis, base : str
-        Bending axis and base model (``pi``, ``bspline``, ``linear``).
+        Bending axis and base model (`pi`, `bspline`, `linear`).
     effects : list of str
-        Its effect terms as ``effects=`` takes them (``["envelope", "delay"]``).
+        Its effect terms as `effects=` takes them (`["envelope", "delay"]`).
     settings : dict
-        The base model's settings (``n_operators``, ...).
+        The base model's settings (`n_operators`, ...).
     params, stderr : dict of str to float
         Fitted parameters and their standard errors.
     equation : str
@@ -320,7 +323,7 @@ class Model:
     path : Path or None
         The file it was loaded from or saved to.
     start_from : Model or None
-        The model its fit started from (:meth:`Suggestion.refit` sets it); :func:`validate`
+        The model its fit started from (`Suggestion.refit` sets it); `validate`
         compares with it.
     """
 
@@ -341,12 +344,12 @@ class Model:
 
     @property
     def effects(self) -> list[str]:
-        """Effect terms as ``effects=`` takes them."""
+        """Effect terms as `effects=` takes them."""
         return [e.label for e in self.estimator.effects_]
 
     @property
     def label(self) -> str:
-        """``base+effect+...``, how ``validate`` and the model ladder name a structure."""
+        """`base+effect+...`, how `validate` and the model ladder name a structure."""
         return "+".join([self.base, *self.effects])
 
     @property
@@ -355,7 +358,7 @@ class Model:
 
     @property
     def fit_report(self):
-        """:class:`endocal.models.base.FitReport`: how the optimiser stopped, RMSE, samples."""
+        """`endocal.models.base.FitReport`: how the optimiser stopped, RMSE, samples."""
         return self.estimator.fit_report_
 
     @property
@@ -372,7 +375,7 @@ class Model:
         return out
 
     def to_dict(self) -> dict:
-        """The model file's content: what ``endocal fit hysteresis --json`` prints (:mod:`endocal.models.io`)."""
+        """The model file's content: what `endocal fit hysteresis --json` prints (`endocal.models.io`)."""
         from endocal.models import model_to_dict
 
         d = model_to_dict(self.estimator)
@@ -384,7 +387,7 @@ class Model:
         return _json(self.to_dict())
 
     def save(self, path: str | Path, *, force: bool = False) -> Path:
-        """Write the model file (versioned JSON, as ``endocal fit hysteresis --out`` writes it).
+        """Write the model file (versioned JSON, as `endocal fit hysteresis --out` writes it).
 
         Parameters
         ----------
@@ -399,7 +402,7 @@ class Model:
         Raises
         ------
         OutputExistsError
-            ``path`` exists and ``force`` is False.
+            `path` exists and `force` is False.
         OutputPathError
             It cannot be written.
         """
@@ -449,7 +452,7 @@ def _model(m, what: str = "model") -> Model:
 
 
 def load_model(path: str | Path) -> Model:
-    """Read a model file (``endocal fit hysteresis --out``, :meth:`Model.save`).
+    """Read a model file (`endocal fit hysteresis --out`, `Model.save`).
 
     Raises
     ------
@@ -462,8 +465,8 @@ def load_model(path: str | Path) -> Model:
 
 
 def _planes_path(planes) -> Path | None:
-    """``planes=`` (a saved Planes or a path) as the file's path: a model records the planes it was
-    fitted through by path and SHA-256, which ``validate`` and ``report`` read them back by."""
+    """`planes=` (a saved Planes or a path) as the file's path: a model records the planes it was
+    fitted through by path and SHA-256, which `validate` and `report` read them back by."""
     if planes is None:
         return None
     if isinstance(planes, Planes):
@@ -476,43 +479,43 @@ def _planes_path(planes) -> Path | None:
 
 def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = (), planes=None,
         start_from: Model | str | Path | None = None, settings: Mapping | None = None) -> Model:
-    """Fit a hysteresis model of one axis to runs (``endocal fit hysteresis``).
+    """Fit a hysteresis model of one axis to runs (`endocal fit hysteresis`).
 
     Parameters
     ----------
     data : Run, path, or a sequence of them
         Estimation records, fitted together (one run each: operator states restart).
     axis : str
-        Bending axis to model (``ap``, ``ml``, ``ud``, ``lr``, a table's own name).
+        Bending axis to model (`ap`, `ml`, `ud`, `lr`, a table's own name).
     model : {"pi", "bspline", "linear"}
-        Base model: ``pi`` with ``effects=["envelope"]`` is the duodenoscope paper's modified
-        Prandtl-Ishlinskii model (eqs. 5-8, analytic inverse eqs. 9-11); ``bspline`` the
-        thesis's direction-dependent B-splines; ``linear`` a piecewise-linear model.
+        Base model: `pi` with `effects=["envelope"]` is the duodenoscope paper's modified
+        Prandtl-Ishlinskii model (eqs. 5-8, analytic inverse eqs. 9-11); `bspline` the
+        thesis's direction-dependent B-splines; `linear` a piecewise-linear model.
     effects : sequence of str, or a comma-separated str
-        Effect terms (``endocal effects`` lists the catalogue), e.g. ``["envelope", "delay"]``,
-        ``"load:sheath_wrap_deg"``.
+        Effect terms (`endocal effects` lists the catalogue), e.g. `["envelope", "delay"]`,
+        `"load:sheath_wrap_deg"`.
     planes : Planes or path, optional
-        Bending planes (:func:`fit_planes`): measured angles are mapped into the twisted
+        Bending planes (`fit_planes`): measured angles are mapped into the twisted
         planes the knob drives first.
     start_from : Model or path, optional
         A fitted model of the same axis and base: the effects it has start at its values
-        (what ``validate``'s refits do).
+        (what `validate`'s refits do).
     settings : mapping, optional
-        Base-model settings, e.g. ``{"n_operators": 30}`` (``--set`` on the command line).
+        Base-model settings, e.g. `{"n_operators": 30}` (`--set` on the command line).
 
     Returns
     -------
     Model
-        Not yet saved (:meth:`Model.save`); its provenance records the data as
-        ``validate`` will look it up.
+        Not yet saved (`Model.save`); its provenance records the data as
+        `validate` will look it up.
 
     Raises
     ------
     ModelError
-        Unknown base, effect or setting; data no model can be fitted on; ``start_from`` of
+        Unknown base, effect or setting; data no model can be fitted on; `start_from` of
         another axis or base.
     RunFormatError
-        A missing or malformed record, a record without ``axis``, or runs recorded on two
+        A missing or malformed record, a record without `axis`, or runs recorded on two
         probes.
     """
     from endocal.fitting import fit_hysteresis, fit_provenance
@@ -541,32 +544,37 @@ class Suggestion:
     Attributes
     ----------
     effect : str
-        As ``effects=`` takes it (``deadzone``, ``load:sheath_wrap_deg``).
+        As `effects=` takes it (`deadzone`, `load:sheath_wrap_deg`).
     gain_pct : float
         How much the candidate lowers the validation (held-out) RMSE, percent.
     p_value : float
         Holm-corrected one-sided p-value of that gain (sign-flip test on half-cycle units).
     significant : bool
-        ``p_value`` below alpha and the gain above the bar; otherwise it is listed on its
-        gain alone and ``evidence`` says why.
+        `p_value` below alpha and the gain above the bar; otherwise it is listed on its
+        gain alone and `evidence` says why.
     rmse_heldout_deg, base_rmse_heldout_deg : float
         Held-out RMSE with and without it (deg).
     evidence, cause, signature, caution : str
         Why it is (not) significant; the effect's physics and residual signature; what its
         fit left at a bound.
+    plan : Refit
+        What to refit (`endocal.validation.refit.Refit`): the data, base, settings, effects
+        and planes of the fit the scan scored; `refit()` makes it.
     suspect : Suspect
-        The library's object (:class:`endocal.validation.suspects.Suspect`).
+        The library's object (`endocal.validation.suspects.Suspect`).
     """
 
     def __init__(self, suspect, validation: Validation) -> None:
         self.suspect = suspect
+        self.plan = suspect.refit
         self._validation = validation
         for k in ("effect", "gain_pct", "p_value", "significant", "rmse_heldout_deg", "base_rmse_heldout_deg",
                   "evidence", "cause", "signature", "caution"):
             setattr(self, k, getattr(suspect, k))
 
     def to_dict(self) -> dict:
-        """One entry of ``suspects`` in ``endocal validate --json``."""
+        """One entry of `suspects` in `endocal validate --json` (without the shell `command` the
+        command line renders from `refit`)."""
         return self.suspect.to_dict()
 
     def to_json(self) -> str:
@@ -575,39 +583,43 @@ class Suggestion:
     @property
     def effects(self) -> list[str]:
         """The refit's effects: the validated model's, then this one."""
-        return [*self._validation.model.effects, self.effect]
+        return list(self.plan.effects)
 
     def refit(self) -> Model:
         """Fit the validated model's structure with this effect added, as the scan scored it.
 
-        On the estimation data the validation used (with ``refit_on="all"`` the validation
+        On the estimation data the validation used (with `refit_on="all"` the validation
         data too; under rolling-origin cross-validation the validation data), through the same
-        planes, starting from the validated model: the command ``validate`` prints.
+        planes, with the same settings, starting from the validated model: the fit whose
+        command `endocal validate` prints.
 
         Returns
         -------
         Model
-            Its ``start_from`` is the validated model, so :func:`validate` shows the error
+            Its `start_from` is the validated model, so `validate` shows the error
             falling.
         """
-        v = self._validation
-        m = v.model
-        return fit(v._refit_data, axis=m.axis, model=m.base, effects=self.effects, planes=v._planes_path,
-                   start_from=m, settings=m.settings)
+        p = self.plan
+        return fit(list(p.data_paths), axis=p.axis, model=p.base, effects=list(p.effects), planes=p.planes_path,
+                   start_from=self._validation.model, settings=p.settings)
+
+    def summary(self) -> str:
+        """One line: the effect, its gain and its p-value (or why it is not significant)."""
+        stat = f"p = {self.p_value:.2g}" if self.significant else self.evidence
+        return (f"add {self.effect}: {-self.gain_pct:+.0f} % validation RMSE "
+                f"({self.base_rmse_heldout_deg:.3g} -> {self.rmse_heldout_deg:.3g} deg), {stat}")
 
     def __repr__(self) -> str:
-        stat = f"p = {self.p_value:.2g}" if self.significant else self.evidence
-        return (f"Suggestion: add {self.effect}: {-self.gain_pct:+.0f} % validation RMSE "
-                f"({self.base_rmse_heldout_deg:.3g} -> {self.rmse_heldout_deg:.3g} deg), {stat}")
+        return f"Suggestion: {self.summary()}"
 
 
 _KINDS = {"time_series": "ts-", "loops": "loops-", "residuals": "resid-", "regimes": "regime-"}
 
 
 class Validation:
-    """A model held against measurements: how far off, where, what is missing (``endocal validate``).
+    """A model held against measurements: how far off, where, what is missing (`endocal validate`).
 
-    Made by :func:`validate`. Its ``repr`` is the verdict: the RMSE with its interval, the
+    Made by `validate`. Its `repr` is the verdict: the RMSE with its interval, the
     worst regime, the first suggestion or "nothing missing", the untested suspects, the
     error beside the previous model's.
 
@@ -616,10 +628,10 @@ class Validation:
     model : Model
         The model validated.
     result : ValidationResult
-        The library's object (:class:`endocal.validation.offline.ValidationResult`), which the
-        command's terminal view and ``--json`` render too.
+        The library's object (`endocal.validation.offline.ValidationResult`), which the
+        command's terminal view and `--json` render too.
     rmse_deg : float
-        RMSE of the model on the validation data (deg); ``metrics.ci["rmse_deg"]`` its 95 %
+        RMSE of the model on the validation data (deg); `metrics.ci["rmse_deg"]` its 95 %
         block-bootstrap interval.
     heldout_rmse_deg : float
         RMSE of the model's structure refitted on the estimation data (or rolling origin) and
@@ -630,7 +642,7 @@ class Validation:
         Effects most likely missing, best first (empty: nothing clears the bar).
     untested : list of Pointer
         Effects the residual points at that the scan could not confirm, with the experiment
-        that would (:class:`endocal.validation.verdict.Pointer`).
+        that would (`endocal.validation.verdict.Pointer`).
     compare : Comparison or None
         The previous model's error beside this one's.
     notes : list of str
@@ -638,11 +650,9 @@ class Validation:
         Nothing is missing.
     """
 
-    def __init__(self, result, model: Model, *, refit_data, planes_path, records: Sequence, compare_path=None) -> None:
+    def __init__(self, result, model: Model, *, records: Sequence, compare_path=None) -> None:
         self.result = result
         self.model = model
-        self._refit_data = refit_data
-        self._planes_path = planes_path
         self._records = list(records)
         self._compare_path = compare_path
         self.suggestions = [Suggestion(s, self) for s in result.suspects]
@@ -659,7 +669,7 @@ class Validation:
     notes = property(lambda self: list(self.result.notes))
 
     def to_dict(self) -> dict:
-        """What ``endocal validate MODEL DATA --json`` prints."""
+        """What `endocal validate MODEL DATA --json` prints."""
         d = self.result.to_dict()
         if self._compare_path is not None and d["compare"] is not None:
             d["compare"]["path"] = str(self._compare_path)
@@ -687,7 +697,7 @@ class Validation:
             lines.append(f"  worst regime: {w.group}: {w.name}: RMSE {w.metrics.rmse_deg:.3g} deg ({w.ratio:.2f}x)")
         if self.suggestions:
             more = f" (+{len(self.suggestions) - 1} more)" if len(self.suggestions) > 1 else ""
-            lines.append(f"  missing: {self.suggestions[0]!r}{more}".replace("Suggestion: ", ""))
+            lines.append(f"  missing: {self.suggestions[0].summary()}{more}")
             lines.append("  next: .suggestions[0].refit(), then validate the new model")
         elif scan.scheme == "none":
             lines.append(f"  missing: not tested: {scan.scheme_reason}")
@@ -738,10 +748,10 @@ def validate(model: Model | str | Path, data, *, train=None, compare: Model | st
              load_columns: Sequence[str] | None = None) -> Validation:
     """Hold a model against validation records: how far off, where it fails, which effect is missing.
 
-    What ``endocal validate MODEL DATA...`` does offline: error metrics with 95 %
+    What `endocal validate MODEL DATA...` does offline: error metrics with 95 %
     block-bootstrap intervals, the error by regime, residual tests, and every catalog effect
     the model lacks fitted on the estimation data (the records the model was fitted on,
-    found through its provenance, or ``train``) and scored on ``data``, half-cycle by
+    found through its provenance, or `train`) and scored on `data`, half-cycle by
     half-cycle, Holm-corrected.
 
     Parameters
@@ -750,16 +760,16 @@ def validate(model: Model | str | Path, data, *, train=None, compare: Model | st
     data : Run, path, or a sequence of them
         Validation records (not used by the fit, for an honest score).
     train : Run, path, or a sequence of them, optional
-        Estimation data (``--train``); default: what the model was fitted on.
+        Estimation data (`--train`); default: what the model was fitted on.
     compare : Model, path or bool, optional
         A previous model, shown beside this one under the same scheme. Default (None): the
-        model this one was refitted from (:attr:`Model.start_from`), if any; False: none.
+        model this one was refitted from (`Model.start_from`), if any; False: none.
     cv : {"auto", "rolling", "split"}
         How effects are tested: the estimation/validation split when there is estimation
-        data (``auto``), rolling-origin cross-validation on ``data`` alone (``rolling``), or
-        require the split (``split``).
+        data (`auto`), rolling-origin cross-validation on `data` alone (`rolling`), or
+        require the split (`split`).
     refit_on : {"estimation", "all"}
-        What :meth:`Suggestion.refit` fits on: the estimation data (as the candidates were
+        What `Suggestion.refit` fits on: the estimation data (as the candidates were
         scored), or the estimation and validation data (a final model, to be validated on a
         third record).
     folds : int
@@ -769,7 +779,7 @@ def validate(model: Model | str | Path, data, *, train=None, compare: Model | st
     planes : Planes or path, optional
         Overrides the bending planes the model was fitted through.
     load_columns : sequence of str, optional
-        Columns to try ``load:COLUMN`` on (default: every varying extra column).
+        Columns to try `load:COLUMN` on (default: every varying extra column).
 
     Returns
     -------
@@ -778,8 +788,8 @@ def validate(model: Model | str | Path, data, *, train=None, compare: Model | st
     Raises
     ------
     ModelError
-        Bad ``cv``, ``refit_on`` or ``folds``; a model of an axis the data lacks; estimation
-        data the model file names that is missing or changed; a ``compare`` model of another
+        Bad `cv`, `refit_on` or `folds`; a model of an axis the data lacks; estimation
+        data the model file names that is missing or changed; a `compare` model of another
         axis; records too short to validate on.
     RunFormatError
         A missing or malformed record, or a validation run of another probe than the model's.
@@ -804,35 +814,31 @@ def validate(model: Model | str | Path, data, *, train=None, compare: Model | st
         raise ModelError(f"compare: that model is of axis '{old.axis}', this one of axis '{m.axis}': compare with a "
                          "model of the same axis")
     data_paths = [str(a.source) for a in tables]
-    refit_data, refit_paths, suffix = tables, data_paths, ""
-    if plan.train is not None:
-        refit_data, refit_paths = plan.train, plan.train_paths
-        if refit_on == "all":  # asked for: the validation data folded into the refits
-            refit_data = list({str(a.source): a for a in [*plan.train, *tables]}.values())
-            refit_paths, suffix = [str(a.source) for a in refit_data], "-all"
+    refit_paths, suffix = plan.train_paths, ""
+    if refit_on == "all" and plan.train is not None:  # asked for: the validation data folded into the refits
+        refit_paths, suffix = list(dict.fromkeys([*plan.train_paths, *data_paths])), "-all"
     result = validate_offline(m.estimator, tables, train=plan.train, train_paths=refit_paths, planes=plan.planes,
-                              refit_args=plan.refit_args, scheme_reason=plan.reason, folds=folds, seed=seed,
+                              planes_path=plan.planes_path, scheme_reason=plan.reason, folds=folds, seed=seed,
                               compare=None if old is None else old.estimator,
                               model_path=None if m.path is None else str(m.path), data_paths=data_paths,
                               load_columns=load_columns, refit_suffix=suffix)
-    return Validation(result, m, refit_data=refit_data, planes_path=plan.planes_path, records=tables,
-                      compare_path=None if old is None else old.path)
+    return Validation(result, m, records=tables, compare_path=None if old is None else old.path)
 
 
 # ---------------------------------------------------------------------------- reports
 class Report:
-    """Models compared on records: metrics, paired tests, the model ladder, figures (``endocal report``).
+    """Models compared on records: metrics, paired tests, the model ladder, figures (`endocal report`).
 
-    Made by :func:`make_report`. Its ``repr`` is the report's summary.
+    Made by `make_report`. Its `repr` is the report's summary.
 
     Attributes
     ----------
     report : endocal.report.Report
-        The library's object, which the HTML page, ``report.json`` and the CSV render from.
+        The library's object, which the HTML page, `report.json` and the CSV render from.
     figures : list of ReportFigure
-        Every figure: ``id``, ``section``, ``title``, ``caption`` (and ``figure``).
+        Every figure: `id`, `section`, `title`, `caption` (and `figure`).
     files : dict or None
-        ``html``, ``json``, ``csv`` paths when written (``out``).
+        `html`, `json`, `csv` paths when written (`out`).
     summary : list of str
         The summary sentences the command prints.
     """
@@ -845,20 +851,20 @@ class Report:
     summary = property(lambda self: self.report.summary_lines())
 
     def to_dict(self) -> dict:
-        """``report.json``'s content; ``endocal report --json`` prints its ``summary``, ``not_evaluated``,
-        ``metrics``, ``ladder`` and ``notes``."""
+        """`report.json`'s content; `endocal report --json` prints its `summary`, `not_evaluated`,
+        `metrics`, `ladder` and `notes`."""
         return self.report.to_dict()
 
     def to_json(self) -> str:
         return self.report.to_json()
 
     def write(self, out: str | Path, *, force: bool = False) -> dict:
-        """Write the HTML page with its ``.json`` and ``_metrics.csv`` beside it.
+        """Write the HTML page with its `.json` and `_metrics.csv` beside it.
 
         Returns
         -------
         dict
-            ``html``, ``json``, ``csv`` paths.
+            `html`, `json`, `csv` paths.
 
         Raises
         ------
@@ -882,8 +888,8 @@ class Report:
         Parameters
         ----------
         which : int or str
-            Its index in :attr:`figures`, or its ``id`` (``ladder-ap``, ``loops-check-ap``,
-            ``params-pi-envelope``, ``planes``...).
+            Its index in `figures`, or its `id` (`ladder-ap`, `loops-check-ap`,
+            `params-pi-envelope`, `planes`...).
 
         Returns
         -------
@@ -902,7 +908,7 @@ class Report:
 
 def make_report(models, data, *, planes=None, out: str | Path | None = None, force: bool = False,
                 bootstrap: int = 400, seed: int = 0) -> Report:
-    """Compare hysteresis models on records (``endocal report``).
+    """Compare hysteresis models on records (`endocal report`).
 
     Every model is scored on every record of its axis; models are compared on per-half-cycle
     errors (Wilcoxon signed-rank for two, Friedman with Holm-corrected pairwise tests for
@@ -911,17 +917,17 @@ def make_report(models, data, *, planes=None, out: str | Path | None = None, for
     Parameters
     ----------
     models : Model, path, or a sequence of them
-        Saved models are named by their file's stem, others by ``base+effects``.
+        Saved models are named by their file's stem, others by `base+effects`.
     data : Run, path, or a sequence of them
     planes : Planes or path, optional
         Adds the bending-plane figure before and after orthogonal compensation.
     out : str or Path, optional
-        Write the HTML page there, with ``NAME.json`` and ``NAME_metrics.csv`` beside it
+        Write the HTML page there, with `NAME.json` and `NAME_metrics.csv` beside it
         (checked before any work).
     force : bool
         Overwrite those files.
     bootstrap, seed : int
-        Block-bootstrap replicates and seed of the 95 % intervals (``validate``'s defaults).
+        Block-bootstrap replicates and seed of the 95 % intervals (`validate`'s defaults).
 
     Returns
     -------
@@ -933,42 +939,40 @@ def make_report(models, data, *, planes=None, out: str | Path | None = None, for
         Missing or invalid inputs, models for axes no record has, or nothing that could be
         evaluated (the message lists why).
     OutputExistsError, OutputPathError
-        ``out`` exists (without ``force``) or cannot be written.
+        `out` exists (without `force`) or cannot be written.
     """
     from endocal.report import build_report, side_files
 
     items = [models] if isinstance(models, (str, Path, Model)) else list(models)
-    ms = []
-    for m in items:
-        m = _model(m)  # a saved model goes in by its file: named by its stem, its hash recorded
+    ms, names = [], []
+    for m in map(_model, items):  # a saved model goes in by its file: named by its stem, its hash recorded
         ms.append(m.path if m.path is not None else m.estimator)
+        names.append(str(m.path) if m.path is not None else m.label)
     if isinstance(planes, Planes):  # the figure only: each model reads its data through the planes it records
         planes = planes.path if planes.path is not None else planes.calibration
     rep = build_report(ms, _aligned(data), planes=planes, out=out, force=force, n_boot=bootstrap, seed=seed,
-                       command=_call("make_report", [str(m) if isinstance(m, Path) else repr(m) for m in ms],
-                                     out=None if out is None else str(out)),
-                       keep_figures=True)
+                       command=_call("make_report", names, out=None if out is None else str(out)), keep_figures=True)
     return Report(rep, None if out is None else side_files(out))
 
 
 # ---------------------------------------------------------------------------- planes and force
 class Planes:
     """A bending-plane calibration: the four half-planes' deviations, the twist delta and the
-    orthogonal compensator (``endocal fit planes``; duodenoscope eqs. 1-4).
+    orthogonal compensator (`endocal fit planes`; duodenoscope eqs. 1-4).
 
     Attributes
     ----------
     calibration : PlanesCalibration
-        The library's object (:class:`endocal.planes.calibration.PlanesCalibration`).
+        The library's object (`endocal.planes.calibration.PlanesCalibration`).
     deviation_deg, residual_deviation_deg : dict
-        Per half-plane (``y+``, ``y-``, ``x+``, ``x-``): the fitted deviation and what is left
+        Per half-plane (`y+`, `y-`, `x+`, `x-`): the fitted deviation and what is left
         after compensation (deg).
     delta_deg : float
         The thesis's twist between the planes (deg).
     path : Path or None
         The file it was loaded from or saved to.
     runs : list of Path
-        The sweeps it was fitted on (where :meth:`plot` looks for the measured points).
+        The sweeps it was fitted on (where `plot` looks for the measured points).
     """
 
     def __init__(self, calibration, *, path: str | Path | None = None, runs: Sequence = ()) -> None:
@@ -981,19 +985,19 @@ class Planes:
     delta_deg = property(lambda self: self.calibration.delta_deg)
 
     def to_dict(self) -> dict:
-        """The planes file's content: what ``endocal fit planes --json`` prints."""
+        """The planes file's content: what `endocal fit planes --json` prints."""
         return self.calibration.to_json()
 
     def to_json(self) -> str:
         return _json(self.to_dict())
 
     def save(self, path: str | Path, *, force: bool = False) -> Path:
-        """Write ``planes.json`` (what ``fit hysteresis --planes``, ``excite --planes`` and ``report --planes`` read).
+        """Write `planes.json` (what `fit hysteresis --planes`, `excite --planes` and `report --planes` read).
 
         Raises
         ------
         OutputExistsError
-            ``path`` exists and ``force`` is False.
+            `path` exists and `force` is False.
         """
         from endocal.planes import save_planes
 
@@ -1022,7 +1026,7 @@ class Planes:
 
 
 def fit_planes(runs, *, after=(), bootstrap: int = 200, seed: int = 0) -> Planes:
-    """Fit the bending planes from runs of the ``planes`` protocol (``endocal fit planes``).
+    """Fit the bending planes from runs of the `planes` protocol (`endocal fit planes`).
 
     Parameters
     ----------
@@ -1054,21 +1058,21 @@ def fit_planes(runs, *, after=(), bootstrap: int = 200, seed: int = 0) -> Planes
 
 
 def load_planes(path: str | Path) -> Planes:
-    """Read ``planes.json`` (``endocal fit planes --out``, :meth:`Planes.save`)."""
+    """Read `planes.json` (`endocal fit planes --out`, `Planes.save`)."""
     from endocal.planes import load_planes as _load
 
     return Planes(_load(path), path=path, runs=[Path(path).parent])
 
 
 class ForceModel:
-    """A contact-force model of one knob (``endocal fit force``; duodenoscope paper, eqs. 12-15).
+    """A contact-force model of one knob (`endocal fit force`; duodenoscope paper, eqs. 12-15).
 
-    The report draws no figure of it, so it has no ``plot``.
+    The report draws no figure of it, so it has no `plot`.
 
     Attributes
     ----------
     model : endocal.force.ForceModel
-        The library's object (``predict``, the guard's evaluator).
+        The library's object (`predict`, the guard's evaluator).
     provenance : dict
     path : Path or None
     """
@@ -1079,7 +1083,7 @@ class ForceModel:
         self.path = None if path is None else Path(path)
 
     def to_dict(self) -> dict:
-        """The force-model file's content: what ``endocal fit force --json`` prints."""
+        """The force-model file's content: what `endocal fit force --json` prints."""
         from endocal.force.io import force_model_to_dict
 
         return force_model_to_dict(self.model, self.provenance or None)
@@ -1088,12 +1092,12 @@ class ForceModel:
         return _json(self.to_dict())
 
     def save(self, path: str | Path, *, force: bool = False) -> Path:
-        """Write ``force.json`` (what ``--force-model`` reads).
+        """Write `force.json` (what `--force-model` reads).
 
         Raises
         ------
         OutputExistsError
-            ``path`` exists and ``force`` is False.
+            `path` exists and `force` is False.
         """
         from endocal.force import save_force_model
 
@@ -1110,17 +1114,17 @@ class ForceModel:
 
 
 def fit_force(runs, *, axis: str | None = None, torque_constant_nm_per_a: float | None = None) -> ForceModel:
-    """Fit the contact-force model from unloaded and loaded ``force-calibration`` runs (``endocal fit force``).
+    """Fit the contact-force model from unloaded and loaded `force-calibration` runs (`endocal fit force`).
 
     Parameters
     ----------
     runs : Run, path, or a sequence of them
         At least one run with no tip load and two with known loads
-        (``run_protocol("force-calibration", ..., tip_load_n=F)``).
+        (`run_protocol("force-calibration", ..., tip_load_n=F)`).
     axis : str, optional
         Default: the one the runs' loads name.
     torque_constant_nm_per_a : float, optional
-        Motor torque per current (N m/A); default: the simulator's, from ``run.json``.
+        Motor torque per current (N m/A); default: the simulator's, from `run.json`.
 
     Returns
     -------

@@ -8,6 +8,7 @@ parameters, and end at the noise floor with nothing missing.
 
 from __future__ import annotations
 
+import ast
 import io
 import json
 import subprocess
@@ -68,7 +69,9 @@ def test_the_loop_names_the_missing_delay_and_its_refit_recovers_the_truth(loop)
     first = v.suggestions[0]
     assert first.effect == "delay" and first.significant and first.p_value < 0.01
     assert v.rmse_deg > 3 * NOISE_DEG
-    # the refit is the model's structure plus the delay, started from the validated model
+    # the refit is the model's structure plus the delay, on the estimation data the model file
+    # names, started from the validated model
+    assert first.plan.data_paths == tuple(map(str, loop["est"])) and first.plan.effects == ("envelope", "delay")
     assert model2.effects == ["delay", "envelope"] and model2.start_from is loop["model"]
     # every parameter of the truth within 4 standard errors (the fit fixes the gauge k1 = 1:
     # play operators are homogeneous, k -> k/k1, r -> r/k1, w -> w k1, beta -> beta k1)
@@ -86,10 +89,12 @@ def test_the_loop_names_the_missing_delay_and_its_refit_recovers_the_truth(loop)
     # validation samples alike (within 3 x 0.3/sqrt(2 x 3000) = 0.012 deg)
     assert model2.rmse_deg == pytest.approx(NOISE_DEG, abs=0.01)
     assert v2.rmse_deg == pytest.approx(NOISE_DEG, abs=0.012)
-    # the true structure: nothing missing, and the error fell from the model it came from
+    # the true structure: nothing missing
     assert v2.clean and v2.suggestions == [] and v2.untested == []
+    # and the error fell from the lag's (> 3x the noise, as first validated) to the noise floor
     assert v2.compare is not None and v2.compare.old_label == "pi+envelope"
-    assert v2.compare.new_heldout_rmse_deg < 0.25 * v2.compare.old_heldout_rmse_deg
+    assert v2.compare.old_heldout_rmse_deg == pytest.approx(v.heldout_rmse_deg)
+    assert v2.compare.new_heldout_rmse_deg == pytest.approx(NOISE_DEG, abs=0.012)
 
 
 # ---------------------------------------------------------------------------- the contract
@@ -181,7 +186,8 @@ def test_planes_and_force_from_python(tmp_path):
     planes_run = ec.run_protocol("planes", tmp_path / "planes", seed=1, sample_rate_hz=20, repetitions=1)
     planes = ec.fit_planes(planes_run, bootstrap=20)
     assert repr(planes).startswith("Planes: bending planes (direction, bend_line; 95 % CI, 4 sweeps)")
-    # the simulator twists the half-planes by 12.7, 20.2, 2.3 and 15.6 deg (README)
+    # the simulator twists the half-planes by 12.7, 20.2, 2.3 and 15.6 deg; the README's fit of three
+    # sweeps a half-plane at 100 Hz recovers them within 0.2 deg, one sweep at 20 Hz within 0.5
     assert planes.deviation_deg == pytest.approx({"y+": 12.7, "y-": 20.2, "x+": 2.3, "x-": 15.6}, abs=0.5)
     assert isinstance(planes.plot(), Figure)
     path = planes.save(tmp_path / "planes.json")
@@ -192,7 +198,8 @@ def test_planes_and_force_from_python(tmp_path):
                             tip_load_n=load) for i, load in enumerate(loads)]
     force = ec.fit_force(runs)
     assert repr(force).startswith("ForceModel ap: F_n = dM_knob / (G * L(beta))")
-    # each loaded run predicted by a model fitted without it: within 10 % of the hung load
+    # each loaded run predicted by a model fitted without it: within 10 % of the hung load (the README's
+    # five full-length runs: within 2 %; two passes of three runs here)
     assert [h.load_n for h in force.model.heldout_] == [0.5, 1.0]
     assert all(abs(h.error_pct) < 10 for h in force.model.heldout_)
     saved = force.save(tmp_path / "force.json")
@@ -253,6 +260,8 @@ def test_bad_arguments_are_refused_before_any_work(loop):
         ec.fit(loop["est"], axis="ap", model="pie")
     with pytest.raises(ModelError, match="no data given"):
         ec.fit([], axis="ap")
+    with pytest.raises(ModelError, match="a DataFrame; write it as an aligned table"):
+        ec.fit(pd.read_csv(loop["est"][0]), axis="ap")
 
 
 # ---------------------------------------------------------------------------- the package
@@ -273,3 +282,25 @@ def test_import_endocal_stays_light_and_exports_the_api():
     # names that are also subpackages would be shadowed once those are imported: none is
     assert not any((ROOT / "endocal" / name).exists() or (ROOT / "endocal" / f"{name}.py").exists()
                    for name in api.__all__)
+
+
+
+def _uses_the_api(path: Path) -> bool:
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import) and any(a.name.startswith("endocal.api") for a in node.names):
+            return True
+        if isinstance(node, ast.ImportFrom) and node.level == 0 and (
+                (node.module or "").startswith("endocal.api")
+                or node.module == "endocal" and any(a.name in ("api", *api.__all__) for a in node.names)):
+            return True
+    return False
+
+
+def test_the_api_sits_on_top_of_the_library_beside_the_cli():
+    # the API calls the library as the CLI does; no library module calls back into either
+    from tests.test_layers import _imports
+
+    assert not [n for n in _imports(ROOT / "endocal" / "api.py") if n.startswith("endocal.cli")]
+    callers = [str(p.relative_to(ROOT)) for p in sorted((ROOT / "endocal").rglob("*.py"))
+               if p != ROOT / "endocal" / "__init__.py" and _uses_the_api(p)]
+    assert callers == []

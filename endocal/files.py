@@ -1,19 +1,53 @@
-"""Reading endocal's JSON files (models, planes, force models): one place for what can go wrong.
+"""Writing files so that readers see the old file or the new one, never half; reading endocal's
+JSON files (models, planes, force models) with one answer for what can go wrong in them.
 
-A file changed by hand, half copied or written by another program must stop the command
-in one line naming the file and what is wrong in it, never inside ``json`` or numpy.
+The lowest layer of endocal's inputs and outputs (run folders, model files, planes, force
+models, reports): it depends on the standard library only, so every package may use it without
+reaching into another (a model file is not a run). A file changed by hand, half copied or
+written by another program must stop a command in one line naming the file and what is wrong
+in it, never inside ``json`` or numpy: the error class is the caller's.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
+import tempfile
 from pathlib import Path
 
-from endocal.errors import EndocalError
+
+def _umask() -> int:
+    mask = os.umask(0o022)  # read by setting; restored at once (at import, before any thread writes)
+    os.umask(mask)
+    return mask
 
 
-def read_json_document(path: str | Path, what: str, error: type[EndocalError]):
+_UMASK = _umask()
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` so that readers see the old file or the new one, never half.
+
+    Missing folders on the way are created, as for every output of endocal (a run folder, a
+    model, a report): a user names where the file goes, not how to prepare the way.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        # mkstemp makes the file private (0600); a run or a model is for the whole lab to read,
+        # so it gets the mode any file created here would get (0644 under the usual umask 022)
+        os.fchmod(fd, 0o666 & ~_UMASK)
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def read_json_document(path: str | Path, what: str, error: type[Exception]):
     """The parsed content of the JSON file ``path`` (``what`` names it in messages: "model file").
 
     Raises
@@ -59,7 +93,7 @@ def first_non_finite(node, path: str = "") -> str | None:
     return None
 
 
-def refuse_non_finite(doc, where: str, error: type[EndocalError]) -> None:
+def refuse_non_finite(doc, where: str, error: type[Exception]) -> None:
     """Raise ``error`` naming the first NaN or infinity in ``doc``."""
     bad = first_non_finite(doc)
     if bad:
