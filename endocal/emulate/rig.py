@@ -45,6 +45,10 @@ class EmulatedRig(Served):
         Bending axis -> servo ID (default 1 and 2).
     bus_faults, aurora_faults : optional
         Faults of the two devices.
+    present_ticks : int or dict
+        Where the knob servos start (ticks, for all or per servo ID; 2048 is 0 deg).
+    torque_on : bool
+        The servos start with torque on (as a crashed program leaves them).
     physics_period_s : float
         How often the probe is stepped (default 5 ms).
     stage : bool
@@ -56,15 +60,16 @@ class EmulatedRig(Served):
 
     def __init__(self, probe: ProbeConfig, sim_config: SimConfig | None = None, *, seed: int = 0, ids: dict | None = None,
                  bus_faults: BusFaults | None = None, aurora_faults: AuroraFaults | None = None,
-                 physics_period_s: float = 0.005, baudrate: int = 57600, stage: bool = False,
-                 stage_faults: StageFaults | None = None, on_event=None) -> None:
+                 physics_period_s: float = 0.005, baudrate: int = 57600, present_ticks=ZERO_TICKS,
+                 torque_on: bool = False, stage: bool = False, stage_faults: StageFaults | None = None,
+                 on_event=None) -> None:
         super().__init__()
         self.probe = probe
         self.ids = ids or {a: k + 1 for k, a in enumerate(probe.bending_axes)}
         cfg = (sim_config or SimConfig.default()).replace(motor={"knob_time_constant_s": 0.0})
         self.sim = Simulator(cfg, probe, seed)
-        self.bus = ServoBus(list(self.ids.values()), baudrate=baudrate, faults=bus_faults, seed=seed,
-                            on_event=on_event)
+        self.bus = ServoBus(list(self.ids.values()), baudrate=baudrate, present_ticks=present_ticks,
+                            torque_on=torque_on, faults=bus_faults, seed=seed, on_event=on_event)
         self.aurora = AuroraEmulator(faults=aurora_faults)
         self.stage = StageEmulator(0, faults=stage_faults, on_event=on_event) if stage else None
         self.period_s = physics_period_s
