@@ -50,7 +50,8 @@ PORT_STATUS_UNKNOWN = -1  # the tracker object gave none (a stand-in without ndi
 STATUS_OK = "ok"
 STATUS_MISSING, STATUS_OUT, STATUS_PARTLY = DROPOUT_STATUSES
 STATUS_REASONS = {STATUS_MISSING: "missing: no transform", STATUS_OUT: "out of the field generator's volume",
-                  STATUS_PARTLY: "partly out of the field generator's volume"}
+                  STATUS_PARTLY: "partly out of the field generator's volume",
+                  STATUS_OK: "no frame read since its last valid pose"}
 TRACKER_KEYS = {"serial_port", "tip_port_handle", "base_port_handle", "rom_files", "rate_hz", "detect_timeout_s",
                 "max_lost_s"}
 
@@ -412,13 +413,12 @@ class AuroraTracker:
             if all(seen_valid.values()):
                 break
             if time.monotonic() > deadline:
-                missing = [f"{s} (port handle {self.config.handles[s]:#04x}, "
-                           f"{STATUS_REASONS.get(self._last_status.get(s), 'missing')})"
-                           for s, ok in seen_valid.items() if not ok]
+                lost = [s for s, ok in seen_valid.items() if not ok]
+                named = ", ".join(f"{s} (port handle {self.config.handles[s]:#04x})" for s in lost)
+                why = "; ".join(f"{s}: {STATUS_REASONS.get(self._last_status.get(s, STATUS_MISSING))}" for s in lost)
                 raise HardwareError(
-                    f"NDI Aurora: {', '.join(missing)} reported no valid pose within "
-                    f"{self.config.detect_timeout_s:g} s; check the sensor lies inside the field generator's "
-                    "measurement volume, away from metal"
+                    f"NDI Aurora: {named} reported no valid pose within {self.config.detect_timeout_s:g} s ({why}); "
+                    "check the sensor lies inside the field generator's measurement volume, away from metal"
                 )
             time.sleep(1.0 / self.config.rate_hz)
 
@@ -471,7 +471,7 @@ class AuroraTracker:
         for sensor, last in self._last_valid.items():
             if now - last > self.config.max_lost_s:
                 handle = self.config.handles[sensor]
-                reason = STATUS_REASONS.get(self._last_status.get(sensor, STATUS_MISSING), "missing")
+                reason = STATUS_REASONS.get(self._last_status.get(sensor, STATUS_MISSING))
                 raise HardwareError(
                     f"NDI Aurora: the {sensor} sensor (port handle {handle:#04x}) has reported no valid pose for "
                     f"{now - last:.1f} s ({reason}; tracker.max_lost_s = {self.config.max_lost_s:g}): check its cable "

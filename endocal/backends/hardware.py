@@ -214,9 +214,16 @@ class HardwareConfig:
         for section in ("dynamixel", "tracker", "stage", "safety"):
             if section in d and not isinstance(d[section], dict):
                 raise ConfigError(f"{where}: [{section}] must be a table")
+        dynamixel = DynamixelConfig.from_dict(d["dynamixel"], where)
+        tracker = AuroraConfig.from_dict(d["tracker"], where, base_dir=base_dir)
+        if tracker.serial_port != "auto" and _same_port(dynamixel.port, tracker.serial_port):
+            raise ConfigError(
+                f"{where}: [dynamixel] port and [tracker] serial_port are both {dynamixel.port}: the servos' U2D2 "
+                "and the Aurora each need their own serial port (list them with `python -m serial.tools.list_ports`)"
+            )
         return cls(
-            dynamixel=DynamixelConfig.from_dict(d["dynamixel"], where),
-            tracker=AuroraConfig.from_dict(d["tracker"], where, base_dir=base_dir),
+            dynamixel=dynamixel,
+            tracker=tracker,
             stage=StageConfig.from_dict(d.get("stage", {}), where),
             safety=SafetyConfig.from_dict(d.get("safety", {}), where),
             name=str(d.get("name", "rig")),
@@ -245,6 +252,14 @@ class HardwareConfig:
         except tomllib.TOMLDecodeError as exc:
             raise ConfigError(f"hardware config {path} is not valid TOML: {exc}") from None
         return cls.from_dict(data, where=str(path), base_dir=path.parent)
+
+
+def _same_port(a: str, b: str) -> bool:
+    """Whether two serial port names are one device (``COM3``/``com3``; a symlink such as
+    ``/dev/serial/by-id/...`` and the ``/dev/ttyUSB0`` it points at)."""
+    import os
+
+    return a.strip().lower() == b.strip().lower() or os.path.realpath(a) == os.path.realpath(b)
 
 
 # --- safety check -------------------------------------------------------------------------

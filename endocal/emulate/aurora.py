@@ -16,10 +16,10 @@ with one) stops tracking and offers every port handle again for ``PINIT`` and ``
 Each handle's port status (NDI Combined API, "TX", reply option 0001) is ``0x31`` (occupied,
 initialised, enabled) for a sensor seen, ``0x01`` for one missing; a sensor out of the field
 generator's volume (the :class:`AuroraFaults` ``out_of_volume`` fault) sets bit 6 (``0x40``),
-one partly out of it bit 7 (``0x80``). Out of volume its transform is still sent, displaced by
-:data:`DEGRADED_MM` (partly out: a tenth of it) as a distorted reading would be, when the host
-asks for such transforms (reply option ``0800``, which scikit-surgerynditracker sets), and
-``MISSING`` otherwise.
+one partly out of it bit 7 (``0x80``). Out of volume (or partly) its transform is still sent,
+displaced by :data:`DEGRADED_MM` as a distorted reading would be, when the host asks for such
+transforms (reply option ``0800``, which scikit-surgerynditracker sets), and ``MISSING``
+otherwise.
 
 It runs in a process of its own: ndicapi holds Python's interpreter lock while it waits
 for a reply, so an emulator thread in the host's process could never answer. The sensor
@@ -213,8 +213,7 @@ class _Unit:
             pos = chunk[0:3]
             if bits:  # a distorted reading, or none unless the host asked for transforms out of volume
                 seen = bool(option & REPLY_OUT_OF_VOLUME)
-                scale = 1.0 if bits & PORT_OUT_OF_VOLUME else 0.1
-                pos = [p + scale * d for p, d in zip(pos, DEGRADED_MM)]
+                pos = [p + d for p, d in zip(pos, DEGRADED_MM)]
             out.append((h, seen, pos, chunk[3:7], bits))
         return out
 

@@ -29,6 +29,12 @@ from endocal.sim import SimConfig, Simulator
 
 ZERO_TICKS = 2048
 TICKS_PER_DEG = 4096 / 360.0
+#: What the rig TOML allows each status packet (2 x this + 2 ms) and each stage reply: the emulators
+#: answer from threads of a process that shares the CPU with the host, and a loaded machine does not
+#: always schedule them within the 34 ms dynamixel-sdk waits for a U2D2 (round trips of 0.3 s were
+#: measured on 2 cores under a load of 12), which on a real rig would be a dead bus
+LATENCY_TIMER_MS = 500.0
+STAGE_TIMEOUT_S, STAGE_MAX_MISSED = 0.1, 10  # a stage silent for 1.1 s stops the run
 
 
 class EmulatedRig(Served):
@@ -140,10 +146,11 @@ class EmulatedRig(Served):
             "# Written by `endocal emulate rig`: the emulated devices of this session.\n"
             'name = "emulated rig"\n\n'
             f'[dynamixel]\nport = "{self.bus.port}"\nbaudrate = {self.bus.baudrate}\nmodel_number = 1020\n'
+            f"latency_timer_ms = {LATENCY_TIMER_MS:g}  # served by a process that shares the CPU\n"
             f"{motors}\n"
             f'[tracker]\nserial_port = "{self.aurora.port}"\ntip_port_handle = {self.aurora.handles["tip"]}\n'
             f'base_port_handle = {self.aurora.handles["base"]}\ndetect_timeout_s = 3.0\n\n'
             + ('[stage]\nmode = "absent"\n' if self.stage is None else
-               f'[stage]\nmode = "udp"\nhost = "127.0.0.1"\nport = {self.stage.port}\ntimeout_s = 0.02\n'
-               'max_missed_replies = 5\ntranslation_limits_mm = [-50.0, 50.0]\nrotation_limits_deg = [-90.0, 90.0]\n'))
+               f'[stage]\nmode = "udp"\nhost = "127.0.0.1"\nport = {self.stage.port}\ntimeout_s = {STAGE_TIMEOUT_S:g}\n'
+               f'max_missed_replies = {STAGE_MAX_MISSED}\ntranslation_limits_mm = [-50.0, 50.0]\nrotation_limits_deg = [-90.0, 90.0]\n'))
         return path
