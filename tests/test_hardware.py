@@ -919,6 +919,21 @@ def test_unknown_keys_are_config_errors_naming_key_and_file(tmp_path):
         HardwareConfig.from_toml(path)
 
 
+def test_one_serial_port_for_both_devices_and_a_bad_latency_are_config_errors(tmp_path):
+    # the same device under two names: /dev/serial/by-id/... is a symlink to /dev/ttyUSB0
+    device = tmp_path / "ttyUSB0"
+    device.touch()
+    (tmp_path / "by-id").symlink_to(device)
+    path = rig_toml(tmp_path, port=str(device))
+    path.write_text(path.read_text().replace("[tracker]\n", f'[tracker]\nserial_port = "{tmp_path / "by-id"}"\n'))
+    with pytest.raises(ConfigError, match=rf"{path}: \[dynamixel\] port and \[tracker\] serial_port are both"):
+        HardwareConfig.from_toml(path)
+    path = rig_toml(tmp_path)
+    path.write_text(path.read_text().replace("latency_timer_ms = 500.0", "latency_timer_ms = 0"))
+    with pytest.raises(ConfigError, match=r"latency_timer_ms must be in \(0, 1000\] ms, got 0"):
+        HardwareConfig.from_toml(path)
+
+
 def test_config_must_fit_probe_and_register_range(tmp_path):
     config = HardwareConfig.from_toml(EXAMPLE)
     with pytest.raises(ConfigError, match="configures ap, ml but probe 'duodenoscope' bends with ud, lr"):
