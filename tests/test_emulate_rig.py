@@ -158,7 +158,7 @@ def test_a_sensor_out_of_volume_for_a_moment_is_flagged_left_out_and_counted(tmp
     # (endocal/emulate/aurora.py), and each frame says so in its port status
     faults = AuroraFaults(out_of_volume=("tip",), partly_out_of_volume=("base",), out_of_volume_after_s=0.6,
                           out_of_volume_for_s=0.5)
-    proc, events, torque, _ = _excite_on_rig(tmp_path, SINE, aurora_faults=faults)
+    proc, _, _, _ = _excite_on_rig(tmp_path, SINE, aurora_faults=faults)
     assert proc.returncode == 0, proc.stderr
     tracker = read_stream(tmp_path / "rig-run", "tracker")
     flagged = tracker[~tracker["valid"]]

@@ -837,7 +837,7 @@ def test_udp_stage_moves_translation_and_rotation(tmp_path):
     stage.start()
     try:
         section = f'[stage]\nmode = "udp"\nhost = "127.0.0.1"\nport = {stage.port}\ntimeout_s = 0.5\n'
-        with emulated_backend(tmp_path, stage=section) as (backend, bus, _), backend:
+        with emulated_backend(tmp_path, stage=section) as (backend, _, _), backend:
             t, g = sine_chunk(n=20)
             g["translation"] = 0.5 * np.sin(2 * np.pi * t)  # at most 3.1 mm/s < 10 mm/s
             g["rotation"] = -2.0 * np.sin(2 * np.pi * t)

@@ -10,6 +10,7 @@ what reached the wire, or never did. Bad rig files are refused before any packet
 
 from __future__ import annotations
 
+import itertools
 import json
 import signal
 import subprocess
@@ -147,9 +148,9 @@ def test_torque_left_on_is_switched_off_before_the_eeprom_is_written_then_the_kn
     # homing: ap ramps from +10 deg to 0 at 20 deg/s (50 goals a second), then the sine starts at 0
     ap = [w.value for w in goal_syncs(bus) if w.id == 1]
     home = ap[:ap.index(2048) + 1]
-    steps_deg = [abs(b - a) / TICKS_PER_DEG for a, b in zip([start[1], *home], home)]
+    steps_deg = [abs(b - a) / TICKS_PER_DEG for a, b in itertools.pairwise([start[1], *home])]
     assert len(home) >= 25 and max(steps_deg) <= 20.0 / 50.0 + 1.0 / TICKS_PER_DEG  # plus a tick of rounding
-    assert all(b <= a for a, b in zip(home, home[1:]))  # straight down, no overshoot
+    assert all(b <= a for a, b in itertools.pairwise(home))  # straight down, no overshoot
     meta = json.loads((tmp_path / "run" / "run.json").read_text())
     assert meta["status"] == "complete" and meta["backend"]["dynamixel"]["servos"]["ap"]["position_limit_ticks"] == [
         _ticks(-90.0), _ticks(90.0)]

@@ -34,13 +34,12 @@ from typing import Any, Callable
 import numpy as np
 
 from endocal.backends.base import SENSORS, TRACKER_COLUMNS
+from endocal.errors import ConfigError, HardwareError
 from endocal.streams import DROPOUT_STATUSES
 
 #: The hardware tracker stream: the run format's columns, then each sensor's ``status`` in words
 #: and the ``port_status`` bits the Aurora reported (-1: none reported)
 HARDWARE_TRACKER_COLUMNS = (*TRACKER_COLUMNS, "status", "port_status")
-from endocal.errors import ConfigError, HardwareError
-
 INSTALL_HINT = "pip install 'endocal-toolkit[aurora]'"
 # Port status bits of a TX/BX reply (NDI Combined API; ndicapi's NDI_OUT_OF_VOLUME, NDI_PARTIALLY_IN_VOLUME)
 PORT_OUT_OF_VOLUME = 0x40

@@ -19,8 +19,9 @@ Safety
 - Torque goes off on every exit path: :meth:`HardwareBackend.close` (idempotent), the
   context manager, and, while open, an ``atexit`` hook and SIGTERM/SIGHUP handlers that
   turn torque off, then unwind with :class:`~endocal.errors.StopSignal` (a ``SystemExit``
-  with code 128 + the signal number) so the caller's ``finally`` blocks still run. Ctrl-C raises ``KeyboardInterrupt`` as usual,
-  and the caller's ``finally``/``with`` closes the backend.
+  with code 128 + the signal number) so the caller's ``finally`` blocks still run. Ctrl-C
+  raises ``KeyboardInterrupt`` as usual, and the caller's ``finally``/``with`` closes the
+  backend.
 
 UDP stage protocol, version 1 (ASCII, one datagram per message, numbers in the DoF's unit)
 ------------------------------------------------------------------------------------------
