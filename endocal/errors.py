@@ -41,3 +41,21 @@ class HardwareError(EndocalError, RuntimeError):
 
 class ModelError(EndocalError, ValueError):
     """A model file or fit request is invalid (wrong version, fields, axis, or data)."""
+
+
+class StopSignal(SystemExit):
+    """A termination signal (SIGTERM, SIGHUP) stopped a hardware run, after torque was switched off.
+
+    Not an error of the user's: it unwinds like ``sys.exit(128 + signum)`` so that every
+    ``finally`` still runs (the run's streams are flushed, ``run.json`` says how it ended).
+    """
+
+    def __init__(self, signum: int) -> None:
+        import signal
+
+        super().__init__(128 + signum)
+        self.signum = signum
+        try:
+            self.signame = signal.Signals(signum).name
+        except ValueError:
+            self.signame = f"signal {signum}"

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from endocal.backends.base import Backend
-from endocal.errors import ConfigError, HardwareError, OutputPathError
+from endocal.errors import ConfigError, HardwareError, OutputPathError, StopSignal
 from endocal.probe import ProbeConfig
 from endocal.runs.format import (
     MOTOR,
@@ -138,10 +138,17 @@ def run_excitation(
     Raises
     ------
     LimitError, OutputExistsError, OutputPathError
-        Before anything moves or is written.
+        Before anything moves or is written (a backend with a ``check_plan`` method, the
+        hardware's, checks the whole run against its own limits here too).
+    StopSignal
+        SIGTERM or SIGHUP stopped a hardware run: torque is off, the run is kept with status
+        ``interrupted`` and ``stopped_by`` naming the signal in ``run.json``.
     """
     out = Path(out)
     trajectory.check_limits(probe)  # refuse before anything moves
+    check_plan = getattr(backend, "check_plan", None)
+    if check_plan is not None:  # a rig's own limits (tighter than the probe's), before it is opened
+        check_plan(trajectory.t_s, trajectory.goal)
     if guard is not None:
         if not hasattr(backend, "attach_guard"):
             raise ConfigError(f"backend '{backend.name}' has no per-tick hook for a force guard")
@@ -195,6 +202,10 @@ def run_excitation(
         status = "complete"
     except KeyboardInterrupt:
         status = "interrupted"
+    except StopSignal as exc:  # SIGTERM/SIGHUP on hardware: torque is already off, the run so far is kept
+        status = "interrupted"
+        meta["stopped_by"] = exc.signame
+        raise
     except BaseException as exc:
         status, error = "failed", f"{type(exc).__name__}: {exc}"
         raise

@@ -9,7 +9,10 @@ motor stream
     columns (the simulator logs ``contact_force_n`` and ``sheath_wrap_deg``).
 tracker stream (long format, one row per sensor frame)
     ``t_s``, ``sensor`` (``tip`` / ``base``), ``x_mm y_mm z_mm``, ``qw qx qy qz``
-    (sensor-to-tracker rotation, scalar first) and ``valid`` (bool).
+    (sensor-to-tracker rotation, scalar first) and ``valid`` (bool). The hardware backend adds
+    ``status`` (``ok``, ``missing``, ``out_of_volume``, ``partly_out_of_volume``: what the NDI
+    Aurora's port status said of that sensor in that frame; only ``ok`` rows are valid) and
+    ``port_status`` (the port status bits as reported, -1 when none was).
 truth stream (simulator only)
     ``t_s`` and noise-free quantities for tests, e.g. ``<axis>_true_deg``.
 """
@@ -24,6 +27,8 @@ from endocal.probe import ProbeConfig
 
 TRACKER_COLUMNS = ("t_s", "sensor", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz", "valid")
 SENSORS = ("tip", "base")
+#: ``status`` values of a hardware tracker row that is not valid (see the module docstring)
+DROPOUT_STATUSES = ("missing", "out_of_volume", "partly_out_of_volume")
 
 
 def motor_columns(probe: ProbeConfig) -> list[str]:

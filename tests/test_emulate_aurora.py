@@ -11,6 +11,7 @@ import pytest
 from endocal.backends.aurora import AuroraConfig, AuroraTracker
 from endocal.emulate.aurora import AuroraEmulator, AuroraFaults, ndi_crc16, tx_transform
 from endocal.errors import HardwareError
+from tests._cli import endocal, one_line_exit_2
 
 pytest.importorskip("sksurgerynditracker")
 
@@ -108,3 +109,42 @@ def test_every_session_on_one_unit_finds_the_tools_and_reads_frames(firmware):
                 dead = NDITracker({"tracker type": "aurora", "serial port": emu.port})
                 dead.start_tracking()
                 ndicapy.ndiClose(dead._device)
+
+
+@pytest.mark.parametrize("firmware", ["AURORA Rev 008", "AURORA Rev 009"])  # TX and BX frames
+def test_port_status_out_of_volume_flags_the_frames_for_its_span_only(firmware):
+    # from 0.5 s after TSTART, for 0.5 s: the tip out of the field volume, the base partly out. The
+    # unit still sends both poses (10 mm off: endocal/emulate/aurora.py DEGRADED_MM); only the port
+    # status, read through ndicapi (ndiGetTXPortStatus / ndiGetBXPortStatus), tells them apart
+    faults = AuroraFaults(out_of_volume=("tip",), partly_out_of_volume=("base",), out_of_volume_after_s=0.5,
+                          out_of_volume_for_s=0.5)
+    with AuroraEmulator(0x0A, 0x0B, firmware=firmware, faults=faults) as emu:
+        emu.set_poses({"tip": TIP, "base": BASE})
+        tr = _tracker(emu)
+        tr.open()  # both sensors seen: the fault starts later
+        tr.start(time.monotonic)
+        frames = _frames(tr, tips=1000, timeout_s=2.0)  # past the span's end
+        tr.close()
+    status, sensor = frames["status"], frames["sensor"]
+    assert set(status[sensor == "tip"]) == {"ok", "out_of_volume"}
+    assert set(status[sensor == "base"]) == {"ok", "partly_out_of_volume"}
+    out, partly = status == "out_of_volume", status == "partly_out_of_volume"
+    assert (frames["port_status"][out] == 0x71).all() and (frames["port_status"][partly] == 0xB1).all()
+    assert (frames["port_status"][status == "ok"] == 0x31).all()
+    assert not frames["valid"][out | partly].any() and frames["valid"][status == "ok"].all()
+    # the distorted pose, kept (TX carries 0.01 mm steps)
+    np.testing.assert_allclose(frames["x_mm"][out], TIP[0][0] + 10.0, atol=0.005 + 1e-9)
+    # one span: flagged frames are contiguous in time, valid ones before and after it
+    t_tip, out_tip = frames["t_s"][sensor == "tip"], out[sensor == "tip"]
+    k = np.flatnonzero(out_tip)
+    assert k.size and (np.diff(k) == 1).all() and k[0] > 0 and k[-1] < out_tip.size - 1
+    assert np.all(np.diff(t_tip) > 0)
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["aurora", "--out-of-volume", "elbow"], "--out-of-volume 'elbow': name a sensor, tip or base"),
+    (["rig", "--config-out", "unused.toml", "--partly-out-of-volume", "shaft"], "--partly-out-of-volume 'shaft'"),
+    (["aurora", "--out-of-volume", "tip", "--out-of-volume-for", "0"], "--out-of-volume-for more than 0 s"),
+])
+def test_the_out_of_volume_fault_options_name_a_sensor_and_a_span(args, fragment):
+    one_line_exit_2(endocal("emulate", *args), fragment)

@@ -150,8 +150,9 @@ def test_endocal_emulate_dynamixel_prints_its_port_and_every_torque_switch():
         proc.send_signal(signal.SIGTERM)
         rest, errors = proc.communicate(timeout=10)
     assert proc.returncode == 0, errors
+    # and, at the end, each servo's torque state
     assert rest.splitlines() == ["servo 1 torque on", "servo 2 torque on", "servo 1 torque off", "servo 2 torque off",
-                                 "stopped"]
+                                 "stopped: servo 1 torque off, servo 2 torque off"]
 
 
 def test_replies_later_than_the_sdk_waits_fail_the_read_and_a_port_that_is_no_device_is_refused(tmp_path):

@@ -16,6 +16,7 @@ from endocal.emulate.stage import StageFaults
 from endocal.probe import PRESETS
 from endocal.runs.aligned import load_aligned, read_stream
 from tests._cli import endocal
+from tests._wire import assert_torque_off_last, goal_syncs
 
 pytest.importorskip("sksurgerynditracker")
 TEE = PRESETS["tee"]
@@ -30,20 +31,27 @@ SHORT = {
 }
 
 
-def _excite_on_rig(tmp, args, **rig_kw):
+def _excite_on_rig(tmp, args, *, check_wire=True, **rig_kw):
+    """Run ``endocal excite ARGS`` in a child process on the emulated rig; on the way out (unless
+    ``check_wire`` is False: a bus unplugged mid-run can take no torque-off) assert on the servo
+    bus's write log that every servo's last write switched its torque off. Returns the process, the
+    emulator's events, each servo's torque at the end and the ticks whose goals reached the servos."""
     events = []
     with EmulatedRig(TEE, seed=1, on_event=events.append, **rig_kw) as rig:
         cfg = rig.write_config(tmp / "rig.toml")
         proc = endocal("excite", *args, "--backend", "hardware", "--hardware-config", cfg, "--out", tmp / "rig-run",
-                       "-q", timeout=120, process=True)
+                       "-q", timeout=180, process=True)
         torque = rig.bus.torque()
-    return proc, events, torque
+        if check_wire:
+            assert_torque_off_last(rig.bus)
+        ticks_on_wire = len(goal_syncs(rig.bus)) // len(rig.bus.servos)
+    return proc, events, torque, ticks_on_wire
 
 
 @pytest.mark.parametrize("protocol", sorted(SHORT))
 def test_a_run_on_the_emulated_rig_matches_the_simulator(tmp_path, protocol):
     args = SHORT[protocol]
-    proc, events, torque = _excite_on_rig(tmp_path, args)
+    proc, events, torque, _ = _excite_on_rig(tmp_path, args)
     assert proc.returncode == 0, proc.stderr
     assert events == ["servo 1 torque on", "servo 2 torque on", "servo 1 torque off", "servo 2 torque off"]
     assert torque == {1: False, 2: False}
@@ -63,13 +71,18 @@ def test_a_run_on_the_emulated_rig_matches_the_simulator(tmp_path, protocol):
         diff = a[f"{axis}_meas_deg"].to_numpy()[:k] - b[f"{axis}_meas_deg"].to_numpy()[:k]
         assert np.sqrt(np.mean(diff**2)) <= 1.2, (axis, np.sqrt(np.mean(diff**2)))
     timing = json.loads((tmp_path / "rig-run" / "run.json").read_text())["backend"]["timing"]
-    # recorded: the set rate, and the achieved one (the schedule slides under load rather than bursting)
-    assert timing["set_rate_hz"] == pytest.approx(100.0) and timing["achieved_rate_hz"] == pytest.approx(100.0, rel=0.2)
+    # recorded: the set rate, and the achieved one, never above it: under load the schedule slides rather
+    # than bursting to catch up (how far below it falls is the machine's, not asserted)
+    assert timing["set_rate_hz"] == pytest.approx(100.0) and 0 < timing["achieved_rate_hz"] <= 1.05 * 100.0
 
 
 @pytest.mark.parametrize("rig_kw, fragments", [
     ({"aurora_faults": AuroraFaults(missing=("tip",), missing_after_s=2.0)},
-     ("tip sensor (port handle 0x0a) has reported no valid pose", "max_lost_s")),
+     ("tip sensor (port handle 0x0a) has reported no valid pose", "(missing: no transform; tracker.max_lost_s = 1)")),
+    # the tip bent out of the field volume: the Aurora still sends its (distorted) pose, flagged
+    ({"aurora_faults": AuroraFaults(out_of_volume=("tip",), out_of_volume_after_s=2.0)},
+     ("tip sensor (port handle 0x0a) has reported no valid pose",
+      "(out of the field generator's volume; tracker.max_lost_s = 1)")),
     ({"bus_faults": BusFaults(hardware_error={2: "overload"}, hardware_error_after_s=2.0)},
      ("ID 2 (knob 'ml')", "hardware alert", "overload")),
     ({"bus_faults": BusFaults(unplug_after_s=2.0)}, ("sync read", "failed", "check cables and power")),
@@ -77,27 +90,35 @@ def test_a_run_on_the_emulated_rig_matches_the_simulator(tmp_path, protocol):
      ("translation/rotation stage at 127.0.0.1:", "stopped answering", "check the LabVIEW PC")),
 ])
 def test_a_device_fault_mid_run_ends_safely(tmp_path, rig_kw, fragments):
-    proc, events, torque = _excite_on_rig(tmp_path, SINE, **rig_kw)
+    unplugged = "unplug_after_s=2.0" in repr(rig_kw)
+    proc, events, torque, sent = _excite_on_rig(tmp_path, SINE, check_wire=not unplugged, **rig_kw)
     assert proc.returncode == 3, (proc.returncode, proc.stderr)  # a hardware fault, not bad input
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and all(f in lines[0] for f in fragments), proc.stderr
     meta = json.loads((tmp_path / "rig-run" / "run.json").read_text())
     assert meta["status"] == "failed" and "HardwareError" in meta["error"]
-    assert len(read_stream(tmp_path / "rig-run", "motor")) > 50  # what was logged before the fault is readable
-    if "unplug_after_s=2.0" not in repr(rig_kw):
+    # what was logged before the fault is readable: every tick whose goals reached the servos, but those
+    # of the chunk the fault cut short (0.1 s, 10 ticks)
+    assert sent > 0 and sent - 10 <= len(read_stream(tmp_path / "rig-run", "motor")) <= sent
+    if not unplugged:
         assert torque == {1: False, 2: False}  # the emulator saw torque switched off on every servo
         assert "servo 1 torque off" in events and "servo 2 torque off" in events
+    if "out_of_volume=('tip',)" in repr(rig_kw):  # the frames that stopped it are in the stream, flagged
+        tracker = read_stream(tmp_path / "rig-run", "tracker")
+        out = tracker[tracker["status"] == "out_of_volume"]
+        assert len(out) >= 3 and set(out["sensor"]) == {"tip"} and not out["valid"].any()  # 1 s of them (40 Hz at most)
+        assert (out["port_status"] & 0x40).all()
 
 
 def test_a_tracker_that_does_not_see_both_sensors_is_refused_before_torque(tmp_path):
-    proc, events, torque = _excite_on_rig(tmp_path, SINE, aurora_faults=AuroraFaults(missing=("tip",)))
+    proc, events, torque, _ = _excite_on_rig(tmp_path, SINE, aurora_faults=AuroraFaults(missing=("tip",)))
     assert proc.returncode == 3, proc.stderr
     assert "tip (port handle 0x0a) reported no valid pose" in proc.stderr
     assert not [e for e in events if e.endswith("torque on")] and torque == {1: False, 2: False}
 
 
 def test_the_rig_with_its_udp_stage_plays_and_records_it(tmp_path):
-    proc, events, torque = _excite_on_rig(tmp_path, SINE, stage=True)
+    proc, events, torque, _ = _excite_on_rig(tmp_path, SINE, stage=True)
     assert proc.returncode == 0, proc.stderr
     assert "stage stopped" in events and torque == {1: False, 2: False}  # STOP sent at close
     meta = json.loads((tmp_path / "rig-run" / "run.json").read_text())
@@ -129,3 +150,40 @@ def test_one_emulated_rig_serves_run_after_run(tmp_path):
         tracker = read_stream(tmp_path / f"run{k}", "tracker")
         assert len(tracker) > 40 and tracker["valid"].all()  # 1 s at 40 Hz, two sensors
         assert len(read_stream(tmp_path / f"run{k}", "motor")) > 90  # 1 s at 100 Hz
+
+
+def test_a_sensor_out_of_volume_for_a_moment_is_flagged_left_out_and_counted(tmp_path):
+    # 0.6 s into tracking the tip leaves the field volume and the base is partly out, for 0.5 s (less
+    # than max_lost_s = 1 s): the run goes on; the Aurora still sends both poses, 10 mm off in x
+    # (endocal/emulate/aurora.py), and each frame says so in its port status
+    faults = AuroraFaults(out_of_volume=("tip",), partly_out_of_volume=("base",), out_of_volume_after_s=0.6,
+                          out_of_volume_for_s=0.5)
+    proc, _, _, _ = _excite_on_rig(tmp_path, SINE, aurora_faults=faults)
+    assert proc.returncode == 0, proc.stderr
+    tracker = read_stream(tmp_path / "rig-run", "tracker")
+    flagged = tracker[~tracker["valid"]]
+    kinds = flagged.groupby("sensor")["status"].agg(set).to_dict()
+    assert kinds == {"tip": {"out_of_volume"}, "base": {"partly_out_of_volume"}}
+    n_tip = int((flagged["sensor"] == "tip").sum())
+    assert 3 <= n_tip <= 22  # 0.5 s of 40 Hz frames at most (a loaded machine reads fewer)
+    assert (flagged.loc[flagged["sensor"] == "tip", "port_status"] & 0x40).all()
+    assert (flagged.loc[flagged["sensor"] == "base", "port_status"] & 0x80).all()
+    ok = tracker[tracker["valid"]]
+    assert set(ok["status"]) == {"ok"} and len(ok) > len(flagged)
+    # the flagged poses are the distorted ones: the base does not move, and its flagged frames sit 10 mm
+    # off in x (the simulated tracker's noise is 0.29 mm per coordinate; medians of 3+ frames)
+    base = tracker[tracker["sensor"] == "base"]
+    shift = base.loc[~base["valid"], "x_mm"].median() - base.loc[base["valid"], "x_mm"].median()
+    assert shift == pytest.approx(10.0, abs=1.0)
+    t0, t1 = flagged["t_s"].min(), flagged["t_s"].max()
+    # left out of the aligned table: no row between the flagged frames (a 0.5 s gap is not interpolated)...
+    aligned = load_aligned(tmp_path / "rig-run").table
+    assert not ((aligned["t_s"] > t0) & (aligned["t_s"] < t1)).any()
+    # ...and counted in run.json, per cause
+    counts = json.loads((tmp_path / "rig-run" / "run.json").read_text())["counts"]
+    assert counts["tracker_out_of_volume_dropped"] == n_tip
+    assert counts["tracker_partly_out_of_volume_dropped"] == int((flagged["sensor"] == "base").sum())
+    assert counts["tracker_missing_dropped"] == 0 and counts["tracker_invalid_dropped"] == len(flagged)
+    motor = read_stream(tmp_path / "rig-run", "motor")
+    inside = int(((motor["t_s"] > t0) & (motor["t_s"] < t1)).sum())
+    assert inside > 0 and counts["motor_ticks_without_tracking"] >= inside  # the ticks inside the gap

@@ -35,11 +35,21 @@ def test_goals_move_the_stage_and_stop_holds_it():
 def test_dropped_replies_within_the_watchdog_hold_the_last_position():
     with StageEmulator(faults=StageFaults(drop_probability=0.3), seed=1) as emu:
         stage = _client(emu.port, timeout_s=0.02, max_missed_replies=10)
-        stage.open()
-        for _ in range(50):
-            stage.command(1.0, 0.0)
+        last = stage.open()
+        held, received = 0, [last]
+        for k in range(1, 61):
+            reply = stage.command(0.05 * k, 0.0)  # a goal that keeps moving away: the stage follows it
+            if stage.missed:  # no reply to this goal (dropped, or later than timeout_s)
+                assert reply == last  # the position reported is the last one received
+                held += 1
+            else:
+                assert reply[0] >= last[0]  # a reply received: where the stage is now, on its way
+                last = reply
+                received.append(reply)
+            time.sleep(0.005)
         stage.close()
-        assert emu.dropped > 0  # the faults happened, and the client rode them out
+    assert emu.dropped > 0 and held >= 1  # replies were lost, and the client rode them out
+    assert len({r[0] for r in received}) > 10  # the replies received moved on: a held one was really the last
 
 
 def test_a_silent_stage_trips_the_watchdog():

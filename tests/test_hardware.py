@@ -1,11 +1,28 @@
-"""Hardware backends without hardware: a simulated XM430 bus behind the real dynamixel_sdk group
-classes, a fake NDI tracker, and a fake LabVIEW stage on 127.0.0.1.
+"""The hardware backend (endocal/backends/hardware.py, dynamixel.py, aurora.py) without hardware.
 
-The simulated bus behaves like the servos where safety depends on it: EEPROM writes are
-refused while torque is on, goals outside the Position Limit registers are refused, a
-transaction interrupted half-way leaves the SDK port marked busy (so later packets fail
-unless the caller clears it), and every write is logged so tests can prove what never
-reached the bus.
+Its safety promises are tested on the wire: the backend drives the emulated XM430 bus
+(endocal/emulate/servos.py) through the real dynamixel-sdk on a pseudo-terminal, and the
+emulator's log of every write that reached a servo proves what was sent and what never was
+(here in-process, ``emulated_backend``; as a user runs it, ``endocal excite`` in a child
+process, in tests/test_hardware_wire.py). The tracker is a fake here (the Aurora's own tests,
+through ndicapi against its emulator, are tests/test_emulate_aurora.py).
+
+``FakeBus``, a Python double of the SDK's port and packet handlers, is kept only where no
+emulator can reach:
+
+- register decoding (``test_read_state_decodes_signed_registers_through_sync_read``): the test
+  sets present current, velocity and position to chosen signed values; the emulated servo
+  computes them from its own physics and cannot be made to report chosen ones;
+- an interrupt inside a bus transaction
+  (``test_torque_off_after_keyboard_interrupt_inside_a_bus_transaction``): ``KeyboardInterrupt``
+  raised at a chosen point inside the SDK's transaction, leaving its port marked busy; a real
+  Ctrl-C lands wherever the process happens to be, so only a double can place it there;
+- exactly one reply lost at a chosen sync read
+  (``test_one_lost_reply_is_retried_within_the_tick_and_counted``); the emulator loses replies
+  at random (its own test counts recoveries statistically, tests/test_emulate_dynamixel.py);
+- the chunk's columns against the goals to half a tick
+  (``test_chunk_columns_match_the_run_format``): an ideal servo that reaches each goal at once;
+  the emulated one lags like a real servo.
 """
 
 from __future__ import annotations
@@ -19,6 +36,7 @@ import subprocess
 import sys
 import textwrap
 import threading
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -26,10 +44,12 @@ import pytest
 
 from endocal.backends import aurora as aur
 from endocal.backends import dynamixel as dxl
-from endocal.backends.base import TRACKER_COLUMNS, Backend, motor_columns
+from endocal.backends.base import Backend, motor_columns
 from endocal.backends.hardware import HardwareBackend, HardwareConfig, check_goals
-from endocal.errors import ConfigError, HardwareError, LimitError, ProtocolError
+from endocal.emulate.servos import BusFaults, ServoBus
+from endocal.errors import ConfigError, HardwareError, LimitError, ProtocolError, StopSignal
 from endocal.probe import PRESETS
+from tests._wire import goal_syncs
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "configs" / "hardware-example.toml"
@@ -40,7 +60,7 @@ ERR_DATA_LIMIT, ERR_ACCESS = 5, 7
 HALF_TICK_DEG = 0.5 * 360.0 / 4096  # rounding of a knob goal to the nearest tick
 
 
-# --- a simulated XM430-W350 bus -----------------------------------------------------------
+# --- a Python double of an XM430-W350 bus (only where no emulator reaches: see the docstring) ---
 class FakeServo:
     def __init__(self, model=1020, present_ticks=2048, firmware=45):
         self.mem = bytearray(700)
@@ -261,13 +281,28 @@ class FakeTracker:
         return self.handles, [0.0] * n, [self.frame_number] * n, tracking, [0.1] * n
 
 
+class PortStatusFakeTracker(FakeTracker):
+    """Frames with a sixth element, port handle -> port status, as ``PortStatusTracker`` returns them:
+    the tip out of the field volume (bit 6) from frame ``out_from`` on, its pose still reported."""
+
+    def __init__(self, settings, out_from=3, bits=0x40):
+        super().__init__(settings)
+        self.out_from, self.bits = out_from, bits
+
+    def get_frame(self):
+        frame = super().get_frame()
+        out = self.frame_number >= self.out_from
+        return (*frame, {0x0A: 0x31 | (self.bits if out else 0), 0x0B: 0x31})
+
+
 # --- fixtures -----------------------------------------------------------------------------
-def rig_toml(tmp_path, stage="", safety="", extra_motor="", rate_hz=200.0):
+def rig_toml(tmp_path, stage="", safety="", extra_motor="", rate_hz=200.0, port="/dev/ttyFAKE"):
     text = f"""
 name = "test-rig"
 [dynamixel]
-port = "/dev/ttyFAKE"
+port = "{port}"
 baudrate = 1000000
+latency_timer_ms = 500.0
 [dynamixel.motors.ap]
 id = 1
 zero_ticks = 2048
@@ -304,6 +339,36 @@ def make_backend(tmp_path, *, servos=None, tracker_kwargs=None, **toml_kwargs):
 
     backend = HardwareBackend(config, TEE, port_handler=bus, packet_handler=bus, tracker_factory=factory)
     return backend, bus, trackers
+
+
+@contextmanager
+def emulated_backend(tmp_path, *, ids=(1, 2), bus_kwargs=None, tracker_kwargs=None, tracker=FakeTracker,
+                     **toml_kwargs):
+    """``(backend, bus, trackers)``: a backend on the emulated servo bus (real dynamixel-sdk, a
+    pseudo-terminal at 1 Mbd) and a fake tracker; closed, and the bus stopped, on the way out.
+    ``bus.writes()`` is every write the servos received."""
+    with ServoBus(list(ids), baudrate=1_000_000, **(bus_kwargs or {})) as bus:
+        config = HardwareConfig.from_toml(rig_toml(tmp_path, port=bus.port, **toml_kwargs))
+        trackers = []
+
+        def factory(settings):
+            trackers.append(tracker(settings, **(tracker_kwargs or {})))
+            return trackers[-1]
+
+        backend = HardwareBackend(config, TEE, tracker_factory=factory)
+        try:
+            yield backend, bus, trackers
+        finally:
+            backend.close()
+
+
+def torque_switched_on(bus) -> bool:
+    return any(w.value == 1 and w.error == 0 for w in bus.writes(64))
+
+
+def only_torque_off(bus) -> bool:
+    """Nothing reached the servos but Torque Enable = 0 (closing switches it off whatever happened)."""
+    return all(w.address == 64 and w.value == 0 for w in bus.writes())
 
 
 def sine_chunk(t0=0.0, n=20, rate_hz=100.0, amp_deg=5.0, f_hz=1.0):
@@ -362,45 +427,44 @@ def test_read_state_decodes_signed_registers_through_sync_read(tmp_path, fast):
 
 
 def test_limit_registers_hold_the_tighter_limits_in_ticks(tmp_path):
-    backend, bus, _ = make_backend(tmp_path)
-    with backend:
-        pass
+    with emulated_backend(tmp_path) as (backend, bus, _):
+        with backend:
+            pass
     # ap: limits (-60, 80) deg, +1: 2048 - 60*4096/360 = 1365.33 -> 1365; 2048 + 80*11.378 = 2958.2 -> 2958
-    assert bus.servos[1].get(52, 4) == 1365 and bus.servos[1].get(48, 4) == 2958
+    assert bus.servos[1].get(52) == 1365 and bus.servos[1].get(48) == 2958  # in the servo's EEPROM
     # ml: limits (-70, 70), direction -1: 2048 -+ 796.4 -> 1252 .. 2844
-    assert bus.servos[2].get(52, 4) == 1252 and bus.servos[2].get(48, 4) == 2844
+    assert bus.servos[2].get(52) == 1252 and bus.servos[2].get(48) == 2844
+    assert all(w.error == 0 for w in bus.writes())  # every write was accepted: EEPROM written with torque off
     assert backend.limits["ap"] == (-60.0, 80.0)
     assert backend.max_speed["ap"] == 100.0 and backend.max_speed["ml"] == TEE.max_knob_speed_dps
 
 
 def test_extended_position_mode_sets_the_mode_and_leaves_limit_registers_alone(tmp_path):
-    path = rig_toml(tmp_path)
-    path.write_text(path.read_text().replace("baudrate = 1000000", 'baudrate = 1000000\noperating_mode = "extended_position"'))
-    bus = FakeBus({1: FakeServo(), 2: FakeServo()})
-    backend = HardwareBackend(HardwareConfig.from_toml(path), TEE, port_handler=bus, packet_handler=bus,
-                              tracker_factory=lambda s: FakeTracker(s))
-    with backend:
-        backend.execute(*sine_chunk())
-    assert all(s.get(11, 1) == 4 for s in bus.servos.values())  # Operating Mode 4 = extended position
-    assert not [e for e in bus.log if e[2] in (48, 52)]  # the servo ignores them in this mode
+    with emulated_backend(tmp_path) as (backend, bus, _):
+        path = Path(backend.config.source)
+        path.write_text(path.read_text().replace("baudrate = 1000000", 'baudrate = 1000000\noperating_mode = "extended_position"'))
+        backend = HardwareBackend(HardwareConfig.from_toml(path), TEE, tracker_factory=lambda s: FakeTracker(s))
+        with backend:
+            backend.execute(*sine_chunk())
+    assert all(s.get(11) == 4 for s in bus.servos.values())  # Operating Mode 4 = extended position
+    assert not bus.writes(48) and not bus.writes(52)  # the servo ignores them in this mode
     assert "position_limit_ticks" not in backend.describe()["dynamixel"]["servos"]["ap"]
 
 
 # --- safety: limits refused before any write ----------------------------------------------
 def test_limit_violation_refused_before_any_goal_is_written(tmp_path):
-    backend, bus, _ = make_backend(tmp_path)
-    with backend:
+    with emulated_backend(tmp_path) as (backend, bus, _), backend:
         t, g = sine_chunk()
         g["ap"][-1] = -60.5  # last tick beyond the rig limit -60 deg (the probe allows -90)
         with pytest.raises(LimitError, match=r"'ap' at t = 0\.200 s is -60\.500 deg, beyond its limit -60\.000"):
             backend.execute(t, g)
-        assert bus.goal_writes == 0
+        assert goal_syncs(bus) == []
         # a jump faster than 100 deg/s on ap is refused too, with the speed and limit named
         g = {k: np.zeros(t.size) for k in TEE.dofs}
         g["ap"][5:] = 2.0  # 2 deg in 10 ms = 200 deg/s
         with pytest.raises(LimitError, match=r"'ap' at t = 0\.060 s moves at 200\.0 deg/s.*limit 100 deg/s"):
             backend.execute(t, g)
-        assert bus.goal_writes == 0
+        assert goal_syncs(bus) == []
         # NaN and the absent stage are refused the same way
         g = {k: np.zeros(t.size) for k in TEE.dofs}
         g["ml"][3] = np.nan
@@ -410,17 +474,17 @@ def test_limit_violation_refused_before_any_goal_is_written(tmp_path):
         g["translation"][-1] = 0.5
         with pytest.raises(ProtocolError, match="moves 'translation'.*no translation/rotation stage"):
             backend.execute(t, g)
-        assert bus.goal_writes == 0
+        assert goal_syncs(bus) == []
         # a good chunk, then a second chunk whose step into it is too fast: refused whole
         t1, g1 = sine_chunk(amp_deg=5.0)
         backend.execute(t1, g1)
-        written = bus.goal_writes
-        assert written == t1.size
+        written = len(goal_syncs(bus))
+        assert written == 2 * t1.size  # one goal per servo and tick
         t2, g2 = sine_chunk(t0=t1[-1])
         g2["ap"][:] = g1["ap"][-1] + 3.0  # +3 deg within one 10 ms tick: 300 deg/s
         with pytest.raises(LimitError, match="'ap'.*faster than the limit"):
             backend.execute(t2, g2)
-        assert bus.goal_writes == written
+        assert len(goal_syncs(bus)) == written
 
 
 def test_check_goals_argues_speed_from_time_steps():
@@ -436,52 +500,54 @@ def test_check_goals_argues_speed_from_time_steps():
 
 
 def test_start_far_from_present_position_is_refused_unless_homed(tmp_path):
-    servos = {1: FakeServo(present_ticks=2048 + 114), 2: FakeServo()}  # ap rests at +10.0 deg
-    backend, bus, _ = make_backend(tmp_path, servos=servos)
-    with backend:
+    far = {"bus_kwargs": {"present_ticks": {1: 2048 + 114}}}  # ap rests at +10.0 deg
+    with emulated_backend(tmp_path, **far) as (backend, bus, _), backend:
         t, g = sine_chunk()
         with pytest.raises(LimitError, match=r"'ap' is at 10\.02 deg but the first goal.*start tolerance 2 deg"):
             backend.execute(t, g)
-        assert bus.goal_writes == 0
-    servos = {1: FakeServo(present_ticks=2048 + 114), 2: FakeServo()}
-    backend, bus, _ = make_backend(tmp_path, servos=servos,
-                                   safety="[safety]\nhome_on_open = true\nhome_speed_dps = 400.0\n")
-    with pytest.raises(LimitError, match="faster than the limit"):  # homing itself respects the 100 deg/s limit
-        backend.open()
-    assert bus.torques() == {1: 0, 2: 0}
-    servos = {1: FakeServo(present_ticks=2048 + 114), 2: FakeServo()}
-    backend, bus, _ = make_backend(tmp_path, servos=servos,
-                                   safety="[safety]\nhome_on_open = true\nhome_speed_dps = 100.0\n")
-    with backend:
-        assert dxl.to_signed(servos[1].get(132, 4), 4) == 2048
-        ramp = [v for (_, i, _, v) in bus.writes_of("sync_goal") if i == 1]
-        steps_deg = np.abs(np.diff(ramp)) * 360 / 4096
-        assert steps_deg.max() <= 100.0 / 50.0 + 2 * HALF_TICK_DEG  # 100 deg/s at 50 Hz, plus rounding
-        chunk = backend.execute(*sine_chunk())
+        assert goal_syncs(bus) == []
+        # torque on held each knob where it was: the only goals written are the present positions
+        assert {(w.id, w.value) for w in bus.writes(116)} == {(1, 2048 + 114), (2, 2048)}
+    with emulated_backend(tmp_path, **far, safety="[safety]\nhome_on_open = true\nhome_speed_dps = 400.0\n") as (
+            backend, bus, _):
+        with pytest.raises(LimitError, match="faster than the limit"):  # homing itself respects the 100 deg/s limit
+            backend.open()
+        assert bus.torque() == {1: False, 2: False} and goal_syncs(bus) == []
+    with emulated_backend(tmp_path, **far, safety="[safety]\nhome_on_open = true\nhome_speed_dps = 100.0\n") as (
+            backend, bus, _):
+        with backend:
+            backend.servos.read_state()  # a round trip: the servos have seen every sync write before it
+            ramp = [w.value for w in goal_syncs(bus) if w.id == 1]
+            assert ramp[-1] == 2048 and bus.servos[1].get(116) == 2048  # the goal is 0 deg
+            steps_deg = np.abs(np.diff([2048 + 114, *ramp])) * 360 / 4096
+            assert steps_deg.max() <= 100.0 / 50.0 + 2 * HALF_TICK_DEG  # 100 deg/s at 50 Hz, plus rounding
+            chunk = backend.execute(*sine_chunk())
     assert len(chunk.motor["t_s"]) == 20
 
 
 # --- safety: torque off on every exit path ------------------------------------------------
 def test_torque_off_after_normal_close_and_close_is_idempotent(tmp_path):
-    backend, bus, trackers = make_backend(tmp_path)
-    backend.open()
-    assert bus.torques() == {1: 1, 2: 1}
-    backend.execute(*sine_chunk())
-    backend.close()
-    assert bus.torques() == {1: 0, 2: 0} and not bus.is_open
-    assert trackers[0].stopped == 1 and trackers[0].closed == 1
-    n_log = len(bus.log)
-    backend.close()
-    assert len(bus.log) == n_log and trackers[0].closed == 1
+    with emulated_backend(tmp_path) as (backend, bus, trackers):
+        backend.open()
+        assert bus.torque() == {1: True, 2: True}
+        backend.execute(*sine_chunk())
+        backend.close()
+        assert bus.torque() == {1: False, 2: False}
+        assert trackers[0].stopped == 1 and trackers[0].closed == 1
+        n_writes = len(bus.writes())
+        backend.close()
+        assert len(bus.writes()) == n_writes and trackers[0].closed == 1
 
 
 def test_torque_off_after_exception_in_execute(tmp_path):
-    backend, bus, _ = make_backend(tmp_path)
-    bus.fail_sync_read_at = 5  # the bus stops answering at the 5th tick
-    with pytest.raises(HardwareError, match="sync read .* failed .*no status packet"):
-        with backend:
-            backend.execute(*sine_chunk())
-    assert bus.torques() == {1: 0, 2: 0} and not bus.is_open
+    overload = {"bus_kwargs": {"faults": BusFaults(hardware_error={2: "overload"}, hardware_error_after_s=0.3)}}
+    with emulated_backend(tmp_path, **overload) as (backend, bus, _):
+        with pytest.raises(HardwareError, match=r"ID 2 \(knob 'ml'\).*hardware alert.*overload"):
+            with backend:
+                backend.execute(*sine_chunk(n=300))  # 3 s: the servo overloads 0.3 s after the first packet
+        assert bus.torque() == {1: False, 2: False}
+        last = {w.id: w for w in bus.writes(64)}  # the last Torque Enable write to each servo: off
+        assert last[1].value == 0 and last[1].error == 0
 
 
 def test_one_lost_reply_is_retried_within_the_tick_and_counted(tmp_path):
@@ -506,67 +572,75 @@ def test_torque_off_after_keyboard_interrupt_inside_a_bus_transaction(tmp_path):
 
 def test_sigterm_turns_torque_off_and_restores_the_handler(tmp_path):
     before = signal.getsignal(signal.SIGTERM)
-    backend, bus, _ = make_backend(tmp_path)
-    backend.open()
-    assert signal.getsignal(signal.SIGTERM) == backend._on_signal
-    with pytest.raises(SystemExit) as info:
-        os.kill(os.getpid(), signal.SIGTERM)
-        backend.execute(*sine_chunk())  # the handler runs at the latest here
-    assert info.value.code == 128 + signal.SIGTERM
-    assert bus.torques() == {1: 0, 2: 0}
-    assert signal.getsignal(signal.SIGTERM) == before
+    with emulated_backend(tmp_path) as (backend, bus, _):
+        backend.open()
+        assert signal.getsignal(signal.SIGTERM) == backend._on_signal
+        with pytest.raises(StopSignal) as info:
+            os.kill(os.getpid(), signal.SIGTERM)
+            backend.execute(*sine_chunk())  # the handler runs at the latest here
+        assert info.value.code == 128 + signal.SIGTERM and info.value.signame == "SIGTERM"
+        assert bus.torque() == {1: False, 2: False}
+        assert signal.getsignal(signal.SIGTERM) == before
 
 
 def test_atexit_turns_torque_off_when_the_caller_never_closes(tmp_path):
+    # a Python caller that opens the rig and exits without close(): the child process runs the
+    # real SDK against the emulated bus here, and says when it is about to exit
     script = textwrap.dedent(f"""
-        import atexit, json, sys
-        sys.path.insert(0, {str(Path(__file__).parent)!r})
-        import test_hardware as th
-        from pathlib import Path
-        state = {{}}
-        backend, bus, _ = th.make_backend(Path({str(tmp_path)!r}))
-        atexit.register(lambda: print(json.dumps(bus.torques())))  # registered first, runs last
+        import sys
+        sys.path.insert(0, {str(ROOT)!r})
+        import tests.test_hardware as th
+        from endocal.backends.hardware import HardwareBackend, HardwareConfig
+        backend = HardwareBackend(HardwareConfig.from_toml(sys.argv[1]), th.TEE, tracker_factory=th.FakeTracker)
         backend.open()
         backend.execute(*th.sine_chunk(n=5))
-        print(json.dumps(bus.torques()))
+        print("open", flush=True)
+        sys.stdin.readline()
         sys.exit(0)
     """)
-    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
-    assert out.returncode == 0, out.stderr
-    during, after = (json.loads(line) for line in out.stdout.splitlines())
-    assert during == {"1": 1, "2": 1} and after == {"1": 0, "2": 0}
+    with ServoBus([1, 2], baudrate=1_000_000) as bus:
+        config = rig_toml(tmp_path, port=bus.port)
+        proc = subprocess.Popen([sys.executable, "-c", script, str(config)], stdin=subprocess.PIPE,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            assert proc.stdout.readline().strip() == "open", proc.stderr.read()
+            during = bus.torque()
+            _, errors = proc.communicate("exit\n", timeout=120)
+        finally:
+            proc.kill()
+        assert proc.returncode == 0, errors
+        assert during == {1: True, 2: True} and bus.torque() == {1: False, 2: False}
 
 
 # --- opening checks -----------------------------------------------------------------------
 def test_open_refuses_a_missing_servo_with_port_and_id(tmp_path):
-    backend, bus, trackers = make_backend(tmp_path, servos={1: FakeServo()})
-    with pytest.raises(HardwareError, match=r"ID 2 \(knob 'ml'\) on /dev/ttyFAKE at 1000000 baud did not answer"):
-        backend.open()
-    assert bus.torques() == {1: 0} and not bus.is_open and trackers == []
+    with emulated_backend(tmp_path, ids=(1,)) as (backend, bus, trackers):
+        with pytest.raises(HardwareError, match=rf"ID 2 \(knob 'ml'\) on {bus.port} at 1000000 baud did not answer"):
+            backend.open()
+        assert only_torque_off(bus) and trackers == []  # nothing else written, the tracker never opened
 
 
 def test_open_refuses_the_wrong_model(tmp_path):
-    backend, bus, _ = make_backend(tmp_path, servos={1: FakeServo(), 2: FakeServo(model=1060)})
-    with pytest.raises(HardwareError, match=r"model number 1060 \(XL430-W250\), expected 1020 \(XM430-W350\)"):
-        backend.open()
-    assert not bus.is_open
+    with emulated_backend(tmp_path, bus_kwargs={"model_number": 1060}) as (backend, bus, _):
+        with pytest.raises(HardwareError, match=r"model number 1060 \(XL430-W250\), expected 1020 \(XM430-W350\)"):
+            backend.open()
+        assert only_torque_off(bus)
 
 
 def test_open_refuses_a_missing_tracker_tool_before_torque_on(tmp_path):
-    backend, bus, trackers = make_backend(tmp_path, tracker_kwargs={"handles": (0x0A, 0x0C)})
-    with pytest.raises(HardwareError, match=r"no tool on port handle 11 \(0x0b\) for the base sensor.*12 \(0x0c\)"):
-        backend.open()
-    assert bus.torques() == {1: 0, 2: 0} and not bus.is_open
-    assert not any(e[2] == 64 and e[3] == 1 for e in bus.log)  # torque was never switched on
-    assert trackers[0].closed == 1
+    with emulated_backend(tmp_path, tracker_kwargs={"handles": (0x0A, 0x0C)}) as (backend, bus, trackers):
+        with pytest.raises(HardwareError, match=r"no tool on port handle 11 \(0x0b\) for the base sensor.*12 \(0x0c\)"):
+            backend.open()
+        assert bus.torque() == {1: False, 2: False} and not torque_switched_on(bus) and goal_syncs(bus) == []
+        assert trackers[0].closed == 1
 
 
 def test_open_refuses_a_knob_resting_outside_its_limits(tmp_path):
-    servos = {1: FakeServo(present_ticks=2048 - 700), 2: FakeServo()}  # ap at -61.5 deg < -60
-    backend, bus, _ = make_backend(tmp_path, servos=servos)
-    with pytest.raises(HardwareError, match=r"knob 'ap' rests at -61\.5 deg, outside its limits -60\.\.80"):
-        backend.open()
-    assert not any(e[2] == 64 and e[3] == 1 for e in bus.log)
+    outside = {"bus_kwargs": {"present_ticks": {1: 2048 - 700}}}  # ap at -61.5 deg < -60
+    with emulated_backend(tmp_path, **outside) as (backend, bus, _):
+        with pytest.raises(HardwareError, match=r"knob 'ap' rests at -61\.5 deg, outside its limits -60\.\.80"):
+            backend.open()
+        assert not torque_switched_on(bus) and not bus.writes(116)
 
 
 def test_missing_aurora_package_is_a_hardware_error_with_the_install_command(tmp_path, monkeypatch):
@@ -574,12 +648,11 @@ def test_missing_aurora_package_is_a_hardware_error_with_the_install_command(tmp
     monkeypatch.setitem(sys.modules, "sksurgerynditracker.nditracker", None)
     with pytest.raises(HardwareError, match=r"pip install 'endocal-toolkit\[aurora\]'"):
         aur.default_tracker_factory({"tracker type": "aurora"})
-    config = HardwareConfig.from_toml(rig_toml(tmp_path))
-    bus = FakeBus({1: FakeServo(), 2: FakeServo()})
-    backend = HardwareBackend(config, TEE, port_handler=bus, packet_handler=bus)
-    with pytest.raises(HardwareError, match="scikit-surgerynditracker, which is not installed"):
-        backend.open()
-    assert bus.torques() == {1: 0, 2: 0} and not bus.is_open
+    with ServoBus([1, 2], baudrate=1_000_000) as bus:
+        backend = HardwareBackend(HardwareConfig.from_toml(rig_toml(tmp_path, port=bus.port)), TEE)
+        with pytest.raises(HardwareError, match="scikit-surgerynditracker, which is not installed"):
+            backend.open()
+        assert bus.torque() == {1: False, 2: False} and not torque_switched_on(bus)
 
 
 # --- tracker ------------------------------------------------------------------------------
@@ -629,11 +702,48 @@ def test_tracker_frames_rows_with_missing_and_nan_tools():
     rows, numbers = aur._frame_rows(frame, {"tip": 0x0A, "base": 0x0B}, 1.25)
     assert [r[1] for r in rows] == ["tip", "base"]
     tip, base = rows
-    assert tip[0] == 1.25 and tip[-1] is True and tip[2:5] == (1.0, 2.0, 60.0)
+    assert len(tip) == len(aur.HARDWARE_TRACKER_COLUMNS)
+    assert tip[0] == 1.25 and tip[9] is True and tip[2:5] == (1.0, 2.0, 60.0)
+    assert tip[10:] == ("ok", aur.PORT_STATUS_UNKNOWN)  # a tracker object that reports no port status
     np.testing.assert_allclose(tip[5:9], [math.cos(0.15), math.sin(0.15), 0, 0], atol=1e-15)
-    assert base[-1] is False and all(math.isnan(v) for v in base[2:9])
+    assert base[9] is False and base[10] == "missing" and all(math.isnan(v) for v in base[2:9])
     rows, numbers = aur._frame_rows(frame, {"tip": 0x0A, "base": 0x0C}, 0.0)  # base not plugged in
-    assert rows[1][-1] is False and numbers[1] is None
+    assert rows[1][9] is False and rows[1][10] == "missing" and numbers[1] is None
+
+
+@pytest.mark.parametrize("bits, status", [
+    (0x31, "ok"),  # occupied, initialised, enabled
+    (0x71, "out_of_volume"),  # bit 6
+    (0xB1, "partly_out_of_volume"),  # bit 7
+    (0xF1, "out_of_volume"),  # both: the worse one
+])
+def test_the_port_status_flags_a_frame_whatever_its_pose(bits, status):
+    # out of volume the Aurora still sends a (degraded) transform: the port status alone tells
+    frame = PortStatusFakeTracker({}, out_from=1, bits=bits & 0xC0).get_frame()
+    tip, base = aur._frame_rows(frame, {"tip": 0x0A, "base": 0x0B}, 0.5)[0]
+    assert tip[10:] == (status, bits) and tip[9] is (status == "ok")
+    assert tip[2:5] == (1.0, 2.0, 60.0)  # the reported pose is kept in the stream, flagged
+    assert base[9:] == (True, "ok", 0x31)
+    assert aur.sensor_status(0x01, False) == "missing" and aur.sensor_status(aur.PORT_STATUS_UNKNOWN, True) == "ok"
+
+
+def test_port_status_as_ndicapi_returns_it_from_a_bx_reply():
+    # ndicapi 3.7 builds a BX port status from signed chars: 0xB1 comes back sign-extended
+    assert aur._port_status_bits(2**64 - 79) == 0xB1 and aur._port_status_bits(-79) == 0xB1
+    assert aur._port_status_bits(0x71) == 0x71 and aur._port_status_bits(0x131) == 0x131
+
+
+def test_a_sensor_out_of_volume_for_max_lost_s_stops_the_run_and_says_why(tmp_path):
+    with emulated_backend(tmp_path, tracker=PortStatusFakeTracker) as (backend, bus, _):
+        path = Path(backend.config.source)
+        path.write_text(path.read_text().replace("detect_timeout_s = 0.5", "detect_timeout_s = 0.5\nmax_lost_s = 0.2"))
+        backend = HardwareBackend(HardwareConfig.from_toml(path), TEE,
+                                  tracker_factory=lambda s: PortStatusFakeTracker(s, out_from=40))
+        with pytest.raises(HardwareError, match=r"tip sensor \(port handle 0x0a\) has reported no valid pose for "
+                                                r"[\d.]+ s \(out of the field generator's volume; tracker.max_lost_s = 0.2\)"):
+            with backend:
+                backend.execute(*sine_chunk(n=300))
+        assert bus.torque() == {1: False, 2: False}
 
 
 # --- the chunk ----------------------------------------------------------------------------
@@ -668,12 +778,13 @@ def test_chunk_columns_match_the_run_format(tmp_path):
             assert np.all(m[f"{dof}_{kind}"] == 0.0)
     assert all(np.isfinite(v).all() for v in m.values())
     tr = chunk.tracker
-    assert list(tr) == list(TRACKER_COLUMNS)
+    assert list(tr) == list(aur.HARDWARE_TRACKER_COLUMNS)  # the run format's, then status and port_status
     n_rows = len(tr["t_s"]) + len(chunk2.tracker["t_s"])
     assert n_rows >= 2 and n_rows % 2 == 0  # one tip and one base row per frame
     assert set(tr["sensor"]) <= {"tip", "base"}
     bad = ~tr["valid"]
     assert np.isnan(tr["x_mm"][bad]).all() and np.isfinite(tr["x_mm"][~bad]).all()
+    assert set(tr["status"][bad]) == {"missing"} and set(tr["status"][~bad]) == {"ok"}
     assert info["dynamixel"]["servos"]["ap"]["model_number"] == 1020
     assert info["dynamixel"]["servos"]["ml"]["firmware_version"] == 45
     assert info["tracker"]["tools_seen"]["port_handles"] == [10, 11]
@@ -726,8 +837,7 @@ def test_udp_stage_moves_translation_and_rotation(tmp_path):
     stage.start()
     try:
         section = f'[stage]\nmode = "udp"\nhost = "127.0.0.1"\nport = {stage.port}\ntimeout_s = 0.5\n'
-        backend, bus, _ = make_backend(tmp_path, stage=section)
-        with backend:
+        with emulated_backend(tmp_path, stage=section) as (backend, _, _), backend:
             t, g = sine_chunk(n=20)
             g["translation"] = 0.5 * np.sin(2 * np.pi * t)  # at most 3.1 mm/s < 10 mm/s
             g["rotation"] = -2.0 * np.sin(2 * np.pi * t)
@@ -742,8 +852,7 @@ def test_udp_stage_moves_translation_and_rotation(tmp_path):
         np.testing.assert_allclose(v, expected, rtol=1e-12)
         assert info["stage"]["address"] == f"127.0.0.1:{stage.port}"
         # too fast for the stage's 10 mm/s: refused
-        backend2, _, _ = make_backend(tmp_path, stage=section)
-        with backend2:
+        with emulated_backend(tmp_path, stage=section) as (backend2, _, _), backend2:
             g["translation"] = np.linspace(0, 1.0, t.size)  # 1 mm in 0.19 s = 5.3 mm/s: fine
             backend2.execute(t, g)
             t3 = t + t[-1]
@@ -762,10 +871,10 @@ def test_udp_stage_that_never_answers_is_a_hardware_error(tmp_path):
     try:
         port = silent.getsockname()[1]
         section = f'[stage]\nmode = "udp"\nhost = "127.0.0.1"\nport = {port}\ntimeout_s = 0.02\n'
-        backend, bus, _ = make_backend(tmp_path, stage=section)
-        with pytest.raises(HardwareError, match=f"no reply from the translation/rotation stage at 127.0.0.1:{port}"):
-            backend.open()
-        assert bus.torques() == {1: 0, 2: 0} and not bus.is_open
+        with emulated_backend(tmp_path, stage=section) as (backend, bus, _):
+            with pytest.raises(HardwareError, match=f"no reply from the translation/rotation stage at 127.0.0.1:{port}"):
+                backend.open()
+            assert bus.torque() == {1: False, 2: False} and not torque_switched_on(bus)
     finally:
         silent.close()
 
@@ -776,11 +885,11 @@ def test_udp_stage_that_stops_answering_stops_the_run(tmp_path):
     try:
         section = (f'[stage]\nmode = "udp"\nhost = "127.0.0.1"\nport = {stage.port}\n'
                    "timeout_s = 0.01\nmax_missed_replies = 2\n")
-        backend, bus, _ = make_backend(tmp_path, stage=section)
-        with pytest.raises(HardwareError, match="stopped answering \\(3 replies missing in a row\\)"):
-            with backend:
-                backend.execute(*sine_chunk())
-        assert bus.torques() == {1: 0, 2: 0}
+        with emulated_backend(tmp_path, stage=section) as (backend, bus, _):
+            with pytest.raises(HardwareError, match="stopped answering \\(3 replies missing in a row\\)"):
+                with backend:
+                    backend.execute(*sine_chunk())
+            assert bus.torque() == {1: False, 2: False}
     finally:
         stage.stop()
 
@@ -807,6 +916,21 @@ def test_unknown_keys_are_config_errors_naming_key_and_file(tmp_path):
         HardwareConfig.from_toml(path)
     path.write_text("[dynamixel\n")
     with pytest.raises(ConfigError, match="not valid TOML"):
+        HardwareConfig.from_toml(path)
+
+
+def test_one_serial_port_for_both_devices_and_a_bad_latency_are_config_errors(tmp_path):
+    # the same device under two names: /dev/serial/by-id/... is a symlink to /dev/ttyUSB0
+    device = tmp_path / "ttyUSB0"
+    device.touch()
+    (tmp_path / "by-id").symlink_to(device)
+    path = rig_toml(tmp_path, port=str(device))
+    path.write_text(path.read_text().replace("[tracker]\n", f'[tracker]\nserial_port = "{tmp_path / "by-id"}"\n'))
+    with pytest.raises(ConfigError, match=rf"{path}: \[dynamixel\] port and \[tracker\] serial_port are both"):
+        HardwareConfig.from_toml(path)
+    path = rig_toml(tmp_path)
+    path.write_text(path.read_text().replace("latency_timer_ms = 500.0", "latency_timer_ms = 0"))
+    with pytest.raises(ConfigError, match=r"latency_timer_ms must be in \(0, 1000\] ms, got 0"):
         HardwareConfig.from_toml(path)
 
 
@@ -837,18 +961,15 @@ def test_hardware_run_folder_through_run_excitation(tmp_path):
     from endocal.protocols.trajectory import Trajectory
     from endocal.runs.aligned import read_stream
 
-    config = HardwareConfig.from_toml(rig_toml(tmp_path))
-    bus = FakeBus({1: FakeServo(), 2: FakeServo()})
-    backend = HardwareBackend(config, TEE, port_handler=bus, packet_handler=bus,
-                              tracker_factory=lambda s: RotatedBaseTracker(s))
     fs = 100.0
     t = np.arange(31) / fs
     goal = {d: np.zeros(t.size) for d in TEE.dofs}
     goal["ap"] = 3.0 * np.sin(2 * np.pi * 2.0 * t)  # peak speed 37.7 deg/s < 100 deg/s
     traj = Trajectory(t_s=t, goal=goal, sample_rate_hz=fs, protocol="test")
-    result = run_excitation(traj, backend, TEE, tmp_path / "run", protocol_info={"name": "test"}, seed=0)
+    with emulated_backend(tmp_path, tracker=RotatedBaseTracker) as (backend, bus, _):
+        result = run_excitation(traj, backend, TEE, tmp_path / "run", protocol_info={"name": "test"}, seed=0)
+        assert bus.torque() == {1: False, 2: False}
     assert result.status == "complete" and result.motor_rows == t.size
-    assert bus.torques() == {1: 0, 2: 0} and not bus.is_open
     meta = json.loads((tmp_path / "run" / "run.json").read_text())
     assert meta["backend"]["name"] == "hardware" and meta["backend"]["dynamixel"]["servos"]["ap"]["model_number"] == 1020
     motor = read_stream(tmp_path / "run", "motor")

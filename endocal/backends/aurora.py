@@ -10,8 +10,16 @@ in the tracker-stream layout of :mod:`endocal.backends.base`.
 Frames are read by a background thread at the tracker rate (Aurora: 40 Hz) and stamped
 on the run's monotonic clock (the midpoint of the ``get_frame`` call, so half the serial
 round trip is the stamp's uncertainty); a frame whose frame number did not change since
-the last read is a repeat and is dropped. A sensor that is missing, out of the field
-volume or reports NaN gives a row with ``valid = False`` and NaN values.
+the last read is a repeat and is dropped.
+
+Every row also carries the sensor's port status as the Aurora reported it in the same reply
+(NDI Combined API, "TX" and "BX" replies: bit 6 out of the field generator's volume, bit 7
+partly out of it), which scikit-surgerynditracker leaves out of its frames and
+:class:`PortStatusTracker` reads from ndicapi, and its meaning in words: ``status`` is
+``ok``, ``missing`` (no transform, or NaN), ``out_of_volume`` or ``partly_out_of_volume``.
+Out of volume the Aurora still sends a transform (scikit-surgerynditracker asks for those,
+reply option ``0800``), degraded; only ``ok`` rows are ``valid``, every other row is kept
+in the stream, flagged, and left out of the aligned table.
 """
 
 from __future__ import annotations
@@ -27,8 +35,22 @@ import numpy as np
 
 from endocal.backends.base import SENSORS, TRACKER_COLUMNS
 from endocal.errors import ConfigError, HardwareError
+from endocal.streams import DROPOUT_STATUSES
 
+#: The hardware tracker stream: the run format's columns, then each sensor's ``status`` in words
+#: and the ``port_status`` bits the Aurora reported (-1: none reported)
+HARDWARE_TRACKER_COLUMNS = (*TRACKER_COLUMNS, "status", "port_status")
 INSTALL_HINT = "pip install 'endocal-toolkit[aurora]'"
+# Port status bits of a TX/BX reply (NDI Combined API; ndicapi's NDI_OUT_OF_VOLUME, NDI_PARTIALLY_IN_VOLUME)
+PORT_OUT_OF_VOLUME = 0x40
+PORT_PARTLY_OUT_OF_VOLUME = 0x80
+PORT_STATUS_UNKNOWN = -1  # the tracker object gave none (a stand-in without ndicapi)
+#: ``status`` of a tracker row: what the sensor's pose and port status say, in words
+STATUS_OK = "ok"
+STATUS_MISSING, STATUS_OUT, STATUS_PARTLY = DROPOUT_STATUSES
+STATUS_REASONS = {STATUS_MISSING: "missing: no transform", STATUS_OUT: "out of the field generator's volume",
+                  STATUS_PARTLY: "partly out of the field generator's volume",
+                  STATUS_OK: "no frame read since its last valid pose"}
 TRACKER_KEYS = {"serial_port", "tip_port_handle", "base_port_handle", "rom_files", "rate_hz", "detect_timeout_s",
                 "max_lost_s"}
 
@@ -196,7 +218,7 @@ def default_tracker_factory(settings: dict) -> Any:
             f"the NDI Aurora backend needs scikit-surgerynditracker, which is not installed ({exc}): {INSTALL_HINT}"
         ) from None
     try:
-        return NDITracker(settings)
+        tracker = NDITracker(settings)
     except (OSError, ValueError, KeyError) as exc:
         port = settings.get("serial port", "any serial port (auto)")
         msg = " ".join(str(exc).split())
@@ -204,6 +226,89 @@ def default_tracker_factory(settings: dict) -> Any:
             f"cannot connect to the NDI Aurora on {port}: {msg}; check the System Control Unit is on, "
             "the USB/serial cable, and the port (Linux: 'dialout' group)"
         ) from None
+    try:
+        return PortStatusTracker(tracker)
+    except BaseException:
+        tracker.close()
+        raise
+
+
+class PortStatusTracker:
+    """An ``NDITracker`` whose frames also carry each tool's port status.
+
+    scikit-surgerynditracker reads every frame with ndicapi (``TX:0801`` or ``BX:0801``) and
+    returns the transforms only; the port status of each tool in that same reply is read here,
+    right after each ``get_frame``, from ndicapi's parse of it (``ndiGetTXPortStatus`` or
+    ``ndiGetBXPortStatus``, whichever reply the tracker asked for).
+
+    Parameters
+    ----------
+    tracker : NDITracker
+        Connected. Everything but ``get_frame`` is passed through to it.
+
+    Raises
+    ------
+    HardwareError
+        The installed scikit-surgerynditracker does not keep the ndicapi device, reply kind and
+        tools this reads (its 1.0 releases do): frames out of the field volume could not be
+        told from good ones, so the tracker is refused rather than read without them.
+    """
+
+    def __init__(self, tracker: Any) -> None:
+        import ndicapy
+
+        self._tracker = tracker
+        device = getattr(tracker, "_device", None)
+        capture = getattr(tracker, "_capture_string", None)
+        tools = getattr(tracker, "_tool_descriptors", None)
+        if device is None or not isinstance(capture, str) or not isinstance(tools, list):
+            raise HardwareError(
+                f"scikit-surgerynditracker {tracker_package_version()} does not expose the ndicapi device endocal "
+                "reads each sensor's port status from (out of the field volume or not): install a 1.0 release "
+                f"({INSTALL_HINT})"
+            )
+        self._status = ndicapy.ndiGetBXPortStatus if capture.startswith("BX") else ndicapy.ndiGetTXPortStatus
+
+    def get_frame(self) -> tuple:
+        """``NDITracker.get_frame()``'s five lists and a sixth: port handle -> port status (int)."""
+        frame = self._tracker.get_frame()
+        t = self._tracker
+        status = {int(d["port handle"]): _port_status_bits(self._status(t._device, d["c_str port handle"]))
+                  for d in t._tool_descriptors}
+        return (*frame, status)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._tracker, name)
+
+
+def _port_status_bits(raw: int) -> int:
+    """The port status as ndicapi returns it, made exact where it can be.
+
+    ndicapi (3.7) assembles a BX reply's 4-byte port status from signed chars, so a byte of
+    0x80 or more (partly out of volume sets bit 7) sign-extends over the bytes above it:
+    0xB1 comes back as 2**64 - 79. The low byte, which holds bits 0-7 (occupied ... out of
+    volume, partly out of volume), is always exact; the others are kept only when intact.
+    """
+    raw = int(raw)
+    return raw & 0xFF if raw < 0 or raw > 0x7FFFFFFF else raw
+
+
+def sensor_status(port_status: int, pose_ok: bool) -> str:
+    """A sensor's frame in words: ``out_of_volume``, ``partly_out_of_volume``, ``missing`` or ``ok``.
+
+    Parameters
+    ----------
+    port_status : int
+        The port status of the TX/BX reply (bit 6 out of volume, bit 7 partly out of volume),
+        or :data:`PORT_STATUS_UNKNOWN`.
+    pose_ok : bool
+        A finite transform was reported.
+    """
+    if port_status != PORT_STATUS_UNKNOWN and port_status & PORT_OUT_OF_VOLUME:
+        return STATUS_OUT
+    if port_status != PORT_STATUS_UNKNOWN and port_status & PORT_PARTLY_OUT_OF_VOLUME:
+        return STATUS_PARTLY
+    return STATUS_OK if pose_ok else STATUS_MISSING
 
 
 def tracker_package_version() -> str:
@@ -217,20 +322,26 @@ def tracker_package_version() -> str:
 
 
 def _frame_rows(frame, handles: dict[str, int], t_s: float) -> tuple[list[tuple], tuple]:
-    """Tracker-stream rows (one per sensor) and the frame numbers of one ``get_frame`` result."""
-    port_handles, _timestamps, frame_numbers, tracking, _quality = frame
+    """Tracker-stream rows (one per sensor, :data:`HARDWARE_TRACKER_COLUMNS`) and the frame
+    numbers of one ``get_frame`` result (a sixth element, handle -> port status, when the
+    tracker reports it: :class:`PortStatusTracker`)."""
+    port_handles, _timestamps, frame_numbers, tracking, _quality = frame[:5]
+    port_status = frame[5] if len(frame) > 5 else {}
     index = {int(h): k for k, h in enumerate(port_handles)}
     rows, numbers = [], []
     for sensor in SENSORS:
         k = index.get(handles[sensor])
         if k is None:
-            rows.append((t_s, sensor, *([math.nan] * 7), False))
+            rows.append((t_s, sensor, *([math.nan] * 7), False, STATUS_MISSING, PORT_STATUS_UNKNOWN))
             numbers.append(None)
             continue
         numbers.append(frame_numbers[k])
         pos, quat = matrix_to_pose(np.asarray(tracking[k], dtype=float).reshape(4, 4))
-        valid = bool(np.isfinite(pos).all() and np.isfinite(quat).all())
-        rows.append((t_s, sensor, *pos[0].tolist(), *quat[0].tolist(), valid))
+        bits = int(port_status.get(handles[sensor], PORT_STATUS_UNKNOWN))
+        status = sensor_status(bits, bool(np.isfinite(pos).all() and np.isfinite(quat).all()))
+        if status == STATUS_MISSING:
+            pos[:], quat[:] = math.nan, math.nan
+        rows.append((t_s, sensor, *pos[0].tolist(), *quat[0].tolist(), status == STATUS_OK, status, bits))
     return rows, tuple(numbers)
 
 
@@ -257,6 +368,7 @@ class AuroraTracker:
         self._rows: list[tuple] = []
         self._round_trips: list[float] = []  # get_frame durations (s), for the stamp uncertainty
         self._last_valid: dict[str, float] = {}  # sensor -> monotonic time of its last valid pose
+        self._last_status: dict[str, str] = {}  # sensor -> status of its last frame
         self._error: BaseException | None = None
         self._last_numbers: tuple | None = None
         self.info: dict = {}
@@ -295,15 +407,17 @@ class AuroraTracker:
         while not all(seen_valid.values()):
             rows, _ = _frame_rows(self._tracker.get_frame(), self.config.handles, 0.0)
             for row in rows:
-                seen_valid[row[1]] = seen_valid[row[1]] or row[-1]
+                seen_valid[row[1]] = seen_valid[row[1]] or row[9]
+                self._last_status[row[1]] = row[10]
             if all(seen_valid.values()):
                 break
             if time.monotonic() > deadline:
-                missing = [f"{s} (port handle {self.config.handles[s]:#04x})" for s, ok in seen_valid.items() if not ok]
+                lost = [s for s, ok in seen_valid.items() if not ok]
+                named = ", ".join(f"{s} (port handle {self.config.handles[s]:#04x})" for s in lost)
+                why = "; ".join(f"{s}: {STATUS_REASONS.get(self._last_status.get(s, STATUS_MISSING))}" for s in lost)
                 raise HardwareError(
-                    f"NDI Aurora: {', '.join(missing)} reported no valid pose within "
-                    f"{self.config.detect_timeout_s:g} s; check the sensor lies inside the field generator's "
-                    "measurement volume, away from metal"
+                    f"NDI Aurora: {named} reported no valid pose within {self.config.detect_timeout_s:g} s ({why}); "
+                    "check the sensor lies inside the field generator's measurement volume, away from metal"
                 )
             time.sleep(1.0 / self.config.rate_hz)
 
@@ -327,8 +441,9 @@ class AuroraTracker:
                 t_s = 0.5 * (t_before + t_after)
                 self._round_trips.append(t_after - t_before)
                 rows, numbers = _frame_rows(frame, self.config.handles, t_s)
-                for row in rows:  # the last valid pose of each sensor, for check()
-                    if row[-1]:
+                for row in rows:  # the last valid pose of each sensor, and its last status, for check()
+                    self._last_status[row[1]] = row[10]
+                    if row[9]:
                         self._last_valid[row[1]] = time.monotonic()
                 if numbers != self._last_numbers or None in numbers:
                     self._last_numbers = numbers
@@ -346,7 +461,8 @@ class AuroraTracker:
     def check(self) -> None:
         """Raise :class:`HardwareError` if the reader thread died or a sensor is lost.
 
-        A sensor is lost when it has reported no valid pose for ``max_lost_s``.
+        A sensor is lost when it has reported no valid pose for ``max_lost_s``: missing, out
+        of the field generator's volume or partly out of it (the message says which).
         """
         if self._error is not None:
             raise HardwareError(f"NDI Aurora: reading frames failed ({self._error}); check the tracker cable and power")
@@ -354,10 +470,11 @@ class AuroraTracker:
         for sensor, last in self._last_valid.items():
             if now - last > self.config.max_lost_s:
                 handle = self.config.handles[sensor]
+                reason = STATUS_REASONS.get(self._last_status.get(sensor, STATUS_MISSING))
                 raise HardwareError(
                     f"NDI Aurora: the {sensor} sensor (port handle {handle:#04x}) has reported no valid pose for "
-                    f"{now - last:.1f} s (tracker.max_lost_s = {self.config.max_lost_s:g}): check its cable and that it "
-                    "stays inside the field generator's volume"
+                    f"{now - last:.1f} s ({reason}; tracker.max_lost_s = {self.config.max_lost_s:g}): check its cable "
+                    "and that it stays inside the field generator's volume"
                 )
 
     def drain(self) -> dict[str, np.ndarray]:
@@ -405,15 +522,14 @@ class AuroraTracker:
         }
 
 
+_TEXT_COLUMNS = ("sensor", "status")
+
+
 def rows_to_columns(rows: list[tuple]) -> dict[str, np.ndarray]:
-    """Tracker rows ``(t_s, sensor, x, y, z, qw, qx, qy, qz, valid)`` -> column arrays."""
+    """Tracker rows ``(t_s, sensor, x, y, z, qw, qx, qy, qz, valid, status, port_status)`` -> column
+    arrays (:data:`HARDWARE_TRACKER_COLUMNS`)."""
+    kinds = {"valid": bool, "port_status": np.int64, **dict.fromkeys(_TEXT_COLUMNS, object)}
     if not rows:
-        cols: dict[str, np.ndarray] = {c: np.empty(0, dtype=float) for c in TRACKER_COLUMNS}
-        cols["sensor"] = np.empty(0, dtype=object)
-        cols["valid"] = np.empty(0, dtype=bool)
-        return cols
-    by_col = dict(zip(TRACKER_COLUMNS, zip(*rows)))
-    cols = {c: np.asarray(by_col[c], dtype=float) for c in TRACKER_COLUMNS if c not in ("sensor", "valid")}
-    cols["sensor"] = np.asarray(by_col["sensor"], dtype=object)
-    cols["valid"] = np.asarray(by_col["valid"], dtype=bool)
-    return {c: cols[c] for c in TRACKER_COLUMNS}
+        return {c: np.empty(0, dtype=kinds.get(c, float)) for c in HARDWARE_TRACKER_COLUMNS}
+    by_col = dict(zip(HARDWARE_TRACKER_COLUMNS, zip(*rows)))
+    return {c: np.asarray(by_col[c], dtype=kinds.get(c, float)) for c in HARDWARE_TRACKER_COLUMNS}

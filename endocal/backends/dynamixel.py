@@ -49,6 +49,9 @@ LEN_GOAL_POSITION = 4
 LEN_PRESENT_BLOCK = 10  # current(2) + velocity(4) + position(4), one sync read
 
 MODEL_XM430_W350 = 1020
+#: What an X-series servo's Baud Rate register (address 8, values 0-7) can be set to, bit/s
+SERVO_BAUDRATES = (9600, 57600, 115200, 1_000_000, 2_000_000, 3_000_000, 4_000_000, 4_500_000)
+SDK_LATENCY_TIMER_MS = 16.0  # what dynamixel-sdk assumes of the USB adapter's latency timer
 MODEL_NAMES = {1020: "XM430-W350", 1030: "XM430-W210", 1060: "XL430-W250", 1120: "XM540-W270", 1130: "XM540-W150"}
 
 OPERATING_MODES = {"position": 3, "extended_position": 4}
@@ -136,7 +139,7 @@ def _le_bytes(value: int, n_bytes: int) -> list[int]:
 # --- configuration ------------------------------------------------------------------------
 MOTOR_KEYS = {"id", "zero_ticks", "direction", "gear_ratio", "limits_deg", "max_speed_dps"}
 DYNAMIXEL_KEYS = {"port", "baudrate", "model_number", "operating_mode", "fast_sync_read",
-                  "write_limit_registers", "motors"}
+                  "write_limit_registers", "latency_timer_ms", "motors"}
 
 
 @dataclass(frozen=True)
@@ -221,6 +224,11 @@ class DynamixelConfig:
         firmware) instead of Sync Read.
     write_limit_registers : bool
         Write the knob limits into Min/Max Position Limit (position mode only).
+    latency_timer_ms : float
+        The USB adapter's latency timer as the wait for each status packet assumes it: a reply
+        is awaited ``2 * latency_timer_ms + 2`` ms plus its bytes' time (dynamixel-sdk's rule,
+        which assumes 16 ms, the FTDI default). Raise it for a slow USB hub or a loaded PC (the
+        emulated rig, served by a process that shares the CPU, writes 100).
     motors : dict
         Axis name -> :class:`MotorConfig`.
     """
@@ -231,6 +239,7 @@ class DynamixelConfig:
     operating_mode: str = "position"
     fast_sync_read: bool = False
     write_limit_registers: bool = True
+    latency_timer_ms: float = SDK_LATENCY_TIMER_MS
     motors: dict[str, MotorConfig] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -240,11 +249,20 @@ class DynamixelConfig:
             )
         if not self.motors:
             raise ConfigError("dynamixel: no [dynamixel.motors.<axis>] section; configure one motor per bending knob")
-        ids = [m.id for m in self.motors.values()]
-        if len(set(ids)) != len(ids):
-            raise ConfigError(f"dynamixel: two motors share an id ({ids}); every servo needs its own ID")
-        if self.baudrate <= 0:
-            raise ConfigError(f"dynamixel: baudrate must be positive, got {self.baudrate}")
+        seen: dict[int, str] = {}
+        for axis, m in self.motors.items():
+            if m.id in seen:
+                raise ConfigError(f"dynamixel: ID {m.id} is given to both '{seen[m.id]}' and '{axis}'; every servo "
+                                  "needs its own ID (set them with Dynamixel Wizard)")
+            seen[m.id] = axis
+        if self.baudrate not in SERVO_BAUDRATES:
+            raise ConfigError(
+                f"dynamixel: baudrate {self.baudrate} is not a rate the servos speak; an X-series servo's Baud Rate "
+                f"register sets {', '.join(map(str, SERVO_BAUDRATES))} bit/s (factory default 57600): use the one "
+                "your servos are set to"
+            )
+        if not (math.isfinite(self.latency_timer_ms) and 0 < self.latency_timer_ms <= 1000):
+            raise ConfigError(f"dynamixel: latency_timer_ms must be in (0, 1000] ms, got {self.latency_timer_ms}")
 
     @property
     def tick_range(self) -> tuple[int, int]:
@@ -289,6 +307,7 @@ class DynamixelConfig:
                 write_limit_registers=_as_bool(
                     d.get("write_limit_registers", True), f"{where} [dynamixel] write_limit_registers"
                 ),
+                latency_timer_ms=float(d.get("latency_timer_ms", SDK_LATENCY_TIMER_MS)),
                 motors=motors,
             )
         except ConfigError as exc:
@@ -390,7 +409,7 @@ class KnobServos:
         import dynamixel_sdk as sdk
 
         if self._port is None:
-            self._port = sdk.PortHandler(self.config.port)
+            self._port = _port_handler(sdk, self.config.port, self.config.latency_timer_ms)
         if self._ph is None:
             self._ph = sdk.PacketHandler(2.0)
         hint = "check the U2D2 is plugged in, the port name, and that you may use it (Linux: the 'dialout' group)"
@@ -616,9 +635,12 @@ class KnobServos:
         except Exception:  # noqa: BLE001 - clearing is best effort; the writes below report failures
             pass
         failed = []
+        # a torque we switched on is retried; before that one try each (a servo that never answered
+        # its ping would only make the caller wait out every timeout)
+        attempts = TORQUE_OFF_ATTEMPTS if must_succeed else 1
         for motor in self.config.motors.values():
             last = ""
-            for _ in range(TORQUE_OFF_ATTEMPTS):
+            for _ in range(attempts):
                 self._port.is_using = False
                 try:
                     result, error = self._ph.write1ByteTxRx(self._port, motor.id, ADDR_TORQUE_ENABLE, 0)
@@ -660,9 +682,25 @@ class KnobServos:
             "baudrate": self.config.baudrate,
             "operating_mode": self.config.operating_mode,
             "fast_sync_read": self.config.fast_sync_read,
+            "latency_timer_ms": self.config.latency_timer_ms,
             "recovered_reads": self.recovered_reads,
             "servos": {axis: dict(info) for axis, info in self.info.items()},
         }
+
+
+def _port_handler(sdk, port: str, latency_timer_ms: float):
+    """``sdk.PortHandler(port)`` whose wait for a status packet assumes ``latency_timer_ms``.
+
+    dynamixel-sdk waits ``bytes' time + 2 * LATENCY_TIMER + 2`` ms with ``LATENCY_TIMER = 16``
+    fixed for the process; this port handler puts the configured latency in that rule.
+    """
+
+    class PortHandler(sdk.PortHandler):
+        def setPacketTimeout(self, packet_length):
+            self.packet_start_time = self.getCurrentTime()
+            self.packet_timeout = self.tx_time_per_byte * packet_length + 2.0 * latency_timer_ms + 2.0
+
+    return PortHandler(port)
 
 
 def sdk_version() -> str:

@@ -8,17 +8,20 @@ motors run by a LabVIEW PC reached over UDP (:class:`UdpStage`), or absent.
 
 Safety
 ------
-- Every chunk is checked *before any of it moves*: finite values, the tighter of the
-  probe's and the rig's limits, and the fastest speed allowed per DoF (including the
-  step from the previous chunk's last goal, and from the present position at the first
-  chunk); a violation refuses the whole chunk with :class:`~endocal.errors.LimitError`
-  naming the axis, time, value and limit.
+- A whole run is checked before the rig is opened (:meth:`HardwareBackend.check_plan`,
+  which ``endocal excite`` calls), and every chunk again *before any of it moves*: finite
+  values, the tighter of the probe's and the rig's limits, and the fastest speed allowed per
+  DoF (including the step from the previous chunk's last goal, and from the present position
+  at the first chunk); a violation refuses the whole chunk with
+  :class:`~endocal.errors.LimitError` naming the axis, time, value and limit.
 - Knob limits are also written into the servos' Min/Max Position Limit registers
   (position control mode), so the servo itself refuses goals beyond them.
 - Torque goes off on every exit path: :meth:`HardwareBackend.close` (idempotent), the
   context manager, and, while open, an ``atexit`` hook and SIGTERM/SIGHUP handlers that
-  turn torque off before the process ends. Ctrl-C raises ``KeyboardInterrupt`` as usual,
-  and the caller's ``finally``/``with`` closes the backend.
+  turn torque off, then unwind with :class:`~endocal.errors.StopSignal` (a ``SystemExit``
+  with code 128 + the signal number) so the caller's ``finally`` blocks still run. Ctrl-C
+  raises ``KeyboardInterrupt`` as usual, and the caller's ``finally``/``with`` closes the
+  backend.
 
 UDP stage protocol, version 1 (ASCII, one datagram per message, numbers in the DoF's unit)
 ------------------------------------------------------------------------------------------
@@ -47,7 +50,7 @@ from endocal.backends.aurora import AuroraConfig, AuroraTracker, tracker_package
 from endocal.backends.base import StreamChunk, motor_columns
 from endocal.backends.dynamixel import DynamixelConfig, KnobServos, sdk_version
 from endocal.backends.limits import check_goals, probe_accel_limits
-from endocal.errors import ConfigError, HardwareError, LimitError, ProtocolError
+from endocal.errors import ConfigError, HardwareError, LimitError, ProtocolError, StopSignal
 from endocal.probe import ROTATION, TRANSLATION, ProbeConfig
 
 TOP_KEYS = {"name", "dynamixel", "tracker", "stage", "safety"}
@@ -213,9 +216,16 @@ class HardwareConfig:
             if section in d and not isinstance(d[section], dict):
                 raise ConfigError(f"{where}: [{section}] must be a table")
         try:
+            dynamixel = DynamixelConfig.from_dict(d["dynamixel"], where)
+            tracker = AuroraConfig.from_dict(d["tracker"], where, base_dir=base_dir)
+            if tracker.serial_port != "auto" and _same_port(dynamixel.port, tracker.serial_port):
+                raise ConfigError(
+                    f"{where}: [dynamixel] port and [tracker] serial_port are both {dynamixel.port}: the servos' U2D2 "
+                    "and the Aurora each need their own serial port (list them with `python -m serial.tools.list_ports`)"
+                )
             return cls(
-                dynamixel=DynamixelConfig.from_dict(d["dynamixel"], where),
-                tracker=AuroraConfig.from_dict(d["tracker"], where, base_dir=base_dir),
+                dynamixel=dynamixel,
+                tracker=tracker,
                 stage=StageConfig.from_dict(d.get("stage", {}), where),
                 safety=SafetyConfig.from_dict(d.get("safety", {}), where),
                 name=str(d.get("name", "rig")),
@@ -252,6 +262,14 @@ class HardwareConfig:
         except tomllib.TOMLDecodeError as exc:
             raise ConfigError(f"hardware config {path} is not valid TOML: {exc}") from None
         return cls.from_dict(data, where=str(path), base_dir=path.parent)
+
+
+def _same_port(a: str, b: str) -> bool:
+    """Whether two serial port names are one device (``COM3``/``com3``; a symlink such as
+    ``/dev/serial/by-id/...`` and the ``/dev/ttyUSB0`` it points at)."""
+    import os
+
+    return a.strip().lower() == b.strip().lower() or os.path.realpath(a) == os.path.realpath(b)
 
 
 # --- safety check -------------------------------------------------------------------------
@@ -594,6 +612,32 @@ class HardwareBackend:
             self.servos.write_goals_deg({a: float(goals[a][i]) for a in start})
         self._present.update(end)
 
+    def check_plan(self, t_s: np.ndarray, goal: dict[str, np.ndarray]) -> None:
+        """Check a whole run against this rig before it is opened: nothing is sent on any bus.
+
+        The same checks as every chunk of :meth:`execute` gets (finite goals, the tighter of
+        the probe's and the rig's limits, speeds and accelerations, no translation/rotation
+        without a stage), over the whole run at once, so that a goal beyond the rig's limits
+        late in a protocol is refused before the probe moves at all rather than mid-run. Only
+        the start check (the first goal against where each DoF rests) waits for :meth:`open`.
+
+        Parameters
+        ----------
+        t_s : ndarray, shape (n,)
+            The run's tick times, s.
+        goal : dict
+            Every DoF of the probe -> goals, shape (n,), in deg or mm.
+
+        Raises
+        ------
+        LimitError, ProtocolError
+        """
+        t = np.asarray(t_s, dtype=float)
+        goals = self._validated_goals(t, goal)
+        check_goals(t, goals, self.limits, self.max_speed, self.units, None, self.max_accel,
+                    refused=f"the run was refused before the rig was opened (limits: the tighter of probe "
+                            f"'{self.probe.name}' and {self.config.source})")
+
     def attach_guard(self, guard) -> None:
         """Step ``guard`` (a :class:`endocal.force.guard.ForceGuard`) at every tick; None detaches.
 
@@ -811,7 +855,7 @@ class HardwareBackend:
         # then unwind like sys.exit so the caller's finally blocks still flush the run. If torque
         # could not be switched off, that HardwareError ("cut the power") is what propagates.
         self.close()
-        raise SystemExit(128 + signum)
+        raise StopSignal(signum)
 
     # -- record --------------------------------------------------------------------------
     def describe(self) -> dict:

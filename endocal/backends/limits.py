@@ -60,6 +60,7 @@ def check_goals(
     units: dict[str, str],
     previous: tuple | None = None,
     max_accel: dict[str, float] | None = None,
+    refused: str = "the chunk was refused before any of it moved",
 ) -> None:
     """Refuse a chunk of goals that leaves a limit or moves too fast, before anything moves.
 
@@ -81,6 +82,8 @@ def check_goals(
         step) lets the acceleration into this chunk be checked as well.
     max_accel : dict, optional
         DoF -> largest allowed ``|d speed / dt|`` in unit/s^2 (DoFs not in it: unchecked).
+    refused : str
+        What the messages say was refused (a chunk; a whole run, before the rig is opened).
 
     Raises
     ------
@@ -103,7 +106,7 @@ def check_goals(
         bad = ~np.isfinite(g)
         if bad.any():
             k = int(np.argmax(bad))
-            raise ProtocolError(f"goal for '{dof}' at t = {t[k]:.3f} s is {g[k]} (not a number); the chunk was refused")
+            raise ProtocolError(f"goal for '{dof}' at t = {t[k]:.3f} s is {g[k]} (not a number); {refused}")
         lo, hi = limits[dof]
         out = (g < lo) | (g > hi)
         if out.any():
@@ -111,7 +114,7 @@ def check_goals(
             lim = lo if g[k] < lo else hi
             raise LimitError(
                 f"goal for '{dof}' at t = {t[k]:.3f} s is {g[k]:.3f} {u}, beyond its limit {lim:.3f} {u} "
-                f"(allowed {lo:g}..{hi:g} {u}); the chunk was refused before any of it moved"
+                f"(allowed {lo:g}..{hi:g} {u}); {refused}"
             )
         tt, gg = t, g
         if previous is not None:
@@ -125,7 +128,7 @@ def check_goals(
                 raise LimitError(
                     f"goal for '{dof}' at t = {tt[k + 1]:.3f} s moves at {speed[k]:.1f} {u}/s "
                     f"(from {gg[k]:.3f} to {gg[k + 1]:.3f} {u}), faster than the limit {max_speed[dof]:g} {u}/s; "
-                    "the chunk was refused before any of it moved"
+                    f"{refused}"
                 )
             a_max = (max_accel or {}).get(dof)
             if a_max is not None:
@@ -142,5 +145,5 @@ def check_goals(
                         raise LimitError(
                             f"goal for '{dof}' at t = {tv[k + 1]:.3f} s changes speed from {v[k]:.1f} to {v[k + 1]:.1f} "
                             f"{u}/s in one tick: {acc[k]:.0f} {u}/s^2, above the limit {a_max:g} {u}/s^2; "
-                            "the chunk was refused before any of it moved"
+                            f"{refused}"
                         )

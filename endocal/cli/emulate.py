@@ -19,8 +19,9 @@ app = typer.Typer(help="Emulated rig devices speaking the real wire protocols, f
                   no_args_is_help=True)
 
 
-def _run_until_stopped(emulator, ready: str) -> None:
-    """Print the ``ready`` line, serve until Ctrl-C or SIGTERM, then close the emulator.
+def _run_until_stopped(emulator, ready: str, final=None) -> None:
+    """Print the ``ready`` line, serve until Ctrl-C or SIGTERM, then close the emulator and print
+    ``stopped`` (with ``final()``, e.g. every servo's torque state, when given).
 
     SIGTERM is caught before ``ready`` is printed: whoever waits for that line may stop us at once.
     """
@@ -35,7 +36,7 @@ def _run_until_stopped(emulator, ready: str) -> None:
     finally:
         signal.signal(signal.SIGTERM, previous)
         emulator.close()
-        out.print("stopped", markup=False)
+        out.print("stopped" if final is None else f"stopped: {final()}", markup=False)
 
 
 def _hardware_errors(items: list[str]) -> dict[int, str]:
@@ -50,6 +51,24 @@ def _hardware_errors(items: list[str]) -> dict[int, str]:
             raise ConfigError(f"--hardware-error {item!r}: write ID=overload or ID=overheating")
         errors[int(k)] = kind
     return errors
+
+
+def _aurora_faults(missing, missing_after, silent_after, out_of_volume, partly_out_of_volume, out_of_volume_after,
+                   out_of_volume_for):
+    """The Aurora's fault options as :class:`~endocal.emulate.aurora.AuroraFaults`; sensors named tip or base."""
+    from endocal.emulate.aurora import AuroraFaults
+    from endocal.errors import ConfigError
+
+    for flag, sensors in (("--missing", missing), ("--out-of-volume", out_of_volume),
+                          ("--partly-out-of-volume", partly_out_of_volume)):
+        bad = [m for m in sensors if m not in ("tip", "base")]
+        if bad:
+            raise ConfigError(f"{flag} {bad[0]!r}: name a sensor, tip or base")
+    if out_of_volume_after < 0 or (out_of_volume_for is not None and not out_of_volume_for > 0):
+        raise ConfigError("--out-of-volume-after must be 0 s or more and --out-of-volume-for more than 0 s")
+    return AuroraFaults(missing=tuple(missing), missing_after_s=missing_after, silent_after_s=silent_after,
+                        out_of_volume=tuple(out_of_volume), partly_out_of_volume=tuple(partly_out_of_volume),
+                        out_of_volume_after_s=out_of_volume_after, out_of_volume_for_s=out_of_volume_for)
 
 
 def _event(line: str) -> None:
@@ -86,7 +105,8 @@ def dynamixel(
                        unplug_after_s=unplug_after, hardware_error=errors, hardware_error_after_s=hardware_error_after)
     bus = ServoBus(id_list, model_number=model_number, baudrate=baudrate, faults=faults, seed=seed, on_event=_event)
     bus.start()
-    _run_until_stopped(bus, f"dynamixel bus on {bus.port} (ids {', '.join(map(str, id_list))}, {baudrate} bd)")
+    _run_until_stopped(bus, f"dynamixel bus on {bus.port} (ids {', '.join(map(str, id_list))}, {baudrate} bd)",
+                       bus.torque_line)
 
 
 @app.command("rig")
@@ -103,6 +123,10 @@ def rig(
     hardware_error_after: float = typer.Option(5.0, "--hardware-error-after", help="Seconds after the first packet."),
     missing: list[str] = typer.Option([], "--missing", help="Fault: a tracker sensor (tip or base) reported MISSING."),
     missing_after: float = typer.Option(0.0, "--missing-after", help="...from this many seconds after tracking starts (0: always)."),
+    out_of_volume: list[str] = typer.Option([], "--out-of-volume", help="Fault: a tracker sensor (tip or base) out of the field generator's volume (port status bit 6; repeatable)..."),
+    partly_out_of_volume: list[str] = typer.Option([], "--partly-out-of-volume", help="Fault: ...or partly out of it (bit 7)..."),
+    out_of_volume_after: float = typer.Option(0.0, "--out-of-volume-after", help="...from this many seconds after tracking starts..."),
+    out_of_volume_for: Optional[float] = typer.Option(None, "--out-of-volume-for", help="...for this many seconds (default: to the end)."),
     stage: bool = typer.Option(False, "--stage", help="Also emulate the UDP translation/rotation stage (the probe follows it)."),
     stage_silent_after: Optional[float] = typer.Option(None, "--stage-silent-after", help="Fault: the stage stops answering this many seconds after its first request."),
 ) -> None:
@@ -110,30 +134,28 @@ def rig(
     simulated probe the knobs bend, so `endocal excite P --backend hardware --hardware-config
     RIG.toml` runs unchanged through the real SDKs. Runs until Ctrl-C or SIGTERM.
     """
-    from endocal.emulate.aurora import AuroraFaults
     from endocal.emulate.rig import EmulatedRig
     from endocal.emulate.servos import BusFaults
     from endocal.emulate.stage import StageFaults
-    from endocal.errors import ConfigError
     from endocal.probe import load_probe
     from endocal.runs.format import check_parent
     from endocal.sim import SimConfig
 
     errors = _hardware_errors(hardware_error)
-    if [m for m in missing if m not in ("tip", "base")]:
-        raise ConfigError(f"--missing: name a sensor, tip or base (got {', '.join(missing)})")
+    aurora_faults = _aurora_faults(missing, missing_after, None, out_of_volume, partly_out_of_volume,
+                                   out_of_volume_after, out_of_volume_for)
     check_parent(config_out)
     cfg = SimConfig.from_toml(sim_config) if sim_config is not None else None
     rig_ = EmulatedRig(load_probe(probe), cfg, seed=seed, on_event=_event,
                        bus_faults=BusFaults(drop_probability=drop, corrupt_probability=corrupt, unplug_after_s=unplug_after,
                                             hardware_error=errors, hardware_error_after_s=hardware_error_after),
-                       aurora_faults=AuroraFaults(missing=tuple(missing), missing_after_s=missing_after),
+                       aurora_faults=aurora_faults,
                        stage=stage, stage_faults=StageFaults(silent_after_s=stage_silent_after))
     rig_.start()
     rig_.write_config(config_out)
     where = f"stage on 127.0.0.1:{rig_.stage.port}" if rig_.stage is not None else "stage absent"
     _run_until_stopped(rig_, f"emulated rig: servos on {rig_.bus.port}, aurora on {rig_.aurora.port}, {where}; "
-                             f"wrote {config_out}")
+                             f"wrote {config_out}", rig_.bus.torque_line)
 
 
 @app.command("aurora")
@@ -144,21 +166,21 @@ def aurora(
     missing: list[str] = typer.Option([], "--missing", help="Fault: report this sensor (tip or base) MISSING (repeatable)..."),
     missing_after: float = typer.Option(0.0, "--missing-after", help="...from this many seconds after TSTART (0: always)."),
     silent_after: Optional[float] = typer.Option(None, "--silent-after", help="Fault: stop answering this many seconds after TSTART."),
+    out_of_volume: list[str] = typer.Option([], "--out-of-volume", help="Fault: a sensor (tip or base) out of the field generator's volume (port status bit 6; repeatable)..."),
+    partly_out_of_volume: list[str] = typer.Option([], "--partly-out-of-volume", help="Fault: ...or partly out of it (bit 7)..."),
+    out_of_volume_after: float = typer.Option(0.0, "--out-of-volume-after", help="...from this many seconds after TSTART..."),
+    out_of_volume_for: Optional[float] = typer.Option(None, "--out-of-volume-for", help="...for this many seconds (default: to the end)."),
 ) -> None:
     """An emulated NDI Aurora (System Control Unit) on a pseudo-terminal, in a process of its own.
 
     Serves a still tip 60 mm above the base; `endocal emulate rig` moves them with the knobs.
     Point `[tracker] serial_port` of a rig TOML at the printed path.
     """
-    from endocal.emulate.aurora import AuroraEmulator, AuroraFaults
-    from endocal.errors import ConfigError
+    from endocal.emulate.aurora import AuroraEmulator
 
-    bad = [m for m in missing if m not in ("tip", "base")]
-    if bad:
-        raise ConfigError(f"--missing {bad[0]!r}: name a sensor, tip or base")
     emu = AuroraEmulator(tip_port_handle, base_port_handle,
-                         faults=AuroraFaults(missing=tuple(missing), missing_after_s=missing_after,
-                                             silent_after_s=silent_after))
+                         faults=_aurora_faults(missing, missing_after, silent_after, out_of_volume, partly_out_of_volume,
+                                               out_of_volume_after, out_of_volume_for))
     emu.start()
     _run_until_stopped(emu, f"aurora on {emu.port} (tip port handle {tip_port_handle:#04x}, "
                             f"base {base_port_handle:#04x}, 40 Hz)")

@@ -53,6 +53,7 @@ def excite(
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
     from endocal.backends.registry import make_backend
+    from endocal.errors import StopSignal
     from endocal.excite import prepare_backend, run_excitation
     from endocal.probe import load_probe
     from endocal.protocols import load_protocol, parse_overrides
@@ -125,19 +126,24 @@ def excite(
         transient=True,
     ) as bar:
         task = bar.add_task(f"{proto.name} on {be.name}", total=trajectory.duration_s)
-        result = run_excitation(
-            trajectory,
-            be,
-            probe_cfg,
-            out_dir,
-            protocol_info=protocol_info,
-            seed=seed,
-            realtime=realtime,
-            force=force,
-            command=command,
-            progress=lambda done, total: bar.update(task, completed=done),
-            guard=guard,
-        )
+        try:
+            result = run_excitation(
+                trajectory,
+                be,
+                probe_cfg,
+                out_dir,
+                protocol_info=protocol_info,
+                seed=seed,
+                realtime=realtime,
+                force=force,
+                command=command,
+                progress=lambda done, total: bar.update(task, completed=done),
+                guard=guard,
+            )
+        except StopSignal as exc:  # torque is off; the run so far is on disk
+            kept = (f"the run in {out_dir} is kept (status interrupted in run.json)" if (out_dir / "run.json").is_file()
+                    else "nothing was logged")
+            fail(f"stopped by {exc.signame}: torque is off; {kept}", code=exc.code)
     speed = f", {result.speed_x_realtime:,.0f}x real time" if result.wall_s > 0 else ""
     out.print(
         f"run {result.status}: {result.run_dir} ({result.logged_s:.1f} of {result.planned_s:.1f} s logged, "

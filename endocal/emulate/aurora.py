@@ -13,6 +13,14 @@ a header CRC and a final CRC), whichever the firmware ``VER`` reports makes the 
 Like the real unit it serves session after session: each ``INIT`` (every connection opens
 with one) stops tracking and offers every port handle again for ``PINIT`` and ``PENA``.
 
+Each handle's port status (NDI Combined API, "TX", reply option 0001) is ``0x31`` (occupied,
+initialised, enabled) for a sensor seen, ``0x01`` for one missing; a sensor out of the field
+generator's volume (the :class:`AuroraFaults` ``out_of_volume`` fault) sets bit 6 (``0x40``),
+one partly out of it bit 7 (``0x80``). Out of volume (or partly) its transform is still sent,
+displaced by :data:`DEGRADED_MM` as a distorted reading would be, when the host asks for such
+transforms (reply option ``0800``, which scikit-surgerynditracker sets), and ``MISSING``
+otherwise.
+
 It runs in a process of its own: ndicapi holds Python's interpreter lock while it waits
 for a reply, so an emulator thread in the host's process could never answer. The sensor
 poses (mm, quaternion w, x, y, z) are set from the host process through shared memory
@@ -31,6 +39,10 @@ from dataclasses import dataclass
 from endocal.emulate._serving import close_fds, open_raw_pty
 
 SENSOR_SLOTS = ("tip", "base")
+PORT_SEEN, PORT_MISSING = 0x31, 0x01  # occupied | initialised | enabled; occupied only
+PORT_OUT_OF_VOLUME, PORT_PARTLY_OUT_OF_VOLUME = 0x40, 0x80  # port status bits 6 and 7
+REPLY_OUT_OF_VOLUME = 0x0800  # TX/BX reply option: report transforms out of volume too
+DEGRADED_MM = (10.0, 0.0, 0.0)  # how far off the emulated unit reports a sensor out of volume
 _ODD_PARITY = (0, 1, 1, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, 1, 1, 0)
 
 
@@ -81,11 +93,31 @@ class AuroraFaults:
         ...from this long after ``TSTART`` on (0: from the start, even before tracking).
     silent_after_s : float or None
         Stop answering this long after ``TSTART`` (a pulled cable, a crashed unit).
+    out_of_volume, partly_out_of_volume : tuple of str
+        Sensors out of the field generator's volume (port status bit 6), or partly out of it
+        (bit 7)...
+    out_of_volume_after_s : float
+        ...from this long after ``TSTART``...
+    out_of_volume_for_s : float or None
+        ...for this long (None: to the end).
     """
 
     missing: tuple = ()
     missing_after_s: float = 0.0
     silent_after_s: float | None = None
+    out_of_volume: tuple = ()
+    partly_out_of_volume: tuple = ()
+    out_of_volume_after_s: float = 0.0
+    out_of_volume_for_s: float | None = None
+
+    def volume_bits(self, sensor: str, since_start_s: float | None) -> int:
+        """Port status bits 6/7 of ``sensor`` at ``since_start_s`` after ``TSTART`` (None: not tracking)."""
+        if since_start_s is None or since_start_s < self.out_of_volume_after_s or (
+                self.out_of_volume_for_s is not None
+                and since_start_s >= self.out_of_volume_after_s + self.out_of_volume_for_s):
+            return 0
+        return ((PORT_OUT_OF_VOLUME if sensor in self.out_of_volume else 0)
+                | (PORT_PARTLY_OUT_OF_VOLUME if sensor in self.partly_out_of_volume else 0))
 
 
 class _Unit:
@@ -151,44 +183,51 @@ class _Unit:
             self.t_start = time.monotonic()
             return reply("OKAY")
         if name == "TX":
-            return reply(self._tx())
+            return reply(self._tx(_reply_option(arg)))
         if name == "BX":
-            return self._bx()
+            return self._bx(_reply_option(arg))
         return reply("ERROR01")
 
-    def _tx(self) -> str:
+    def _tx(self, option: int) -> str:
         n = self.frame()
         parts = [f"{len(self.handles):02X}"]
-        for h, seen, pos, quat in self._poses():
-            pose = tx_transform(pos, quat) if seen else "MISSING"
-            parts.append(f"{h:02X}{pose}{0x31 if seen else 0x01:08X}{n:08X}\n")
+        for h, seen, pos, quat, bits in self._poses(option):
+            pose = tx_transform(pos, quat, 0.0 if not bits else 0.5) if seen else "MISSING"
+            parts.append(f"{h:02X}{pose}{(PORT_SEEN if seen else PORT_MISSING) | bits:08X}{n:08X}\n")
         parts.append("0000")  # system status
         return "".join(parts)
 
-    def _poses(self):
-        """Per sensor: handle, whether it is seen, position (3), quaternion (4)."""
+    def _poses(self, option: int):
+        """Per sensor: handle, whether a transform is sent, position (3), quaternion (4) and the
+        out-of-volume bits of its port status."""
         values = list(self.shared)
+        since = None if self.t_start is None else time.monotonic() - self.t_start
         out = []
         for k, sensor in enumerate(SENSOR_SLOTS):
             h = self.handles[sensor]
             chunk = values[8 * k:8 * k + 8]
             lost = sensor in self.faults.missing and (
-                self.faults.missing_after_s <= 0 or (self.t_start is not None
-                                                     and time.monotonic() - self.t_start >= self.faults.missing_after_s))
-            out.append((h, chunk[7] > 0 and not lost and h in self.enabled, chunk[0:3], chunk[3:7]))
+                self.faults.missing_after_s <= 0 or (since is not None and since >= self.faults.missing_after_s))
+            seen = chunk[7] > 0 and not lost and h in self.enabled
+            bits = self.faults.volume_bits(sensor, since) if seen else 0
+            pos = chunk[0:3]
+            if bits:  # a distorted reading, or none unless the host asked for transforms out of volume
+                seen = bool(option & REPLY_OUT_OF_VOLUME)
+                pos = [p + d for p, d in zip(pos, DEGRADED_MM)]
+            out.append((h, seen, pos, chunk[3:7], bits))
         return out
 
-    def _bx(self) -> bytes:
+    def _bx(self, option: int) -> bytes:
         """A BX reply (binary): header ``C4 A5``, body length, header CRC; per handle its handle,
         status (1 valid, 2 missing), q0 qx qy qz x y z error as float32, port status and frame
         number (uint32); system status (uint16); CRC of everything before (all little endian)."""
         n = self.frame()
         body = bytearray((len(self.handles),))
-        for h, seen, pos, quat in self._poses():
+        for h, seen, pos, quat, bits in self._poses(option):
             body += bytes((h, 0x01 if seen else 0x02))
             if seen:
-                body += struct.pack("<8f", *quat, *pos, 0.0)
-            body += struct.pack("<II", 0x31 if seen else 0x01, n)
+                body += struct.pack("<8f", *quat, *pos, 0.0 if not bits else 0.5)
+            body += struct.pack("<II", (PORT_SEEN if seen else PORT_MISSING) | bits, n)
         body += struct.pack("<H", 0)
         head = b"\xc4\xa5" + struct.pack("<H", len(body))
         frame = head + struct.pack("<H", ndi_crc16(head)) + bytes(body)
@@ -197,6 +236,14 @@ class _Unit:
     def silent(self) -> bool:
         f = self.faults.silent_after_s
         return f is not None and self.t_start is not None and time.monotonic() - self.t_start >= f
+
+
+def _reply_option(arg: str) -> int:
+    """The reply option of a ``TX``/``BX`` command (four hex digits; 0001 when absent or unreadable)."""
+    try:
+        return int(arg[:4], 16) if arg else 0x0001
+    except ValueError:
+        return 0x0001
 
 
 def _serve(master: int, handles: dict, shared, faults: AuroraFaults, rate_hz: float, firmware: str, stop,

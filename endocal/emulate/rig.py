@@ -29,6 +29,12 @@ from endocal.sim import SimConfig, Simulator
 
 ZERO_TICKS = 2048
 TICKS_PER_DEG = 4096 / 360.0
+#: What the rig TOML allows each status packet (2 x this + 2 ms) and each stage reply: the emulators
+#: answer from threads of a process that shares the CPU with the host, and a loaded machine does not
+#: always schedule them within the 34 ms dynamixel-sdk waits for a U2D2 (round trips of 0.3 s were
+#: measured on 2 cores under a load of 12), which on a real rig would be a dead bus
+LATENCY_TIMER_MS = 500.0
+STAGE_TIMEOUT_S, STAGE_MAX_MISSED = 0.1, 10  # a stage silent for 1.1 s stops the run
 
 
 class EmulatedRig(Served):
@@ -45,6 +51,10 @@ class EmulatedRig(Served):
         Bending axis -> servo ID (default 1 and 2).
     bus_faults, aurora_faults : optional
         Faults of the two devices.
+    present_ticks : int or dict
+        Where the knob servos start (ticks, for all or per servo ID; 2048 is 0 deg).
+    torque_on : bool
+        The servos start with torque on (as a crashed program leaves them).
     physics_period_s : float
         How often the probe is stepped (default 5 ms).
     stage : bool
@@ -56,15 +66,16 @@ class EmulatedRig(Served):
 
     def __init__(self, probe: ProbeConfig, sim_config: SimConfig | None = None, *, seed: int = 0, ids: dict | None = None,
                  bus_faults: BusFaults | None = None, aurora_faults: AuroraFaults | None = None,
-                 physics_period_s: float = 0.005, baudrate: int = 57600, stage: bool = False,
-                 stage_faults: StageFaults | None = None, on_event=None) -> None:
+                 physics_period_s: float = 0.005, baudrate: int = 57600, present_ticks=ZERO_TICKS,
+                 torque_on: bool = False, stage: bool = False, stage_faults: StageFaults | None = None,
+                 on_event=None) -> None:
         super().__init__()
         self.probe = probe
         self.ids = ids or {a: k + 1 for k, a in enumerate(probe.bending_axes)}
         cfg = (sim_config or SimConfig.default()).replace(motor={"knob_time_constant_s": 0.0})
         self.sim = Simulator(cfg, probe, seed)
-        self.bus = ServoBus(list(self.ids.values()), baudrate=baudrate, faults=bus_faults, seed=seed,
-                            on_event=on_event)
+        self.bus = ServoBus(list(self.ids.values()), baudrate=baudrate, present_ticks=present_ticks,
+                            torque_on=torque_on, faults=bus_faults, seed=seed, on_event=on_event)
         self.aurora = AuroraEmulator(faults=aurora_faults)
         self.stage = StageEmulator(0, faults=stage_faults, on_event=on_event) if stage else None
         self.period_s = physics_period_s
@@ -135,10 +146,11 @@ class EmulatedRig(Served):
             "# Written by `endocal emulate rig`: the emulated devices of this session.\n"
             'name = "emulated rig"\n\n'
             f'[dynamixel]\nport = "{self.bus.port}"\nbaudrate = {self.bus.baudrate}\nmodel_number = 1020\n'
+            f"latency_timer_ms = {LATENCY_TIMER_MS:g}  # served by a process that shares the CPU\n"
             f"{motors}\n"
             f'[tracker]\nserial_port = "{self.aurora.port}"\ntip_port_handle = {self.aurora.handles["tip"]}\n'
             f'base_port_handle = {self.aurora.handles["base"]}\ndetect_timeout_s = 3.0\n\n'
             + ('[stage]\nmode = "absent"\n' if self.stage is None else
-               f'[stage]\nmode = "udp"\nhost = "127.0.0.1"\nport = {self.stage.port}\ntimeout_s = 0.02\n'
-               'max_missed_replies = 5\ntranslation_limits_mm = [-50.0, 50.0]\nrotation_limits_deg = [-90.0, 90.0]\n'))
+               f'[stage]\nmode = "udp"\nhost = "127.0.0.1"\nport = {self.stage.port}\ntimeout_s = {STAGE_TIMEOUT_S:g}\n'
+               f'max_missed_replies = {STAGE_MAX_MISSED}\ntranslation_limits_mm = [-50.0, 50.0]\nrotation_limits_deg = [-90.0, 90.0]\n'))
         return path

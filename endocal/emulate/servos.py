@@ -16,6 +16,10 @@ gives the knobs' positions to whatever emulates the probe behind them.
 Faults, switchable at construction and at run time (:class:`BusFaults`): drop replies,
 corrupt them (a wrong CRC), delay them, raise a servo's hardware error (overload,
 overheating; alert bit in every status packet after), or unplug the bus after some seconds.
+
+Every write instruction a servo receives (Write and Sync Write, refused ones included) is kept
+in order in :meth:`ServoBus.writes`, so a test can prove what reached the wire and what never
+did; :meth:`ServoBus.torque` reports each servo's Torque Enable.
 """
 
 from __future__ import annotations
@@ -59,6 +63,44 @@ CONTROL_TABLE = {
 TABLE_SIZE = 147
 HW_OVERHEATING, HW_OVERLOAD = 0x04, 0x20
 HW_ERRORS = {"overheating": HW_OVERHEATING, "overload": HW_OVERLOAD}
+ADDR_TORQUE_ENABLE = 64
+
+
+@dataclass(frozen=True)
+class WireWrite:
+    """One write instruction as a servo received it.
+
+    Attributes
+    ----------
+    t_s : float
+        When it arrived, seconds on the bus's monotonic clock (0 when the bus started).
+    id : int
+        The servo it addressed.
+    address : int
+        First control-table address written.
+    data : bytes
+        The bytes written (little endian).
+    error : int
+        The Protocol 2.0 error number the servo answered (0: applied; ``ERR_ACCESS``: an EEPROM
+        field while torque is on, ``ERR_DATA_LIMIT``: a goal beyond the Position Limit
+        registers, both not applied). A Sync Write gets no reply; its error is what the servo
+        would have answered.
+    sync : bool
+        Part of a Sync Write (the goal stream) rather than a Write.
+    """
+
+    t_s: float
+    id: int
+    address: int
+    data: bytes
+    error: int
+    sync: bool
+
+    @property
+    def value(self) -> int:
+        """The value written, read as the control-table field at :attr:`address` reads it (signed or not)."""
+        size, signed, _, _ = CONTROL_TABLE.get(self.address, (len(self.data), False, True, False))
+        return int.from_bytes(self.data[:size], "little", signed=signed)
 
 
 @dataclass
@@ -159,9 +201,11 @@ class Servo:
                 return w.ERR_ACCESS
         if 64 in fields and self.get(70) and data[64 - addr]:
             return w.ERR_ACCESS  # a servo in hardware error refuses torque until rebooted
+        if 116 in fields and self.get(11) == 3:
+            goal = int.from_bytes(data[116 - addr:120 - addr], "little", signed=True)
+            if not self.get(52) <= goal <= self.get(48):
+                return w.ERR_DATA_LIMIT  # beyond the Position Limit registers: refused, not applied
         self.table[addr:end] = data
-        if 116 in fields and self.get(11) == 3 and not self.get(52) <= self.get(116) <= self.get(48):
-            return w.ERR_DATA_LIMIT
         self._sync_present()
         return 0
 
@@ -189,6 +233,9 @@ class ServoBus(Served):
         Starting position (ticks), for all or per ID.
     baudrate : int
         Speed the servos answer at (a host that set its line to another speed gets no reply).
+    torque_on : bool
+        Start with torque on, holding the starting position (as a crashed program leaves them:
+        their EEPROM fields refuse writes until torque is switched off).
     faults : BusFaults, optional
     seed : int
         Seed of the dropped and corrupted replies.
@@ -200,10 +247,13 @@ class ServoBus(Served):
     thread_name = "dynamixel-bus"
 
     def __init__(self, ids=(1, 2), *, model_number: int = MODEL_XM430_W350, present_ticks=2048,
-                 baudrate: int = 57600, faults: BusFaults | None = None, seed: int = 0, on_event=None) -> None:
+                 baudrate: int = 57600, torque_on: bool = False, faults: BusFaults | None = None, seed: int = 0,
+                 on_event=None) -> None:
         super().__init__()
         start = present_ticks if isinstance(present_ticks, dict) else {i: present_ticks for i in ids}
         self.servos = {i: Servo(i, model_number=model_number, present_ticks=start.get(i, 2048)) for i in ids}
+        for s in self.servos.values():
+            s.table[ADDR_TORQUE_ENABLE] = int(torque_on)
         self.faults = faults or BusFaults()
         self.on_event = on_event or (lambda line: None)
         self._rng = random.Random(seed)
@@ -211,8 +261,9 @@ class ServoBus(Served):
         self._parser = w.PacketParser()
         self._master: int | None = None
         self._slave: int | None = None
-        self._t_last = time.monotonic()
+        self._t_last = self._t_start = time.monotonic()
         self._t_first: float | None = None
+        self._writes: list[WireWrite] = []
         self._unplugged = False
         self._hw_raised = False
         self.baudrate = baudrate
@@ -238,8 +289,18 @@ class ServoBus(Served):
             return {i: s.pos for i, s in self.servos.items()}
 
     def torque(self) -> dict[int, bool]:
+        """Torque Enable of every servo, now."""
         with self._lock:
             return {i: s.torque for i, s in self.servos.items()}
+
+    def writes(self, address: int | None = None) -> list[WireWrite]:
+        """Every write instruction the servos received so far, in order (those at ``address`` only, if given)."""
+        with self._lock:
+            return [x for x in self._writes if address is None or x.address == address]
+
+    def torque_line(self) -> str:
+        """Each servo's torque state in words, e.g. ``servo 1 torque off, servo 2 torque off``."""
+        return ", ".join(f"servo {i} torque {'on' if on else 'off'}" for i, on in self.torque().items())
 
     # -- serving ----------------------------------------------------------------------
     def _advance(self) -> None:
@@ -326,7 +387,7 @@ class ServoBus(Served):
                 for k in range(4, len(p) - size + 1, size + 1):
                     s = self.servos.get(p[k])
                     if s is not None:
-                        self._write(s, addr, p[k + 1:k + 1 + size])
+                        self._write(s, addr, p[k + 1:k + 1 + size], sync=True)
                 return None
             if ins.instruction in (w.SYNC_READ, w.FAST_SYNC_READ) and ins.id == w.BROADCAST_ID and len(p) >= 4:
                 addr, size = p[0] | p[1] << 8, p[2] | p[3] << 8
@@ -353,9 +414,10 @@ class ServoBus(Served):
                 return w.status(s.id, 0)
             return w.status(s.id, self._err(s, w.ERR_INSTRUCTION))
 
-    def _write(self, s: Servo, addr: int, data: bytes) -> int:
+    def _write(self, s: Servo, addr: int, data: bytes, sync: bool = False) -> int:
         before = s.torque
         code = s.write(addr, bytes(data))
+        self._writes.append(WireWrite(time.monotonic() - self._t_start, s.id, addr, bytes(data), code, sync))
         if s.torque != before:
             self.on_event(f"servo {s.id} torque {'on' if s.torque else 'off'}")
         return code

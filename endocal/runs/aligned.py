@@ -27,6 +27,7 @@ from endocal.kinematics.bending import bending_angles_deg, tip_in_base_mm
 from endocal.probe import ProbeConfig
 from endocal.runs.format import ALIGNED, MOTOR, RUN_JSON, TRACKER, read_run_json, sha256_of
 from endocal.runs.textable import read_csv_table
+from endocal.streams import DROPOUT_STATUSES
 
 #: file suffixes read as CSV text tables (delimiter sniffed: endocal.runs.textable)
 CSV_SUFFIXES = (".csv", ".txt", ".tsv", ".dat")
@@ -43,11 +44,15 @@ class Alignment:
     tracker_invalid: int
     ticks_dropped: int
     max_gap_s: float
+    #: invalid sensor rows by the tracker's ``status`` (hardware runs: ``missing``, ``out_of_volume``,
+    #: ``partly_out_of_volume``); empty when the stream has no ``status`` column
+    invalid_by_status: dict = field(default_factory=dict)
 
     def counts(self) -> dict[str, int]:
         return {
             "tracker_frames": self.tracker_frames,
             "tracker_invalid_dropped": self.tracker_invalid,
+            **{f"tracker_{status}_dropped": n for status, n in self.invalid_by_status.items()},
             "aligned_rows": len(self.table),
             "motor_ticks_without_tracking": self.ticks_dropped,
         }
@@ -144,8 +149,9 @@ def measured_at(t_frames: np.ndarray, t: np.ndarray, max_gap_s: float) -> np.nda
 def align(motor: pd.DataFrame, tracker: pd.DataFrame, probe: ProbeConfig, max_gap_s: float = 0.2) -> Alignment:
     """Put tracker-measured bending angles on the motor clock.
 
-    Frames flagged invalid are dropped, as is any instant where the tip or base frame is
-    missing. For each remaining frame the tip position is expressed in the base sensor's
+    Frames flagged invalid are dropped (on hardware: missing, out of the field volume or
+    partly out of it, counted by the tracker stream's ``status``), as is any instant where
+    the tip or base frame is missing. For each remaining frame the tip position is expressed in the base sensor's
     frame and turned into the two projected bending angles (thesis eq. 1); these are
     interpolated linearly onto the motor ticks. Motor ticks outside the tracked span, or
     inside a tracking gap longer than ``max_gap_s``, have no measurement and are dropped.
@@ -166,6 +172,10 @@ def align(motor: pd.DataFrame, tracker: pd.DataFrame, probe: ProbeConfig, max_ga
         raise RunFormatError(f"tracker stream has no '{missing[0]}' sensor frames: eq. 1 needs both tip and base sensors")
     valid = tracker["valid"].astype(bool).to_numpy()
     n_invalid = int((~valid).sum())
+    by_status = {}
+    if "status" in tracker.columns:
+        status = tracker["status"].astype(str).to_numpy()
+        by_status = {s: int(((status == s) & ~valid).sum()) for s in DROPOUT_STATUSES}
     good = tracker.loc[valid]
     cols = ["t_s", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz"]
     tip = good.loc[good["sensor"].astype(str) == "tip", cols]
@@ -193,7 +203,7 @@ def align(motor: pd.DataFrame, tracker: pd.DataFrame, probe: ProbeConfig, max_ga
             continue
         if pd.api.types.is_numeric_dtype(motor[col]) and not pd.api.types.is_bool_dtype(motor[col]):
             out[col] = motor[col].to_numpy(float)[ok]
-    return Alignment(pd.DataFrame(out), n_frames, n_invalid, int((~ok).sum()), max_gap_s)
+    return Alignment(pd.DataFrame(out), n_frames, n_invalid, int((~ok).sum()), max_gap_s, by_status)
 
 
 @dataclass
