@@ -63,7 +63,7 @@ def fit_hysteresis(
     Raises
     ------
     ModelError
-        ``start_from`` of another axis or base model.
+        ``start_from`` of another axis or base model, or of a drive in another unit (deg, mm).
     """
     if start_from is not None:
         if start_from.base_name != base or (start_from.axis and start_from.axis != axis):
@@ -73,6 +73,8 @@ def fit_hysteresis(
     datas = [load_aligned(p) for p in paths]
     dropped: list = []
     data = axis_data(datas, axis, planes, dropped)
+    if start_from is not None:
+        start_from.check_drive_unit(data, f"the records to fit ({', '.join(str(d.source) for d in datas)})")
     model = make_model(base, effects=effects or (), axis=axis, **settings)
     model = model.fit_from(start_from, data) if start_from is not None else model.fit(data)
     span = sum(float(np.ptp(d.table["t_s"])) for d in datas)

@@ -214,11 +214,13 @@ def build_report(
             (ReportFigure(f"ts-{_slug(g.data, g.axis)}", "records", f"{head}: time series",
                           "Knob command (dashed), measured bending angle (black) and each model's prediction; below, "
                           "each model's error (predicted - measured).", b"", key),
-             lambda t=t, cmd=cmd, meas=meas, preds=preds, head=head: F.time_series(t, cmd, meas, preds, colors, head)),
+             lambda t=t, cmd=cmd, meas=meas, preds=preds, head=head, u=g.hdata.cmd_unit:
+                 F.time_series(t, cmd, meas, preds, colors, head, u)),
             (ReportFigure(f"loops-{_slug(g.data, g.axis)}", "records", f"{head}: hysteresis loops",
                           "Bending angle against knob command: measured, then each model (colour) over the measured "
                           "loop (grey).", b"", key),
-             lambda cmd=cmd, meas=meas, preds=preds, head=head: F.loops(cmd, meas, preds, colors, head)),
+             lambda cmd=cmd, meas=meas, preds=preds, head=head, u=g.hdata.cmd_unit:
+                 F.loops(cmd, meas, preds, colors, head, u)),
             (ReportFigure(f"box-{_slug(g.data, g.axis)}", "records", f"{head}: error per {g.units.kind}",
                           f"RMSE of each {g.units.kind} per model (dots: units). Brackets: paired Wilcoxon "
                           f"signed-rank tests{' with Holm correction' if g.comparison.test == 'friedman' else ''}; "
@@ -229,7 +231,8 @@ def build_report(
                           "Error against knob speed, knob command, the other axis and time (dots: samples; lines: "
                           "mean per bin). A slope against speed points to rate, a step at zero speed to dead zone, "
                           "a trend in time to drift or creep, a slope against the other axis to coupling.", b"", key),
-             lambda g=g, t=t, cmd=cmd, errs=errs, head=head: F.residuals(t, cmd, _other_axis(g), errs, colors, head)),
+             lambda g=g, t=t, cmd=cmd, errs=errs, head=head: F.residuals(t, cmd, _other_axis(g), errs, colors, head,
+                                                                        g.hdata.cmd_unit)),
             (ReportFigure(f"regime-{_slug(g.data, g.axis)}", "records", f"{head}: error by regime",
                           "RMSE of each model by regime of the motion, as `endocal validate` breaks it down: near "
                           "reversals vs steady motion and holds, by speed band (terciles), by amplitude (thirds of "
@@ -250,7 +253,9 @@ def build_report(
                          lambda steps=steps, axis=axis: F.ladder(steps, data_colors, f"Model ladder, axis {axis}")))
     for m in model_entries:
         fixed = getattr(m.model, "fixed_", {})
-        params = {n: (float(v), None if not np.isfinite(m.model.stderr_[n]) else float(m.model.stderr_[n]), n in fixed)
+        shown = m.model.parameter_labels()  # an input effect's in the drive's unit: deadzone_slack_mm
+        params = {shown[n]: (float(v), None if not np.isfinite(m.model.stderr_[n]) else float(m.model.stderr_[n]),
+                             n in fixed)
                   for n, v in m.model.params_.items()}
         jobs.append((ReportFigure(f"params-{_slug(m.label)}", "models", f"{m.label}: fitted parameters",
                                   "Each parameter with its 95 % interval (1.96 standard errors from the fit's "
