@@ -74,7 +74,10 @@ def fit_hysteresis(
     dropped: list = []
     data = axis_data(datas, axis, planes, dropped)
     if start_from is not None:
-        start_from.check_drive_unit(data, f"the records to fit ({', '.join(str(d.source) for d in datas)})")
+        try:
+            start_from.check_drive_unit(data, f"the records to fit ({', '.join(str(d.source) for d in datas)})")
+        except ModelError as exc:
+            raise ModelError(f"--start-from: {exc}") from None
     model = make_model(base, effects=effects or (), axis=axis, **settings)
     model = model.fit_from(start_from, data) if start_from is not None else model.fit(data)
     span = sum(float(np.ptp(d.table["t_s"])) for d in datas)
