@@ -77,7 +77,7 @@ class HysteresisData:
     Parameters
     ----------
     cmd_deg : ndarray, shape (n,)
-        Knob command (deg).
+        Knob command (deg; mm for a linear drive, as ``drive_unit`` says).
     meas_deg : ndarray, shape (n,), optional
         Measured bending angle (deg). Needed to fit, not to predict.
     t_s : ndarray, shape (n,), optional

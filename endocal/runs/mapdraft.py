@@ -340,7 +340,7 @@ class _Drafter:
         axes, found = list(self.probe.bending_axes), []
         for axis in axes:
             goal = _pick(self.cols, _GOAL, need={axis}, taken=self.taken)
-            pos = _pick(self.cols, _POSITION | _ANGLE_UNIT.keys(), avoid=_NOT_KNOB, need={axis},
+            pos = _pick(self.cols, _POSITION | _ANGLE_UNIT.keys() | _LINEAR | {"mm"}, avoid=_NOT_KNOB, need={axis},
                         taken=self.taken | ({goal} if goal else set()))
             if pos is None:
                 pos, goal = goal, None
