@@ -151,11 +151,12 @@ def test_a_tendon_displacement_log_is_drafted_imported_fitted_validated_and_repo
     assert proc.returncode == 0, proc.stderr
     v = json.loads((tmp / "v.json").read_text())
     assert v["scheme"]["name"] == "estimation/validation" and v["metrics"]["rmse_deg"] < NOISE_DEG * 1.25, v["metrics"]
-    assert "slack_mm=" in v["model"]["equation"]
+    assert "slack_mm=" in v["model"]["equation"] and v["model"]["drive_unit"] == "mm"
     assert any(" mm after)" in r["name"] for r in v["regimes"]), v["regimes"]
     proc = endocal("report", tmp / "m.json", "--data", tmp / "chirp.parquet", "--out", tmp / "r.html")
     assert proc.returncode == 0, proc.stderr
     assert "slack_mm=" in (tmp / "r.html").read_text()
+    assert json.loads((tmp / "r.json").read_text())["models"][0]["drive_unit"] == "mm"
 
     # a knob's record (the same numbers, commanded in deg) is refused by every command, in one line
     t = a.table.rename(columns={"ap_cmd_mm": "ap_cmd_deg"})

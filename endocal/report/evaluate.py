@@ -71,6 +71,7 @@ class ModelEntry:
         return {
             "label": self.label, "path": None if self.path is None else str(self.path), "sha256": self.sha256,
             "axis": self.axis, "base": self.base, "effects": self.effects, "equation": self.model.equation(),
+            "drive_unit": self.model.drive_unit_,
             "parameters": {n: {"value": float(v), "stderr": _finite(self.model.stderr_[n]),
                                "fixed": n in getattr(self.model, "fixed_", {})}
                            for n, v in self.model.params_.items()},

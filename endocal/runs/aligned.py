@@ -220,7 +220,8 @@ class AlignedData:
     meta : dict
         ``run.json`` for a run folder, empty for a bare table.
     drive_units : dict of str to str
-        Axis -> the unit of its command (:data:`DRIVE_UNITS`); an axis missing is in deg.
+        Axis -> the unit of its command (:data:`DRIVE_UNITS`); an axis missing is in the unit its
+        command column names.
     """
 
     table: pd.DataFrame
@@ -237,8 +238,12 @@ class AlignedData:
         return [c for c in self.table.columns if c not in core]
 
     def drive_unit(self, axis: str) -> str:
-        """The unit of ``axis``' command: ``deg`` (a knob) or ``mm`` (a linear stage pulling the tendon)."""
-        return self.drive_units.get(self._axis(axis), "deg")
+        """The unit of ``axis``' command: ``deg`` (a knob) or ``mm`` (a linear stage pulling the tendon), as
+        ``drive_units`` says, else as the table's command column names it."""
+        axis = self._axis(axis)
+        if axis in self.drive_units:
+            return self.drive_units[axis]
+        return next((u for u in DRIVE_UNITS if cmd_column(axis, u) in self.table.columns), "deg")
 
     def cmd_column(self, axis: str) -> str:
         """The command column of ``axis`` (``ap_cmd_deg``, ``ap_cmd_mm``)."""

@@ -84,7 +84,8 @@ class ValidationResult:
     axis : str
         The model's bending axis.
     model : dict
-        ``path``, ``base``, ``effects``, ``equation``.
+        ``path``, ``base``, ``effects``, ``label``, ``equation``, ``drive_unit`` (the command's: deg, or mm for
+        a linear drive), ``fit_warnings``.
     data : list of dict
         ``source``, ``sha256``, ``n_samples`` per table.
     metrics : ErrorMetrics
@@ -403,7 +404,8 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
             new_heldout_rmse_deg=scan.baseline_rmse_heldout_deg)
     rep = getattr(model, "fit_report_", None)
     model_info = {"path": model_path, "base": model.base_name, "effects": labels, "label": model_label(model),
-                  "equation": model.equation(), "fit_warnings": list(rep.warnings) if rep is not None else []}
+                  "equation": model.equation(), "drive_unit": model.drive_unit_,
+                  "fit_warnings": list(rep.warnings) if rep is not None else []}
     return ValidationResult(axis=ax, model=model_info, data=info, metrics=metrics, regimes=regimes,
                             residuals=resid, scan=scan, notes=tuple(notes), compare=comp, pointers=tuple(pointers),
                             estimation=est_info, shift=shift,
