@@ -423,7 +423,8 @@ class PIModel(HysteresisModel):
         n = structure["n_operators"]
         # the plays' thresholds r_i = r·i are in the drive's unit (deg, or mm for a linear drive)
         if structure["weights"] == "exponential":
-            parts = [f"{k}={fmt_value(p[k], se.get(k), self.drive_unit_ if k == 'r' else '')}" for k in ("r", "w", "beta")]
+            units = {"r": self.drive_unit_}
+            parts = [f"{k}={fmt_value(p[k], se.get(k), units.get(k, ''))}" for k in ("r", "w", "beta")]
         else:
             parts = [f"r={fmt_value(structure['threshold_step'], unit=self.drive_unit_)} (fixed)"]
             parts += [f"w{i}={fmt_value(p[f'w{i}'], se.get(f'w{i}'))}" for i in range(n + 1) if p[f"w{i}"] != 0.0]

@@ -93,8 +93,8 @@ class RecordStart:
         """``"as if the knob had come 1.8 -> 0 -> 3.6 -> 1.8 deg before it (RMSE 3.2 deg from the
         model's relaxed start, 0.53 deg from this one)"``; the path in ``cmd_unit`` (mm for a linear drive)."""
         path = " -> ".join(f"{x:.3g}" for x in self.path_deg)
-        return (f"as if the knob had come {path} {cmd_unit} before it (RMSE {self.rmse_rest_deg:.3g} deg from the model's "
-                f"relaxed start, {self.rmse_estimated_deg:.3g} deg from this one)")
+        return (f"as if the knob had come {path} {cmd_unit} before it (RMSE {self.rmse_rest_deg:.3g} deg from the "
+                f"model's relaxed start, {self.rmse_estimated_deg:.3g} deg from this one)")
 
 
 #: The histories tried for a record's start, by name (:func:`lead_in_paths`).

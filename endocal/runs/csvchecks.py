@@ -3,9 +3,10 @@
 A unit mistake in a map (:mod:`endocal.runs.csvlog`) gives numbers no rig produces, refused in
 one line naming the map key to fix: a unit the column's own name contradicts (a displacement read
 as degrees, a column in degrees read as millimetres), knob positions far beyond the probe's limits
-(with poses) or a linear drive beyond any tendon's travel, a motor sample rate under 1 Hz or over 10 kHz, tip and base sensors nowhere near a bending length
-apart, a base quaternion read in the wrong order, a knob whose bend moves many times as far as
-it does or that is bent at its zero, fewer aligned rows than any fit can use. Motor samples the
+(with poses) or a linear drive beyond any tendon's travel, a motor sample rate under 1 Hz or over
+10 kHz, tip and base sensors nowhere near a bending length apart, a base quaternion read in the
+wrong order, a knob whose bend moves many times as far as it does or that is bent at its zero,
+fewer aligned rows than any fit can use. Motor samples the
 aligned table leaves out for want of a reading (:func:`reading_gaps`), and measured angles with
 such numbers (:func:`measured_angle_warnings`), are not refused but said, for the import to warn.
 """
@@ -399,7 +400,7 @@ def reading_gaps(covered: np.ndarray, t_read: np.ndarray, t_motor: np.ndarray, l
     return ReadingGaps(int(left.sum()), int(lines[left][0]), float((after - before).max()))
 
 
-__all__ = ["ANGLE_SPAN_MAX_DEG", "BEND_PER_KNOB_MAX", "BEND_PER_MM_MAX", "DISTANCE_RANGE_LENGTHS", "LINEAR_DRIVE_MAX_MM",
-           "MAX_GAP_S", "MIN_ALIGNED_ROWS", "ReadingGaps", "check_aligned_rows", "check_base_order", "check_distance",
-           "check_knob_to_bend", "check_knobs", "check_rate", "check_unit_names", "measured_angle_warnings",
-           "reading_gaps"]
+__all__ = ["ANGLE_SPAN_MAX_DEG", "BEND_PER_KNOB_MAX", "BEND_PER_MM_MAX", "DISTANCE_RANGE_LENGTHS",
+           "LINEAR_DRIVE_MAX_MM", "MAX_GAP_S", "MIN_ALIGNED_ROWS", "ReadingGaps", "check_aligned_rows",
+           "check_base_order", "check_distance", "check_knob_to_bend", "check_knobs", "check_rate", "check_unit_names",
+           "measured_angle_warnings", "reading_gaps"]

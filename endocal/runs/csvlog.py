@@ -5,10 +5,11 @@ servo reports, perhaps the goals sent and the motor currents, and the raw EM pos
 and base sensors. A bending axis may be driven by a linear stage pulling its tendon instead of
 a knob (``unit = "mm"`` or ``"m"``): its command stays in millimetres through the run
 (``<axis>_goal_mm``, ``<axis>_cmd_mm``, ``drive_units`` in ``run.json``), and the models fitted
-on it record the unit (:mod:`endocal.runs.aligned`). A *map* (TOML, see ``configs/csv-map.example.toml``) says which column is
-what and in which unit; :func:`import_csv` converts everything to the run format's units
-(:mod:`endocal.runs.format`), and the bending angles are computed by thesis eq. 1 from the
-poses exactly as for endocal's own runs (the aligned table is built by the same code).
+on it record the unit (:mod:`endocal.runs.aligned`). A *map* (TOML, see
+``configs/csv-map.example.toml``) says which column is what and in which unit; :func:`import_csv`
+converts everything to the run format's units (:mod:`endocal.runs.format`), and the bending
+angles are computed by thesis eq. 1 from the poses exactly as for endocal's own runs (the
+aligned table is built by the same code).
 
 Rows
 ----

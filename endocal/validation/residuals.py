@@ -309,9 +309,9 @@ def cut_start(data: HysteresisData, resid_deg: np.ndarray, what: str = "validati
         st = max(starts, key=lambda s: s.rmse_rest_deg - s.rmse_estimated_deg)
         which = f"the {what}" if data.n_runs == 1 else f"{len(starts)} of {data.n_runs} {what}s (the largest gain)"
         return (f"{which} {_start_words(data.cmd_deg[runs[st.run]], data.cmd_unit)}: run from an estimated start, "
-                f"{st.describe(data.cmd_unit)}: a record cut from a longer motion starts where that motion left the knob, not "
-                "in the relaxed state a model assumes; every model here, candidates too, runs it from the start "
-                "that predicts it best")
+                f"{st.describe(data.cmd_unit)}: a record cut from a longer motion starts where that motion left the "
+                "knob, not in the relaxed state a model assumes; every model here, candidates too, runs it from the "
+                "start that predicts it best")
     found = _unexplained_starts(data, resid_deg)
     if not found:
         return ""
