@@ -141,7 +141,7 @@ class Run:
         lines = [f"Run {str(self.path)!r}: {what}",
                  f"  {s.rows} samples, {s.duration_s:.4g} s at {s.rate_hz:.3g} Hz"]
         for a in s.axes:
-            lines.append(f"  {a.axis}: command {a.cmd_range_deg[0]:.1f} .. {a.cmd_range_deg[1]:.1f} deg, measured "
+            lines.append(f"  {a.axis}: command {a.cmd_range_deg[0]:.1f} .. {a.cmd_range_deg[1]:.1f} {a.drive_unit}, measured "
                          f"{a.meas_range_deg[0]:.1f} .. {a.meas_range_deg[1]:.1f} deg, {a.reversals} reversals")
         return "\n".join(lines)
 
@@ -152,7 +152,7 @@ class Run:
             if axis not in self.axes:
                 raise ModelError(f"{self.path}: no axis '{axis}' (it has {', '.join(self.axes)})")
             return axis
-        spans = {a: float(np.ptp(self.aligned.cmd_deg(a))) for a in self.axes}
+        spans = {a: float(np.ptp(self.aligned.cmd(a))) for a in self.axes}
         return max(self.axes, key=lambda a: spans[a])
 
     def plot(self, axis: str | None = None, kind: str = "loops"):
@@ -176,9 +176,9 @@ class Run:
         a = self.aligned
         title = f"{self.path.name} ({self.protocol or 'table'}), axis {ax}"
         if kind == "loops":
-            return F.loops(a.cmd_deg(ax), a.meas_deg(ax), {}, {}, title)
+            return F.loops(a.cmd(ax), a.meas_deg(ax), {}, {}, title, a.drive_unit(ax))
         if kind == "time_series":
-            return F.time_series(a.t_s, a.cmd_deg(ax), a.meas_deg(ax), {}, {}, title)
+            return F.time_series(a.t_s, a.cmd(ax), a.meas_deg(ax), {}, {}, title, a.drive_unit(ax))
         raise ValueError(f"kind must be 'loops' or 'time_series', got {kind!r}")
 
 

@@ -66,7 +66,7 @@ def fit_hysteresis(
     Raises
     ------
     ModelError
-        ``start_from`` of another axis or base model.
+        ``start_from`` of another axis or base model, or of a drive in another unit (deg, mm).
     RunFormatError
         Runs recorded on two probes (:func:`~endocal.runs.probes.check_one_probe`), or a table
         without ``axis``.
@@ -80,6 +80,11 @@ def fit_hysteresis(
     probe = check_one_probe(datas)
     dropped: list = []
     data = axis_data(datas, axis, planes, dropped)
+    if start_from is not None:
+        try:
+            start_from.check_drive_unit(data, f"the records to fit ({', '.join(str(d.source) for d in datas)})")
+        except ModelError as exc:
+            raise ModelError(f"--start-from: {exc}") from None
     model = make_model(base, effects=effects or (), axis=axis, **settings)
     model = model.fit_from(start_from, data) if start_from is not None else model.fit(data)
     span = sum(float(np.ptp(d.table["t_s"])) for d in datas)

@@ -8,6 +8,7 @@ same aligned table: the bending angles computed again by thesis eq. 1 from the p
 
 from __future__ import annotations
 
+import re
 import shutil
 from pathlib import Path
 
@@ -866,3 +867,38 @@ def test_a_drafted_import_is_pointed_beside_the_log_or_here_when_its_folder_is_r
     monkeypatch.setattr(mapdraft.os, "access", lambda path, mode: False)  # root may write anywhere
     assert mapdraft.import_out(log, angles=True) == Path("sweep.parquet")
     assert mapdraft.import_out(log, angles=False) == Path("sweep")
+
+
+def test_a_probe_pulled_by_linear_stages_imports_as_a_run_in_mm(sim_log, tmp_path):
+    """The knobs replaced by linear stages pulling the tendons, 25 knob degrees a mm (a tendon
+    2.3 mm off the axis): the run keeps the drives in mm (motor stream, aligned table and
+    run.json's drive_units), the probe's knob limits (deg) no longer apply, and the bending
+    angles are those of the knobs' import. Read as degrees, the stages bend the tip some 17 deg
+    per "knob degree", refused naming the unit."""
+    mm_per_deg = 1 / 25.0
+    log = pd.read_csv(sim_log / "log.csv")
+    for axis in ("ap", "ml"):
+        for kind in ("present", "goal"):
+            log[f"{axis}_stage_{kind}"] = (log.pop(f"{axis}_{kind}_ticks") - 2048) / TICKS_PER_DEG * mm_per_deg
+    log.to_csv(tmp_path / "stage.csv", index=False)
+    text = MAP.read_text()
+    for axis in ("ap", "ml"):
+        text = text.replace(f'"{axis}_present_ticks"', f'"{axis}_stage_present"').replace(f'"{axis}_goal_ticks"',
+                                                                                       f'"{axis}_stage_goal"')
+    text = re.sub(r"\nzero_ticks = 2048[^\n]*|\nticks_per_rev = 4096[^\n]*", "", text)
+    (tmp_path / "map.toml").write_text(text.replace('unit = "ticks"', 'unit = "mm"'))
+    proc = endocal("import", "csv", tmp_path / "stage.csv", "--map", tmp_path / "map.toml", "--out", tmp_path / "run")
+    assert proc.returncode == 0, proc.stderr
+    assert "ap (mm) <- ap_stage_present" in proc.stdout, proc.stdout
+    assert _run_json(tmp_path / "run")["drive_units"] == {"ap": "mm", "ml": "mm"}
+    assert {"ap_goal_mm", "ap_pos_mm", "ap_vel_mmps"} <= set(read_stream(tmp_path / "run", "motor").columns)
+    a, b = load_aligned(sim_log / "run"), load_aligned(tmp_path / "run")
+    assert b.drive_units == {"ap": "mm", "ml": "mm"} and "ap_cmd_deg" not in b.table
+    np.testing.assert_allclose(b.cmd("ml"), a.cmd("ml") * mm_per_deg, atol=1e-9)
+    np.testing.assert_allclose(b.meas_deg("ml"), a.meas_deg("ml"), atol=1e-9)
+    (tmp_path / "map.toml").write_text(text.replace('unit = "ticks"', 'unit = "deg"'))
+    one_line_exit_2(endocal("import", "csv", tmp_path / "stage.csv", "--map", tmp_path / "map.toml", "--out",
+                            tmp_path / "deg"),
+                    "read as deg, column 'ap_stage_present'", "deg of bend per knob degree",
+                    '(a tendon pulled by a linear stage: unit = "mm")')
+    assert not (tmp_path / "deg").exists()

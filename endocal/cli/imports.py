@@ -26,8 +26,9 @@ def import_csv_cmd(
     dedupe: bool = typer.Option(False, "--dedupe", help="Drop rows that repeat an earlier row in every column the map uses (ROS bridges write them) and merge rows of one time stamp that fill different columns (a motor tick and a tracker frame in the same millisecond); columns the map does not use (a ROS header's arrival time, seq, frame_id) are not compared. Without it duplicated time stamps are refused."),
     force: bool = typer.Option(False, "--force", help="Replace --out if it is a run folder (or the table an angles map writes), or an existing --draft-map."),
 ) -> None:
-    """Convert a lab's CSV log into a run folder: knob positions (deg, rad or servo ticks),
-    optional goals and currents, tip and base EM poses (mm or m, quaternions xyzw or wxyz).
+    """Convert a lab's CSV log into a run folder: knob positions (deg, rad or servo ticks) or a
+    linear stage's tendon displacement (mm or m, kept in mm), optional goals and currents, tip and
+    base EM poses (mm or m, quaternions xyzw or wxyz).
 
     Bending angles come from the poses by thesis eq. 1, as for endocal's own runs; every later
     command reads the folder like a run of `endocal excite`. A rig that measures the angle

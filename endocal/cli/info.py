@@ -32,11 +32,12 @@ def info(
     if s.status:
         head += f"; run {s.status}, protocol {s.protocol}, backend {s.backend}, seed {s.seed}"
     out.print(head)
-    table = Table("axis", "command (deg)", "measured (deg)", "reversals")
+    one = len({a.drive_unit for a in s.axes}) == 1  # a knob in deg, a linear drive in mm
+    table = Table("axis", f"command ({s.axes[0].drive_unit})" if one else "command", "measured (deg)", "reversals")
     for a in s.axes:
         table.add_row(
             a.axis,
-            f"{a.cmd_range_deg[0]:.1f} .. {a.cmd_range_deg[1]:.1f}",
+            f"{a.cmd_range_deg[0]:.1f} .. {a.cmd_range_deg[1]:.1f}" + ("" if one else f" {a.drive_unit}"),
             f"{a.meas_range_deg[0]:.1f} .. {a.meas_range_deg[1]:.1f}",
             str(a.reversals),
         )

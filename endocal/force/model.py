@@ -300,6 +300,10 @@ def read_trial(run_dir: str | Path, axis: str | None = None, torque_constant_nm_
     if kt is None:
         raise ModelError(f"{run_dir}: run.json records no motor torque constant (a hardware run): "
                          "give --torque-constant N_M_PER_A (the motor's torque per current)")
+    if data.drive_unit(axis) != "deg":
+        raise RunFormatError(f"{run_dir}: the {axis} drive is a linear stage (commanded in {data.drive_unit(axis)}): "
+                             "fit force models a knob's torque against its angle, not a stage's force against its "
+                             "travel")
     tab = data.table
     for col in (f"{axis}_pos_deg", f"{axis}_vel_degps", f"{axis}_current_ma"):
         if col not in tab.columns:

@@ -10,7 +10,13 @@ A model is a *base* (the direction-dependent hysteresis: :mod:`~endocal.models.l
 Contract (scikit-learn / lmfit style): ``__init__`` only stores its arguments;
 ``fit`` returns ``self`` and sets the trailing-underscore attributes (``params_``,
 ``stderr_``, ``correlation_``, ``fit_report_``, ``structure_`` ...); ``predict`` and
-``inverse`` refuse an unfitted model. Fitting is :func:`scipy.optimize.least_squares`
+``inverse`` refuse an unfitted model.
+
+The command is a knob's angle (deg) or a linear drive's tendon displacement (mm): the
+hysteresis maths is the same in either unit, so every base and effect works on the numbers as
+given. ``fit`` records the data's unit as ``drive_unit_``; the model prints its input-side
+parameters in it (``slack_mm``, a play threshold ``r`` in mm) and refuses data commanded in
+another unit (:meth:`HysteresisModel.check_drive_unit`). Fitting is :func:`scipy.optimize.least_squares`
 (trust-region reflective with bounds) on all free parameters of the base and the
 effects jointly; standard errors come from the Jacobian at the optimum.
 """
@@ -20,6 +26,7 @@ from __future__ import annotations
 import copy
 import inspect
 import math
+import re
 import warnings
 from abc import ABC, abstractmethod
 from dataclasses import asdict, dataclass, field
@@ -52,6 +59,18 @@ HISTORY_NFEV_PER_PARAMETER = 10
 SUBSAMPLE_SAMPLES = 4000
 #: relative cost decrease per step under which every fit stops (:func:`_solve`)
 FTOL = 1e-7
+
+
+#: What drives each command unit names, for messages.
+DRIVES = {"deg": "a knob or pulley turned", "mm": "a linear stage pulling the tendon"}
+
+
+def in_drive_unit(text: str, unit: str) -> str:
+    """Text written for a drive commanded in degrees (an input effect's parameters and their units,
+    the plays' thresholds) in ``unit``: ``slack_deg=4.7 deg`` reads ``slack_mm=4.7 mm`` in mm, and
+    ``amp_s_per_deg`` ``amp_s_per_mm``. Only input-side text goes through here: the bending angle
+    stays in deg."""
+    return text if unit == "deg" else re.sub(r"(?<![A-Za-z])deg\b", unit, text)
 
 
 def min_fit_samples(n_free: int) -> int:
@@ -347,6 +366,7 @@ class HysteresisModel(ABC):
         data : HysteresisData or list of them
             What to fit, as :meth:`fit` takes it.
         """
+        start.check_drive_unit(as_data(data)[0], "the data to fit")
         self.fit(data, max_nfev=max_nfev, warm_start=dict(start.params_))
         if not {e.label for e in start.effects_} <= {e.label for e in self.effects_}:
             return self  # an effect dropped: this model does not nest start, and may well fit worse
@@ -502,6 +522,7 @@ class HysteresisModel(ABC):
         self.covariance_ = cov
         self.correlation_ = corr
         self.cmd_range_deg_ = (float(d.cmd_deg.min()), float(d.cmd_deg.max()))
+        self.drive_unit_ = d.cmd_unit
         self.training_data_ = d.fingerprint()
         self.fit_report_ = FitReport(
             success=bool(res.success), status=int(res.status), message=str(res.message),
@@ -510,7 +531,8 @@ class HysteresisModel(ABC):
             n_free=n_free, rank_deficient=rank_def, estimated_starts=[st.to_dict() for st in starts],
             warnings=([f"{d.n_samples} samples for {n_free} free parameters (fewer than 10 per parameter): the "
                        "fit may follow the noise; check it on a record it was not fitted on (endocal validate)"]
-                      if d.n_samples < 10 * n_free else []) + _loose_parameters(free, owners, values, stderr, lo, hi)
+                      if d.n_samples < 10 * n_free else []) + _loose_parameters(free, owners, values, stderr, lo, hi,
+                                                                                  d.cmd_unit)
                      + _no_better_than_a_line(d, float(math.sqrt(float(r @ r) / m)), self.base_name),
         )
         return self
@@ -663,7 +685,7 @@ class HysteresisModel(ABC):
 
     # ------------------------------------------------------------------ known parameters
     def set_parameters(self, values: dict[str, float], *, cmd_range_deg: tuple[float, float] | None = None,
-                       structure: dict | None = None):
+                       structure: dict | None = None, drive_unit: str = "deg"):
         """Use known parameter values instead of fitting (e.g. a paper's table).
 
         Parameters
@@ -671,9 +693,11 @@ class HysteresisModel(ABC):
         values : dict of str to float
             Every parameter of the model by full name (see :meth:`parameter_names`).
         cmd_range_deg : (float, float), optional
-            Valid command range (deg); unlimited when None.
+            Valid command range (in ``drive_unit``); unlimited when None.
         structure : dict, optional
             Data-dependent structure (thresholds, knots) for models that need it.
+        drive_unit : {"deg", "mm"}
+            The unit of the command the values are for (a knob's deg, a linear drive's mm).
 
         Returns
         -------
@@ -699,9 +723,17 @@ class HysteresisModel(ABC):
         self.covariance_ = np.zeros((0, 0))
         self.correlation_ = np.zeros((0, 0))
         self.cmd_range_deg_ = (-math.inf, math.inf) if cmd_range_deg is None else tuple(map(float, cmd_range_deg))
+        self.drive_unit_ = str(drive_unit)
         self.training_data_ = []
         self.fit_report_ = None
         return self
+
+    def parameter_labels(self) -> dict[str, str]:
+        """Each parameter's full name as printed: an input effect's in the drive's unit
+        (``deadzone_slack_deg`` reads ``deadzone_slack_mm`` for a linear drive; :func:`in_drive_unit`)."""
+        self._require_fitted()
+        return {n: in_drive_unit(n, self.drive_unit_) if isinstance(owner, InputEffect) else n
+                for n, (owner, _) in self._owner_map_.items()}
 
     def parameter_names(self) -> list[str]:
         """Full names of all parameters (base first, then effects); needs a fitted model or no data-dependent structure."""
@@ -710,6 +742,31 @@ class HysteresisModel(ABC):
         return list(self._owners(effects, st))
 
     # ------------------------------------------------------------------ predict / inverse
+    def check_drive_unit(self, data, what: str = "these data") -> None:
+        """Refuse data commanded in another unit than this model was fitted in.
+
+        Parameters
+        ----------
+        data : HysteresisData or str or None
+            The data (its ``drive_unit``), or a unit; None (arrays given directly) states none.
+        what : str
+            The data in the message (``"run/ (validation data)"``).
+
+        Raises
+        ------
+        ModelError
+            One line naming both units and what to do.
+        """
+        self._require_fitted()
+        unit = data.drive_unit if isinstance(data, HysteresisData) else data
+        if unit is None or unit == self.drive_unit_:
+            return
+        axis = f"{self.axis} " if self.axis else ""
+        raise ModelError(f"the {axis}model was fitted on a drive commanded in {self.drive_unit_} "
+                         f"({DRIVES.get(self.drive_unit_, self.drive_unit_)}), but {what} command it in {unit} "
+                         f"({DRIVES.get(unit, unit)}): a model holds only for the drive it was fitted on; give records "
+                         f"in {self.drive_unit_}, or fit a model on these")
+
     def _range_check(self, cmd: np.ndarray, what: str) -> np.ndarray:
         lo, hi = self.cmd_range_deg_
         tol = 1e-9 * max(1.0, abs(lo) if math.isfinite(lo) else 1.0, abs(hi) if math.isfinite(hi) else 1.0)
@@ -717,8 +774,9 @@ class HysteresisModel(ABC):
         if not bad.any():
             return cmd
         k = int(np.flatnonzero(bad)[0])
-        msg = (f"{what} {cmd[k]:.3f} deg at sample {k} lies outside the fitted command range "
-               f"[{lo:.3f}, {hi:.3f}] deg ({int(bad.sum())} samples)")
+        u = self.drive_unit_
+        msg = (f"{what} {cmd[k]:.3f} {u} at sample {k} lies outside the fitted command range "
+               f"[{lo:.3f}, {hi:.3f}] {u} ({int(bad.sum())} samples)")
         if self.out_of_range == "error":
             raise ModelError(msg + "; refit on wider data, reduce the amplitude, or clamp to the fitted range "
                              "(--out-of-range clamp; out_of_range='clamp' in Python)")
@@ -731,17 +789,25 @@ class HysteresisModel(ABC):
         Parameters
         ----------
         data : ndarray (n,), list of ndarray, HysteresisData or list of them
-            Knob commands (deg); a list is several runs (states restart per run).
+            Knob commands (deg, or mm for a model of a linear drive: ``drive_unit_``); a list is
+            several runs (states restart per run).
         t_s, extras : optional
             Time stamps (s) and extra columns when effects need them.
 
         Returns
         -------
         ndarray (n,), or a list of arrays when runs were given as a list.
+
+        Raises
+        ------
+        ModelError
+            Unfitted model, bad input, data whose ``drive_unit`` is not the model's, or (with
+            ``out_of_range="error"``) commands beyond the fitted range.
         """
         self._require_fitted()
         self._check_common()
         d, was_list = as_data(data, t_s=t_s, extras=extras)
+        self.check_drive_unit(d)
         for e in self.effects_:
             e.check(d)
         cmd = d.cmd_deg if self.out_of_range == "extrapolate" else self._range_check(d.cmd_deg, "command")
@@ -789,7 +855,8 @@ class HysteresisModel(ABC):
 
         Returns
         -------
-        ndarray (n,) of commands (deg), or a list per run.
+        ndarray (n,) of commands (deg, or mm for a model of a linear drive: ``drive_unit_``), or a
+        list per run.
 
         Raises
         ------
@@ -852,7 +919,8 @@ class HysteresisModel(ABC):
         for e in self.effects_:
             if isinstance(e, InputEffect) and not e.is_zero(eff_p[id(e)]):
                 inner = e.wrap(inner)
-                defs.append(e.describe(eff_p[id(e)], eff_se.get(id(e), {})))
+                # an input effect acts on the command: its parameters are in the drive's unit
+                defs.append(in_drive_unit(e.describe(eff_p[id(e)], eff_se.get(id(e), {})), self.drive_unit_))
         out = self._base_describe(self.structure_, base_p, base_se, inner)
         for e in self.effects_:
             if isinstance(e, OutputFilter) and not e.is_zero(eff_p[id(e)]):
@@ -920,12 +988,13 @@ def _no_better_than_a_line(d: HysteresisData, rmse_deg: float, base: str) -> lis
 
 
 def _loose_parameters(free: list[str], owners: dict, values: dict, stderr: dict, lo: np.ndarray,
-                      hi: np.ndarray) -> list[str]:
+                      hi: np.ndarray, drive_unit: str = "deg") -> list[str]:
     """Warnings for effect parameters the data does not pin down (at a bound, or standard error > |value|).
 
     The base's shape coefficients (B-spline increments, PI weights) sit at their zero bound
     by design and are not reported. An effect whose ``why_loose`` explains its loose values
     (a parametrisation, not missing data) gets that one line instead of a line per parameter.
+    An input effect's lines are in the ``drive_unit`` (:func:`in_drive_unit`).
     """
     out = []
     explained: set[str] = set()
@@ -934,21 +1003,22 @@ def _loose_parameters(free: list[str], owners: dict, values: dict, stderr: dict,
             p = {short: values[full] for full, (o, short) in owners.items() if o is e}
             why = e.why_loose(p, {short: stderr[full] for full, (o, short) in owners.items() if o is e})
             if why:
-                out.append(why)
+                out.append(in_drive_unit(why, drive_unit) if isinstance(e, InputEffect) else why)
                 explained.update(full for full, (o, _) in owners.items() if o is e)
     for i, n in enumerate(free):
         if owners[n][0] == "base" or n in explained:
             continue
         v, se = values[n], stderr[n]
+        name = in_drive_unit(n, drive_unit) if isinstance(owners[n][0], InputEffect) else n
         span = hi[i] - lo[i] if math.isfinite(hi[i] - lo[i]) else max(abs(v), 1.0)
         for bound, word in ((lo[i], "lower"), (hi[i], "upper")):
             if math.isfinite(bound) and abs(v - bound) <= 1e-4 * span:
-                out.append(f"{n} = {v:.4g} sits at its {word} bound {bound:.4g}: the data does not constrain it "
+                out.append(f"{name} = {v:.4g} sits at its {word} bound {bound:.4g}: the data does not constrain it "
                            "(the term may be absent from this data, or compensate for something else)")
                 break
         else:
             if not math.isfinite(se) or se > abs(v):
-                out.append(f"{n} = {v:.4g} +- {se:.2g}: its standard error exceeds its value, the data does not "
+                out.append(f"{name} = {v:.4g} +- {se:.2g}: its standard error exceeds its value, the data does not "
                            "identify it (record motion that exercises the term, or drop it)")
     return out
 

@@ -216,5 +216,6 @@ class BSplineModel(DirectionalModel):
         t = structure["knots"]
         k = structure["degree"]
         m = self._n_coef(structure)
-        return (f"BSpline{k}({inner}) [up/down: {m} coefficients each, knots {t[k]:.4g}..{t[-k - 1]:.4g}, "
+        return (f"BSpline{k}({inner}) [up/down: {m} coefficients each, knots {t[k]:.4g}..{t[-k - 1]:.4g} "
+                f"{self.drive_unit_}, "
                 f"transition={fmt_value(p['transition_slope'], se.get('transition_slope'))}]")

@@ -4,6 +4,11 @@ One axis, one or more runs concatenated along the sample axis. Besides the knob
 command (deg) and the measured bending angle (deg) it carries the time stamps
 (s) and any extra named columns (the other axis's command or angle, logged
 covariates such as ``sheath_wrap_deg``) that effect terms may need.
+
+A bending axis driven by a linear stage pulling its tendon is commanded in mm: ``cmd_deg``
+then holds millimetres and ``drive_unit`` says so (the hysteresis maths is the same in either
+unit). A model fitted on such data records the unit and refuses data of another
+(:meth:`~endocal.models.base.HysteresisModel.check_drive_unit`).
 """
 
 from __future__ import annotations
@@ -33,6 +38,21 @@ def reversals(u: np.ndarray, tol_frac: float = 0.01) -> int:
     return int(count_reversals(u, max(tol_frac * span, REVERSAL_TOL_MIN_DEG))) if span > 0.0 else 0
 
 
+def common_drive_unit(units, what: str = "runs") -> str | None:
+    """The one drive unit of ``units`` (None ones say nothing), or None when none is stated.
+
+    Raises
+    ------
+    ModelError
+        Two different units: records of a knob (deg) and of a linear drive (mm) cannot be one fit.
+    """
+    stated = list(dict.fromkeys(u for u in units if u is not None))
+    if len(stated) > 1:
+        raise ModelError(f"the {what} command their drive in different units ({' and '.join(stated)}): a knob's "
+                         "angle and a linear drive's travel are not one model's input; give records of one drive")
+    return stated[0] if stated else None
+
+
 def _as_1d(name: str, values, n: int | None = None) -> np.ndarray:
     try:
         arr = np.asarray(values, dtype=float)
@@ -57,7 +77,7 @@ class HysteresisData:
     Parameters
     ----------
     cmd_deg : ndarray, shape (n,)
-        Knob command (deg).
+        Knob command (deg; mm for a linear drive, as ``drive_unit`` says).
     meas_deg : ndarray, shape (n,), optional
         Measured bending angle (deg). Needed to fit, not to predict.
     t_s : ndarray, shape (n,), optional
@@ -73,6 +93,10 @@ class HysteresisData:
         come along before the record, run to set the model's state and not part of the record
         (:mod:`endocal.models.start`). Time-based terms count the record's time from the first
         sample after it. Default: none.
+    drive_unit : str, optional
+        The unit of ``cmd_deg``: ``"deg"`` (a knob) or ``"mm"`` (a linear stage pulling the
+        tendon, whose command ``cmd_deg`` then holds in mm). None (arrays given directly) states
+        none: any model takes it, in its own unit.
 
     Raises
     ------
@@ -87,8 +111,16 @@ class HysteresisData:
     extras: Mapping[str, np.ndarray] = field(default_factory=dict)
     run_starts: np.ndarray | None = None
     lead_in: np.ndarray | None = None
+    drive_unit: str | None = None
+
+    @property
+    def cmd_unit(self) -> str:
+        """The unit of the command, for messages: ``drive_unit``, or deg when none is stated."""
+        return self.drive_unit or "deg"
 
     def __post_init__(self) -> None:
+        if self.drive_unit is not None and not (isinstance(self.drive_unit, str) and self.drive_unit.isidentifier()):
+            raise ModelError(f"drive_unit must name a unit (deg, mm), got {self.drive_unit!r}")
         cmd = _as_1d("cmd_deg", self.cmd_deg)
         n = cmd.shape[0]
         if n == 0:
@@ -146,6 +178,7 @@ class HysteresisData:
             extras={k: np.concatenate([r.extras[k] for r in runs]) for k in runs[0].extras},
             run_starts=np.concatenate([r.run_starts + o for r, o in zip(runs, offsets)]),
             lead_in=np.concatenate([r.lead_in for r in runs]),
+            drive_unit=common_drive_unit(r.drive_unit for r in runs),
         )
 
     # ------------------------------------------------------------------ views
@@ -186,12 +219,13 @@ class HysteresisData:
             t_s=None if self.t_s is None else self.t_s[idx],
             extras={k: v[idx] for k, v in self.extras.items()},
             run_starts=starts,
+            drive_unit=self.drive_unit,
         )
 
     def with_cmd(self, cmd_deg: np.ndarray) -> HysteresisData:
         """Same time base, extras and runs, another command (and no measurement)."""
         return HysteresisData(cmd_deg=cmd_deg, t_s=self.t_s, extras=self.extras, run_starts=self.run_starts,
-                              lead_in=self.lead_in)
+                              lead_in=self.lead_in, drive_unit=self.drive_unit)
 
     def column(self, name: str) -> np.ndarray:
         """An extra column by name.

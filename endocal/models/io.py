@@ -7,9 +7,15 @@ Layout (``format: endocal-model``, ``version: 2``)::
      "effects": [{"name": "envelope", "settings": {}}],
      "structure": {...resolved settings, thresholds, knots...},
      "parameters": {"pi_r": {"value": 0.1183, "stderr": 0.002, "fixed": false}, ...},
-     "cmd_range_deg": [-60.0, 60.0],
+     "cmd_range_deg": [-60.0, 60.0], "drive_unit": "deg",
      "correlation": {"names": [...], "matrix": [[...]]},
      "fit": {...FitReport...}, "training_data": [{"sha256": "...", "n_samples": 1400}]}
+
+``drive_unit`` is the unit of the command the model was fitted on: ``deg`` for a knob, ``mm``
+for a linear stage pulling the tendon. The parameters keep their names in either unit
+(``deadzone_slack_deg``, ``cmd_range_deg``), and hold the drive's unit: a model of a linear drive
+prints them as ``slack_mm`` (:func:`~endocal.models.base.in_drive_unit`). A file without the
+field (written before linear drives were read) is a knob's, in deg.
 
 Floats are written with Python's shortest round-trip repr, so a loaded model
 predicts exactly what the saved one did. Infinite or undefined numbers are ``null``.
@@ -36,8 +42,11 @@ from endocal.models.registry import BASES
 
 FORMAT = "endocal-model"
 VERSION = 2
-#: Optional top-level fields: who made the file, from what (endocal version, data files and hashes, command).
-_OPTIONAL = {"provenance"}
+#: Optional top-level fields: who made the file, from what (endocal version, data files and hashes, command);
+#: the drive's unit (deg when absent).
+_OPTIONAL = {"provenance", "drive_unit"}
+#: Units a model's command may be in (endocal.runs.aligned.DRIVE_UNITS).
+_DRIVE_UNITS = ("deg", "mm")
 _KEYS = {"format", "version", "axis", "base", "settings", "out_of_range", "fixed", "effects", "structure",
          "parameters", "cmd_range_deg", "correlation", "fit", "training_data"}
 
@@ -69,6 +78,7 @@ def model_to_dict(model: HysteresisModel) -> dict:
         "parameters": {n: {"value": float(v), "stderr": _num(model.stderr_[n]), "fixed": n in fixed}
                        for n, v in model.params_.items()},
         "cmd_range_deg": [_num(x) for x in model.cmd_range_deg_],
+        "drive_unit": model.drive_unit_,
         "correlation": {"names": list(model.param_names_),
                         "matrix": [[_num(x) for x in row] for row in np.asarray(corr)]},
         "fit": None if model.fit_report_ is None else model.fit_report_.to_dict(),
@@ -124,6 +134,10 @@ def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
         model.fixed_ = {n: model.params_[n] for n in owners if params[n]["fixed"]}
         lo, hi = d["cmd_range_deg"]
         model.cmd_range_deg_ = (_from_num(lo, -math.inf), _from_num(hi, math.inf))
+        model.drive_unit_ = d.get("drive_unit", "deg")
+        if model.drive_unit_ not in _DRIVE_UNITS:
+            raise ModelError(f"{where}: unknown drive_unit {model.drive_unit_!r}; a model's command is in "
+                             f"{' or '.join(_DRIVE_UNITS)}")
         names = list(d["correlation"]["names"])
         model.param_names_ = names
         corr = np.array([[_from_num(x, math.nan) for x in row] for row in d["correlation"]["matrix"]], dtype=float)

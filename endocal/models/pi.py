@@ -421,10 +421,12 @@ class PIModel(HysteresisModel):
     # ------------------------------------------------------------------ printing
     def _base_describe(self, structure: dict, p: dict, se: dict, inner: str) -> str:
         n = structure["n_operators"]
+        # the plays' thresholds r_i = r·i are in the drive's unit (deg, or mm for a linear drive)
         if structure["weights"] == "exponential":
-            parts = [f"{k}={fmt_value(p[k], se.get(k))}" for k in ("r", "w", "beta")]
+            units = {"r": self.drive_unit_}
+            parts = [f"{k}={fmt_value(p[k], se.get(k), units.get(k, ''))}" for k in ("r", "w", "beta")]
         else:
-            parts = [f"r={fmt_value(structure['threshold_step'])} (fixed)"]
+            parts = [f"r={fmt_value(structure['threshold_step'], unit=self.drive_unit_)} (fixed)"]
             parts += [f"w{i}={fmt_value(p[f'w{i}'], se.get(f'w{i}'))}" for i in range(n + 1) if p[f"w{i}"] != 0.0]
         out = f"PI{n}({inner}) [{', '.join(parts)}]"
         if structure["offset"] and p["offset_deg"] != 0.0:

@@ -89,12 +89,12 @@ class RecordStart:
         return cls(int(d["run"]), tuple(float(x) for x in d["path_deg"]), int(d["n_lead"]),
                    float(d["rmse_rest_deg"]), float(d["rmse_estimated_deg"]))
 
-    def describe(self) -> str:
+    def describe(self, cmd_unit: str = "deg") -> str:
         """``"as if the knob had come 1.8 -> 0 -> 3.6 -> 1.8 deg before it (RMSE 3.2 deg from the
-        model's relaxed start, 0.53 deg from this one)"``."""
+        model's relaxed start, 0.53 deg from this one)"``; the path in ``cmd_unit`` (mm for a linear drive)."""
         path = " -> ".join(f"{x:.3g}" for x in self.path_deg)
-        return (f"as if the knob had come {path} deg before it (RMSE {self.rmse_rest_deg:.3g} deg from the model's "
-                f"relaxed start, {self.rmse_estimated_deg:.3g} deg from this one)")
+        return (f"as if the knob had come {path} {cmd_unit} before it (RMSE {self.rmse_rest_deg:.3g} deg from the "
+                f"model's relaxed start, {self.rmse_estimated_deg:.3g} deg from this one)")
 
 
 #: The histories tried for a record's start, by name (:func:`lead_in_paths`).
@@ -189,7 +189,7 @@ def with_lead_in(run: HysteresisData, path: tuple[float, ...]) -> HysteresisData
         cmd_deg=np.concatenate([lead, u]),
         meas_deg=None if run.meas_deg is None else np.concatenate([np.full(n, run.meas_deg[0]), run.meas_deg]),
         t_s=t, extras={k: np.concatenate([np.full(n, v[0]), v]) for k, v in run.extras.items()},
-        lead_in=np.array([n]),
+        lead_in=np.array([n]), drive_unit=run.drive_unit,
     )
 
 
@@ -279,7 +279,7 @@ def _run_view(data: HysteresisData, sl: slice) -> HysteresisData:
     """Run ``sl`` of ``data`` as a record of its own, its columns views (``take`` would copy every column)."""
     return HysteresisData(cmd_deg=data.cmd_deg[sl], meas_deg=None if data.meas_deg is None else data.meas_deg[sl],
                           t_s=None if data.t_s is None else data.t_s[sl],
-                          extras={k: v[sl] for k, v in data.extras.items()})
+                          extras={k: v[sl] for k, v in data.extras.items()}, drive_unit=data.drive_unit)
 
 
 def _rms(x: np.ndarray) -> float:

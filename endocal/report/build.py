@@ -79,7 +79,8 @@ def model_figure(label: str, model, color: str) -> tuple[ReportFigure, callable]
         Its colour in the report.
     """
     fixed = getattr(model, "fixed_", {})
-    params = {n: (float(v), None if not np.isfinite(model.stderr_[n]) else float(model.stderr_[n]), n in fixed)
+    shown = model.parameter_labels()  # an input effect's in the drive's unit: deadzone_slack_mm
+    params = {shown[n]: (float(v), None if not np.isfinite(model.stderr_[n]) else float(model.stderr_[n]), n in fixed)
               for n, v in model.params_.items()}
     name = "+".join([model.base_name] + [e.label for e in model.effects_])
     return (ReportFigure(f"params-{_slug(label)}", "models", f"{label}: fitted parameters",
@@ -161,11 +162,11 @@ def record_figures(data: str, signal: str, axis: str, hdata: HysteresisData, pre
         (ReportFigure(f"ts-{slug}", "records", f"{head}: time series",
                       "Knob command (dashed), measured bending angle (black) and each model's prediction; below, "
                       "each model's error (predicted - measured).", b"", key),
-         lambda: F.time_series(t, cmd, meas, predicted, colors, head)),
+         lambda: F.time_series(t, cmd, meas, predicted, colors, head, hdata.cmd_unit)),
         (ReportFigure(f"loops-{slug}", "records", f"{head}: hysteresis loops",
                       "Bending angle against knob command: measured, then each model (colour) over the measured "
                       "loop (grey).", b"", key),
-         lambda: F.loops(cmd, meas, predicted, colors, head)),
+         lambda: F.loops(cmd, meas, predicted, colors, head, hdata.cmd_unit)),
     ]
     if comparison is not None:
         jobs.append(
@@ -179,7 +180,7 @@ def record_figures(data: str, signal: str, axis: str, hdata: HysteresisData, pre
                       "Error against knob speed, knob command, the other axis and time (dots: samples; lines: "
                       "mean per bin). A slope against speed points to rate, a step at zero speed to dead zone, "
                       "a trend in time to drift or creep, a slope against the other axis to coupling.", b"", key),
-         lambda: F.residuals(t, cmd, _other_axis(hdata), errs, colors, head)),
+         lambda: F.residuals(t, cmd, _other_axis(hdata), errs, colors, head, hdata.cmd_unit)),
         (ReportFigure(f"regime-{slug}", "records", f"{head}: error by regime",
                       "RMSE of each model by regime of the motion, as `endocal validate` breaks it down: near "
                       "reversals vs steady motion and holds, by speed band (terciles), by amplitude (thirds of "

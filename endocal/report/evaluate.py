@@ -23,7 +23,7 @@ from endocal.report.adapters import RegimeBreakdown, axis_data, error_by_regime,
 from endocal.report.stats import Comparison, Units, compare_models, make_units, unit_rmse
 from endocal.runs.aligned import AlignedData, load_aligned
 from endocal.runs.format import sha256_of
-from endocal.validation.data import MIN_SPAN_DEG
+from endocal.validation.data import min_cmd_span
 from endocal.validation.metrics import ErrorMetrics, error_metrics
 
 
@@ -71,6 +71,7 @@ class ModelEntry:
         return {
             "label": self.label, "path": None if self.path is None else str(self.path), "sha256": self.sha256,
             "axis": self.axis, "base": self.base, "effects": self.effects, "equation": self.model.equation(),
+            "drive_unit": self.model.drive_unit_,
             "parameters": {n: {"value": float(v), "stderr": _finite(self.model.stderr_[n]),
                                "fixed": n in getattr(self.model, "fixed_", {})}
                            for n, v in self.model.params_.items()},
@@ -246,8 +247,8 @@ def load_inputs(models: Sequence, datas: Sequence) -> tuple[list[ModelEntry], li
     Raises
     ------
     ModelError
-        No model, a missing or invalid model file, a model without an axis, or a model
-        whose axis no record has.
+        No model, a missing or invalid model file, a model without an axis, a model
+        whose axis no record has, or a model of a drive in another unit than a record's.
     RunFormatError
         No record, a missing or malformed record, or a record none of whose axes any
         model is for.
@@ -290,6 +291,13 @@ def load_inputs(models: Sequence, datas: Sequence) -> tuple[list[ModelEntry], li
             raise ModelError(f"model {e.path or e.label} was fitted on axis '{e.axis}' but no data has it "
                              f"(data axes: {', '.join(data_axes)}); give records of that axis or models fitted on "
                              f"{' or '.join(data_axes)}")
+    for e in entries:  # a model of a knob (deg) predicts no linear drive's record (mm), nor the reverse
+        for d in dentries:
+            if e.axis in d.aligned.axes:
+                try:
+                    e.model.check_drive_unit(d.aligned.drive_unit(e.axis), f"data {d.aligned.source}")
+                except ModelError as exc:
+                    raise ModelError(f"model {e.path or e.label}: {exc}") from None
     model_axes = {e.axis for e in entries}
     for d in dentries:
         if not model_axes & set(d.aligned.axes):
@@ -441,9 +449,10 @@ def evaluate(
                 done += 1
                 if progress:
                     progress(f"{m.label} on {d.label}", done, len(jobs))
-                if span < MIN_SPAN_DEG:
+                if span < min_cmd_span(hd):
                     skipped.append(NotEvaluated(m.label, d.label, axis,
-                                                f"the {axis} command spans only {span:.2f} deg in {d.label}: the record "
+                                                f"the {axis} command spans only {span:.2f} {hd.cmd_unit} in {d.label}: "
+                                                "the record "
                                                 "does not excite this axis"))
                     continue
                 try:
@@ -456,7 +465,8 @@ def evaluate(
                 if beyond:
                     lo, hi = m.model.cmd_range_deg_
                     notes.append(f"{beyond} samples of {d.label} command beyond {m.label}'s fitted range "
-                                 f"[{lo:.3g}, {hi:.3g}] deg: predicted by continuing the model there (an extrapolation)")
+                                 f"[{lo:.3g}, {hi:.3g}] {m.model.drive_unit_}: predicted by continuing the model there "
+                                 "(an extrapolation)")
                 preds[m.label] = (np.asarray(pred, float), notes)
             if not preds:
                 continue

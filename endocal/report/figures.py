@@ -62,13 +62,14 @@ def _thin(n: int, keep: int = 4000) -> np.ndarray:
 
 
 def time_series(t_s: np.ndarray, cmd_deg: np.ndarray, meas_deg: np.ndarray, predicted: Mapping[str, np.ndarray],
-                colors: Mapping[str, str], title: str) -> Figure:
+                colors: Mapping[str, str], title: str, cmd_unit: str = "deg") -> Figure:
     """Command, measured and predicted bending angle over time, and each model's error below.
 
     Parameters
     ----------
     t_s, cmd_deg, meas_deg : (n,) arrays
-        Time (s), knob command and measured bending angle (deg).
+        Time (s), knob command (``cmd_unit``: deg, or mm for a linear drive) and measured bending
+        angle (deg).
     predicted : mapping of label to (n,) array
         Each model's predicted angle (deg).
     colors : mapping of label to colour
@@ -76,13 +77,13 @@ def time_series(t_s: np.ndarray, cmd_deg: np.ndarray, meas_deg: np.ndarray, pred
     """
     fig = _new(10.5, 5.2)
     ax, ax_e = fig.subplots(2, 1, sharex=True, height_ratios=[2, 1])
-    ax.plot(t_s, cmd_deg, color=CMD_COLOR, lw=1.0, ls="--", label="knob command")
+    ax.plot(t_s, cmd_deg, color=CMD_COLOR, lw=1.0, ls="--", label=f"knob command ({cmd_unit})")
     ax.plot(t_s, meas_deg, color=MEAS_COLOR, lw=1.6, label="measured")
     for lbl, y in predicted.items():
         ax.plot(t_s, y, color=colors[lbl], lw=1.0, label=lbl)
         ax_e.plot(t_s, y - meas_deg, color=colors[lbl], lw=0.8, label=lbl)
     ax_e.axhline(0, color="k", lw=0.6)
-    ax.set_ylabel("angle (deg)")
+    ax.set_ylabel("angle (deg)" if cmd_unit == "deg" else f"angle (deg), command ({cmd_unit})")
     ax_e.set_ylabel("error (deg)\npredicted - measured")
     ax_e.set_xlabel("time (s)")
     ax.set_title(title, loc="left", fontsize=11)
@@ -93,8 +94,8 @@ def time_series(t_s: np.ndarray, cmd_deg: np.ndarray, meas_deg: np.ndarray, pred
 
 
 def loops(cmd_deg: np.ndarray, meas_deg: np.ndarray, predicted: Mapping[str, np.ndarray], colors: Mapping[str, str],
-          title: str) -> Figure:
-    """Hysteresis loops: measured angle against command, then each model's over the measured one."""
+          title: str, cmd_unit: str = "deg") -> Figure:
+    """Hysteresis loops: measured angle against command (in ``cmd_unit``), then each model's over the measured one."""
     n = 1 + len(predicted)
     ncols = min(n, 4)
     nrows = int(np.ceil(n / ncols))
@@ -113,7 +114,7 @@ def loops(cmd_deg: np.ndarray, meas_deg: np.ndarray, predicted: Mapping[str, np.
         if i % ncols == 0:
             ax.set_ylabel("bending angle (deg)")
         if i >= n - ncols:
-            ax.set_xlabel("knob command (deg)")
+            ax.set_xlabel(f"knob command ({cmd_unit})")
     fig.suptitle(title, x=0.01, ha="left", fontsize=11)
     return fig
 
@@ -159,7 +160,7 @@ def error_boxes(unit_rmse_deg: Mapping[str, np.ndarray], comparison: Comparison,
 
 
 def residuals(t_s: np.ndarray, cmd_deg: np.ndarray, other: tuple[str, np.ndarray] | None,
-              errors: Mapping[str, np.ndarray], colors: Mapping[str, str], title: str) -> Figure:
+              errors: Mapping[str, np.ndarray], colors: Mapping[str, str], title: str, cmd_unit: str = "deg") -> Figure:
     """Each model's error (predicted - measured) against knob speed, command, other axis and time.
 
     Dots are a thinned sample of the error; lines are the mean error in 20 bins, which is where
@@ -170,9 +171,11 @@ def residuals(t_s: np.ndarray, cmd_deg: np.ndarray, other: tuple[str, np.ndarray
     ----------
     other : (name, (n,) array) or None
         The other axis's command to plot against (None: that panel says the axis did not move).
+    cmd_unit : str
+        The command's unit (deg, or mm for a linear drive).
     """
     speed = np.gradient(cmd_deg, t_s) if cmd_deg.size > 1 else np.zeros_like(cmd_deg)
-    xs = [("knob speed (deg/s)", speed), ("knob command (deg)", cmd_deg),
+    xs = [(f"knob speed ({cmd_unit}/s)", speed), (f"knob command ({cmd_unit})", cmd_deg),
           (f"{other[0]} (deg)" if other else "other axis", other[1] if other else None), ("time (s)", t_s)]
     fig = _new(10.5, 6.2)
     axes = fig.subplots(2, 2, sharey=True).ravel()

@@ -5,11 +5,17 @@ a run folder or an aligned table recorded elsewhere (Parquet or CSV with the sam
 
 ``t_s``
     seconds, strictly increasing;
-``<axis>_cmd_deg``, ``<axis>_meas_deg``
-    per bending axis: the knob command and the bending angle measured from the tracker
+``<axis>_cmd_deg`` (or ``<axis>_cmd_mm``), ``<axis>_meas_deg``
+    per bending axis: the drive command and the bending angle measured from the tracker
     (thesis eq. 1, in the base sensor's frame);
 anything else numeric
     kept (knob positions, currents, ``sheath_wrap_deg``, ``contact_force_n``, ...).
+
+The drive of a bending axis is a knob or pulley turned by a servo, commanded in degrees, or a
+tendon pulled by a linear stage, commanded in millimetres (tendon-sheath benches and continuum
+robots are often built so): the command column names its unit (:data:`DRIVE_UNITS`), and
+:attr:`AlignedData.drive_units` carries it to the models, which record it and refuse data of
+another unit. The hysteresis maths is the same in either unit; the bending angle is always deg.
 """
 
 from __future__ import annotations
@@ -33,6 +39,29 @@ from endocal.streams import DROPOUT_STATUSES
 CSV_SUFFIXES = (".csv", ".txt", ".tsv", ".dat")
 
 CMD, MEAS = "_cmd_deg", "_meas_deg"
+#: Units a bending axis' drive command may be in: a knob or pulley's angle, or a linear stage's tendon
+#: displacement. An axis' command column is ``<axis>_cmd_<unit>``.
+DRIVE_UNITS = ("deg", "mm")
+CMD_SUFFIXES = tuple(f"_cmd_{u}" for u in DRIVE_UNITS)
+
+
+def cmd_column(axis: str, unit: str = "deg") -> str:
+    """The aligned table's command column of ``axis`` driven in ``unit`` (:data:`DRIVE_UNITS`)."""
+    return f"{axis}_cmd_{unit}"
+
+
+def drive_units_of(columns) -> dict[str, str]:
+    """Bending axis -> the unit of its command, for every axis with a command and a measured
+    angle among ``columns`` (an axis with two command columns is refused by :func:`check_aligned`)."""
+    cols = [str(c) for c in columns]
+    have = set(cols)
+    out: dict[str, str] = {}
+    for c in cols:
+        for unit, suffix in zip(DRIVE_UNITS, CMD_SUFFIXES):
+            axis = c[: -len(suffix)]
+            if c.endswith(suffix) and axis and axis + MEAS in have:
+                out.setdefault(axis, unit)
+    return out
 
 
 @dataclass
@@ -195,11 +224,15 @@ def align(motor: pd.DataFrame, tracker: pd.DataFrame, probe: ProbeConfig, max_ga
     ok = measured_at(t_frames, t, max_gap_s)
     out = {"t_s": t[ok]}
     first, second = probe.bending_axes
+    goals = []
     for axis, theta in ((first, theta_first), (second, theta_second)):
-        out[axis + CMD] = motor[f"{axis}_goal_deg"].to_numpy(float)[ok]
+        # a knob's goal in deg, or a linear stage's in mm (a lab's CSV log: endocal.runs.csvlog)
+        unit = next((u for u in DRIVE_UNITS if f"{axis}_goal_{u}" in motor.columns), "deg")
+        goals.append(f"{axis}_goal_{unit}")
+        out[cmd_column(axis, unit)] = motor[goals[-1]].to_numpy(float)[ok]
         out[axis + MEAS] = np.interp(t[ok], t_frames, theta) if t_frames.size else np.empty(0)
     for col in motor.columns:
-        if col == "t_s" or col in (f"{a}_goal_deg" for a in probe.bending_axes):
+        if col == "t_s" or col in goals:
             continue
         if pd.api.types.is_numeric_dtype(motor[col]) and not pd.api.types.is_bool_dtype(motor[col]):
             out[col] = motor[col].to_numpy(float)[ok]
@@ -213,7 +246,7 @@ class AlignedData:
     Attributes
     ----------
     table : DataFrame
-        ``t_s``, ``<axis>_cmd_deg``, ``<axis>_meas_deg`` per axis, and numeric extras.
+        ``t_s``, ``<axis>_cmd_deg`` (or ``_cmd_mm``), ``<axis>_meas_deg`` per axis, and numeric extras.
     axes : list of str
         Bending axes present (those with both a command and a measurement column).
     source : Path
@@ -222,6 +255,9 @@ class AlignedData:
         Hash of the source (the table file, or the run's streams and run.json).
     meta : dict
         ``run.json`` for a run folder, empty for a bare table.
+    drive_units : dict of str to str
+        Axis -> the unit of its command (:data:`DRIVE_UNITS`); an axis missing is in the unit its
+        command column names.
     """
 
     table: pd.DataFrame
@@ -229,15 +265,36 @@ class AlignedData:
     source: Path
     sha256: str
     meta: dict = field(default_factory=dict)
+    drive_units: dict = field(default_factory=dict)
 
     @property
     def extras(self) -> list[str]:
         """Numeric columns beyond time, commands and measurements."""
-        core = {"t_s"} | {a + CMD for a in self.axes} | {a + MEAS for a in self.axes}
+        core = {"t_s"} | {self.cmd_column(a) for a in self.axes} | {a + MEAS for a in self.axes}
         return [c for c in self.table.columns if c not in core]
 
+    def drive_unit(self, axis: str) -> str:
+        """The unit of ``axis``' command: ``deg`` (a knob) or ``mm`` (a linear stage pulling the tendon), as
+        ``drive_units`` says, else as the table's command column names it."""
+        axis = self._axis(axis)
+        if axis in self.drive_units:
+            return self.drive_units[axis]
+        return next((u for u in DRIVE_UNITS if cmd_column(axis, u) in self.table.columns), "deg")
+
+    def cmd_column(self, axis: str) -> str:
+        """The command column of ``axis`` (``ap_cmd_deg``, ``ap_cmd_mm``)."""
+        return cmd_column(axis, self.drive_unit(axis))
+
+    def cmd(self, axis: str) -> np.ndarray:
+        """The command of ``axis`` in its drive unit (:meth:`drive_unit`)."""
+        return self.table[self.cmd_column(axis)].to_numpy(float)
+
     def cmd_deg(self, axis: str) -> np.ndarray:
-        return self.table[self._axis(axis) + CMD].to_numpy(float)
+        """The command of a knob-driven ``axis`` in deg (an axis driven in mm is refused: :meth:`cmd`)."""
+        if self.drive_unit(axis) != "deg":
+            raise RunFormatError(f"{self.source}: the {axis} drive is commanded in {self.drive_unit(axis)}, not deg: "
+                                 "read it with cmd(axis), in its own unit")
+        return self.cmd(axis)
 
     def meas_deg(self, axis: str) -> np.ndarray:
         return self.table[self._axis(axis) + MEAS].to_numpy(float)
@@ -272,8 +329,9 @@ def check_aligned(df: pd.DataFrame, where: str) -> list[str]:
     Raises
     ------
     RunFormatError
-        No ``t_s``, no axis with both command and measurement, non-numeric, NaN or
-        infinite values in time/commands/measurements, or time that does not increase.
+        No ``t_s``, no axis with both command and measurement, an axis with a command in two
+        units, non-numeric, NaN or infinite values in time/commands/measurements, or time that
+        does not increase.
     """
     if "t_s" not in df.columns:
         if df.attrs.get("headerless"):
@@ -282,17 +340,23 @@ def check_aligned(df: pd.DataFrame, where: str) -> list[str]:
                                  "columns (\"1\", \"2\", ...) with `endocal import csv --map`")
         raise RunFormatError(f"{where}: no 't_s' column (an aligned table needs t_s, <axis>_cmd_deg, <axis>_meas_deg; "
                              "a log with its own column names goes through `endocal import csv LOG --map MAP`)")
-    cmd_axes = [c[: -len(CMD)] for c in df.columns if c.endswith(CMD)]
-    axes = [a for a in cmd_axes if a + MEAS in df.columns]
+    units = drive_units_of(df.columns)
+    axes = list(units)
     if not axes:
-        lonely = [c for c in df.columns if c.endswith(CMD) or c.endswith(MEAS)]
+        lonely = [c for c in df.columns if str(c).endswith((*CMD_SUFFIXES, MEAS))]
         hint = f" (found only {', '.join(lonely)})" if lonely else ""
         raise RunFormatError(
-            f"{where}: no bending axis with both '<axis>_cmd_deg' and '<axis>_meas_deg' columns{hint}"
+            f"{where}: no bending axis with both '<axis>_cmd_deg' (or '<axis>_cmd_mm', a linear drive) and "
+            f"'<axis>_meas_deg' columns{hint}"
         )
+    twice = next((a for a in axes if all(cmd_column(a, u) in df.columns for u in DRIVE_UNITS)), None)
+    if twice is not None:
+        raise RunFormatError(f"{where}: axis '{twice}' has a command in deg and one in mm "
+                             f"({', '.join(cmd_column(twice, u) for u in DRIVE_UNITS)}): keep the one its drive "
+                             "was commanded in")
     if len(df) == 0:
         raise RunFormatError(f"{where}: the table has no rows")
-    for col in ["t_s"] + [a + s for a in axes for s in (CMD, MEAS)]:
+    for col in ["t_s"] + [c for a in axes for c in (cmd_column(a, units[a]), a + MEAS)]:
         if not pd.api.types.is_numeric_dtype(df[col]):
             raise RunFormatError(f"{where}: column '{col}' is not numeric")
         values = df[col].to_numpy(float)
@@ -339,9 +403,16 @@ def load_aligned(path: str | Path, max_gap_s: float = 0.2) -> AlignedData:
                                      f"'{probe.name}' its run.json names; record or import the run again") from None
             digest = sha256_of(path)
         axes = check_aligned(df, str(path))
-        return AlignedData(df, axes, path, digest, meta)
+        units = drive_units_of(df.columns)
+        recorded = meta.get("drive_units") or {}
+        wrong = next((a for a in axes if a in recorded and recorded[a] != units[a]), None)
+        if wrong is not None:
+            raise RunFormatError(f"{path / RUN_JSON} records the {wrong} drive in {recorded[wrong]}, but its aligned "
+                                 f"table commands it in {units[wrong]} ({cmd_column(wrong, units[wrong])}): the run "
+                                 "was edited by hand; record or import it again")
+        return AlignedData(df, axes, path, digest, meta, units)
     if not path.exists():
         raise RunFormatError(f"{path} does not exist: give a run folder or an aligned table (.parquet or .csv)")
     df = _read_table(path)
     axes = check_aligned(df, str(path))
-    return AlignedData(df, axes, path, sha256_of(path), {})
+    return AlignedData(df, axes, path, sha256_of(path), {}, drive_units_of(df.columns))

@@ -1,10 +1,12 @@
 """Plausibility of what a CSV map makes of a log, checked before anything is written.
 
 A unit mistake in a map (:mod:`endocal.runs.csvlog`) gives numbers no rig produces, refused in
-one line naming the map key to fix: knob positions far beyond the probe's limits (with poses), a
-motor sample rate under 1 Hz or over 10 kHz, tip and base sensors nowhere near a bending length
-apart, a base quaternion read in the wrong order, a knob whose bend moves many times as far as
-it does or that is bent at its zero, fewer aligned rows than any fit can use. Motor samples the
+one line naming the map key to fix: a unit the column's own name contradicts (a displacement read
+as degrees, a column in degrees read as millimetres), knob positions far beyond the probe's limits
+(with poses) or a linear drive beyond any tendon's travel, a motor sample rate under 1 Hz or over
+10 kHz, tip and base sensors nowhere near a bending length apart, a base quaternion read in the
+wrong order, a knob whose bend moves many times as far as it does or that is bent at its zero,
+fewer aligned rows than any fit can use. Motor samples the
 aligned table leaves out for want of a reading (:func:`reading_gaps`), and measured angles with
 such numbers (:func:`measured_angle_warnings`), are not refused but said, for the import to warn.
 """
@@ -18,6 +20,7 @@ import numpy as np
 from endocal.errors import RunFormatError
 from endocal.kinematics.bending import bending_angles_deg, tip_in_base_mm
 from endocal.models.base import min_fit_samples
+from endocal.runs.colnames import named_length, unit_named
 from endocal.runs.format import LOG_RATE_RANGE_HZ
 from endocal.runs.mapfields import ColumnMap as CsvMap  # the map csvlog reads, as the checks see it
 
@@ -59,6 +62,16 @@ OFF_AXIS_RIGHT_DEG = 15.0
 #: both about +-90 deg; a duodenoscope's knob gear at most a few times), while a knob in
 #: radians read as degrees shows 57 times its real gain.
 BEND_PER_KNOB_MAX = 10.0
+#: Degrees of bend per millimetre of a linear drive beyond which its unit is called a mistake. A
+#: tendon r mm off the bending section's neutral axis bends it 180 / (pi r) deg per mm pulled:
+#: 11 to 29 deg/mm for the 2 to 5 mm of endoscopes and continuum robots, 115 at r = 0.5 mm (a
+#: sub-mm instrument); 360 deg/mm would need r = 0.16 mm. A travel in metres read as mm shows
+#: 1000 times its gain.
+BEND_PER_MM_MAX = 360.0
+#: The farthest a linear drive may pull or push a tendon (mm) before its unit is called a mistake:
+#: a tendon r mm off the axis is pulled r times the bend (8 mm for 90 deg at r = 5 mm), a bench's
+#: stage a few tens of mm; a travel in metres read as mm is 1000 times its size.
+LINEAR_DRIVE_MAX_MM = 500.0
 #: The least knob travel (deg, 1st to 99th percentile) and correlation with its bend over which
 #: that gain is measured: a knob that stays put (the other one moves in a sine-set, and twisted
 #: planes move this bend too) has no gain to measure.
@@ -71,8 +84,36 @@ KNOB_BEND_MIN_CORR = 0.8
 ZERO_BEND_MAX_DEG = 30.0
 
 
-def check_knobs(motor: dict, cmap: CsvMap, where: str) -> None:
-    """Refuse knob positions or goals far beyond the probe's limits: a unit mistake in the map.
+def check_unit_names(cmap: CsvMap, where: str) -> None:
+    """Refuse a knob's unit that its column's name contradicts: an angle unit for a column named
+    in mm or like a displacement (``Tendon Disp.``: a linear drive), or a length for one named in
+    deg, rad or ticks. Read off the names only (before the log is read).
+
+    Raises
+    ------
+    RunFormatError
+        Naming ``[knobs.AXIS] unit``, the column and what its name says.
+    """
+    for dof, k in cmap.knobs.items():
+        w = f"{where} [knobs.{dof}]"
+        for col in (k.position, k.goal):
+            if col is None:
+                continue
+            said = unit_named(col)
+            if k.run_unit == "deg" and named_length(col):
+                raise RunFormatError(
+                    f"{w}: unit = \"{k.unit}\" reads column '{col}' as an angle, but {named_length(col)}: a linear "
+                    f"drive pulling the tendon takes unit = \"{'m' if said == 'm' else 'mm'}\" (its command stays in "
+                    "mm through the run and its models)")
+            if k.run_unit == "mm" and said in ("deg", "rad", "ticks"):
+                raise RunFormatError(
+                    f"{w}: unit = \"{k.unit}\" reads column '{col}' as a length, but its name says {said}: a knob's "
+                    f"angle takes unit = \"{said}\"{' (with zero_ticks and ticks_per_rev)' if said == 'ticks' else ''}")
+
+
+def check_knobs(motor: dict, cmap: CsvMap, where: str, probe_limits: bool = True) -> None:
+    """Refuse knob positions or goals far beyond the probe's limits (with ``probe_limits``), or a
+    linear drive beyond :data:`LINEAR_DRIVE_MAX_MM`: a unit mistake in the map.
 
     Raises
     ------
@@ -86,9 +127,14 @@ def check_knobs(motor: dict, cmap: CsvMap, where: str) -> None:
              "ticks": "check zero_ticks and ticks_per_rev",
              "m": 'millimetres need unit = "mm"', "mm": 'metres need unit = "m"'}
     for dof, k in cmap.knobs.items():
-        u = probe.unit(dof)
-        lo, hi = probe.limits(dof)
-        margin = KNOB_MARGIN_SPANS * (hi - lo)
+        u = cmap.unit(dof)
+        if u != probe.unit(dof):  # a bending axis driven by a linear stage: the probe's knob limits are angles
+            lo, hi, margin, what = -LINEAR_DRIVE_MAX_MM, LINEAR_DRIVE_MAX_MM, 0.0, "any tendon's travel"
+        elif probe_limits:
+            lo, hi = probe.limits(dof)
+            margin, what = KNOB_MARGIN_SPANS * (hi - lo), f"the limits of probe '{probe.name}'"
+        else:
+            continue
         for key, col in (("position", k.position), ("goal", k.goal)):
             if col is None:
                 continue
@@ -97,7 +143,7 @@ def check_knobs(motor: dict, cmap: CsvMap, where: str) -> None:
             if beyond.mean() > MAX_BEYOND_FRACTION:
                 raise RunFormatError(
                     f"{where}: column '{col}' read as {k.unit} gives {dof} knob {key}s of {v.min():.4g}..{v.max():.4g} "
-                    f"{u}, far beyond the limits of probe '{probe.name}' ({lo:g}..{hi:g} {u}) in "
+                    f"{u}, far beyond {what} ({lo:g}..{hi:g} {u}) in "
                     f"{100 * beyond.mean():.0f} % of the motor rows: is [knobs.{dof}] unit right? ({hints[k.unit]})")
 
 
@@ -181,13 +227,20 @@ def check_base_order(tip: np.ndarray, base: np.ndarray, good: np.ndarray, cmap: 
 #: as radians give 57 times the bend.
 ANGLE_SPAN_MAX_DEG = 360.0
 
-_KNOB_HINTS = {"deg": 'radians need unit = "rad"', "rad": "check the column holds this knob's angle",
-               "ticks": "check ticks_per_rev"}
+_KNOB_HINTS = {"deg": 'radians need unit = "rad"',
+               "rad": "check the column holds this knob's angle", "ticks": "check ticks_per_rev",
+               "mm": 'metres need unit = "m"', "m": "check the column holds this drive's travel"}
+
+
+def _gain_max(unit: str) -> float:
+    """The most degrees of bend per unit of a drive in the run's ``unit`` (deg or mm)."""
+    return BEND_PER_MM_MAX if unit == "mm" else BEND_PER_KNOB_MAX
 
 
 def _knob_line(knob: np.ndarray, bend: np.ndarray) -> tuple[float, float, float, float] | None:
     """The knob's 1st and 99th percentiles and the straight line through the bend against it
-    (gain, bend at knob 0); None where the knob barely moves or the bend does not follow it."""
+    (gain, bend at knob 0); None where the knob barely moves or the bend does not follow it.
+    The travel is the run's unit (deg, or mm for a linear drive: :data:`KNOB_SPAN_MIN_DEG` of it)."""
     lo, hi = np.quantile(knob, [0.01, 0.99])
     if hi - lo < KNOB_SPAN_MIN_DEG or abs(np.corrcoef(knob, bend)[0, 1]) < KNOB_BEND_MIN_CORR:
         return None
@@ -198,18 +251,25 @@ def _knob_line(knob: np.ndarray, bend: np.ndarray) -> tuple[float, float, float,
 def _gain_message(line, bend: np.ndarray, dof: str, k, where: str, ask: str = "") -> str:
     lo, hi, gain, _ = line
     b_lo, b_hi = np.quantile(bend, [0.01, 0.99])
-    return (f"{where}: read as {k.unit}, column '{k.position}' turns the {dof} knob over {hi - lo:.3g} deg while "
-            f"the tip bends over {b_hi - b_lo:.3g} deg: {abs(gain):.0f} deg of bend per knob degree, where a "
-            f"tendon drive gives about 1 (at most {BEND_PER_KNOB_MAX:g}): {ask}is [knobs.{dof}] unit right? "
-            f"({_KNOB_HINTS[k.unit]})")
+    if k.run_unit == "mm":
+        moves = f"moves the {dof} drive over {hi - lo:.3g} mm"
+        per = f"per mm, where a tendon pulled r mm off the axis gives 57/r (at most {BEND_PER_MM_MAX:g})"
+    else:
+        moves = f"turns the {dof} knob over {hi - lo:.3g} deg"
+        per = f"per knob degree, where a tendon drive gives about 1 (at most {BEND_PER_KNOB_MAX:g})"
+    # a tendon pulled by a linear stage, read in degrees, bends 57/r deg per "degree": 11 to 29 at r = 2 to 5 mm
+    linear = ' (a tendon pulled by a linear stage: unit = "mm")' if k.unit == "deg" else ""
+    return (f"{where}: read as {k.unit}, column '{k.position}' {moves} while the tip bends over {b_hi - b_lo:.3g} deg: "
+            f"{abs(gain):.0f} deg of bend {per}: {ask}is [knobs.{dof}] unit right? ({_KNOB_HINTS[k.unit]}){linear}")
 
 
 def measured_angle_warnings(knob_deg: dict[str, np.ndarray], meas_deg: dict[str, np.ndarray], cmap: CsvMap,
                             where: str) -> list[str]:
     """A map of measured angles (:func:`check_knob_to_bend` for poses): an angle ranging over more
     than :data:`ANGLE_SPAN_MAX_DEG`, or a knob whose angle moves more than :data:`BEND_PER_KNOB_MAX`
-    degrees per knob degree, said in one line each naming the map keys. ``knob_deg`` and
-    ``meas_deg`` hold each knob's position and each axis' angle on the same samples.
+    degrees per knob degree (:data:`BEND_PER_MM_MAX` per mm of a linear drive), said in one line
+    each naming the map keys. ``knob_deg`` and ``meas_deg`` hold each knob's position (in the run's
+    unit: deg, or mm for a linear drive) and each axis' angle on the same samples.
 
     Warned, not refused: an angles map also carries what is no angle (the real piezo recording's
     drive voltage and displacement, data_samples/piezo), whose numbers may be anything. A bench's knob
@@ -226,8 +286,9 @@ def measured_angle_warnings(knob_deg: dict[str, np.ndarray], meas_deg: dict[str,
             continue
         k = cmap.knobs.get(axis)
         line = _knob_line(knob_deg[axis], bend) if k is not None else None
-        if line is not None and abs(line[2]) > BEND_PER_KNOB_MAX:
-            out.append(_gain_message(line, bend, axis, k, where, "if both are angles, ") +
+        if line is not None and abs(line[2]) > _gain_max(k.run_unit):
+            ask = "if both are angles, " if k.run_unit == "deg" else "if the bend is an angle, "
+            out.append(_gain_message(line, bend, axis, k, where, ask) +
                        f", or [angles.{axis}] unit (read as {ang.unit})?")
     return out
 
@@ -249,20 +310,20 @@ def check_knob_to_bend(motor: dict, tip: np.ndarray, base: np.ndarray, good: np.
     for dof, k in cmap.knobs.items():
         if dof not in bends or inside.sum() < MIN_ALIGNED_ROWS:
             continue
-        knob = np.interp(t_frame[inside], motor["t_s"], motor[f"{dof}_pos_{probe.unit(dof)}"])
+        knob = np.interp(t_frame[inside], motor["t_s"], motor[f"{dof}_pos_{cmap.unit(dof)}"])
         bend = bends[dof][inside]
         line = _knob_line(knob, bend)
         if line is None:
             continue
         gain, at_zero = line[2:]
-        if abs(gain) > BEND_PER_KNOB_MAX:
+        if abs(gain) > _gain_max(k.run_unit):
             raise RunFormatError(_gain_message(line, bend, dof, k, where))
         if abs(at_zero) > ZERO_BEND_MAX_DEG:
             straight = -at_zero / gain
             key = "zero_ticks" if k.unit == "ticks" else "zero"
             raise RunFormatError(
                 f"{where}: at {dof} knob 0 as the map reads it the tip is bent {at_zero:.0f} deg (a straight line "
-                f"through the bend against the knob); it is straight at knob {straight:.3g} deg, where column "
+                f"through the bend against the knob); it is straight at knob {straight:.3g} {k.run_unit}, where column "
                 f"'{k.position}' reads {k.zero + straight / k.per_unit:.6g}: is [knobs.{dof}] {key} right? (the "
                 "reading with the knob at 0, probe straight)")
 
@@ -336,6 +397,7 @@ def reading_gaps(covered: np.ndarray, t_read: np.ndarray, t_motor: np.ndarray, l
     return ReadingGaps(int(left.sum()), int(lines[left][0]), float((after - before).max()))
 
 
-__all__ = ["ANGLE_SPAN_MAX_DEG", "BEND_PER_KNOB_MAX", "DISTANCE_RANGE_LENGTHS", "MAX_GAP_S", "MIN_ALIGNED_ROWS",
-           "ReadingGaps", "check_aligned_rows", "check_base_order", "check_distance", "check_knob_to_bend",
-           "check_knobs", "check_rate", "measured_angle_warnings", "reading_gaps"]
+__all__ = ["ANGLE_SPAN_MAX_DEG", "BEND_PER_KNOB_MAX", "BEND_PER_MM_MAX", "DISTANCE_RANGE_LENGTHS",
+           "LINEAR_DRIVE_MAX_MM", "MAX_GAP_S", "MIN_ALIGNED_ROWS", "ReadingGaps", "check_aligned_rows",
+           "check_base_order", "check_distance", "check_knob_to_bend", "check_knobs", "check_rate", "check_unit_names",
+           "measured_angle_warnings", "reading_gaps"]

@@ -2,10 +2,14 @@
 
 Labs log their rigs as plain CSV: a clock (or none), knob positions in whatever unit the
 servo reports, perhaps the goals sent and the motor currents, and the raw EM poses of the tip
-and base sensors. A *map* (TOML, see ``configs/csv-map.example.toml``) says which column is
-what and in which unit; :func:`import_csv` converts everything to the run format's units
-(:mod:`endocal.runs.format`), and the bending angles are computed by thesis eq. 1 from the
-poses exactly as for endocal's own runs (the aligned table is built by the same code).
+and base sensors. A bending axis may be driven by a linear stage pulling its tendon instead of
+a knob (``unit = "mm"`` or ``"m"``): its command stays in millimetres through the run
+(``<axis>_goal_mm``, ``<axis>_cmd_mm``, ``drive_units`` in ``run.json``), and the models fitted
+on it record the unit (:mod:`endocal.runs.aligned`). A *map* (TOML, see
+``configs/csv-map.example.toml``) says which column is what and in which unit; :func:`import_csv`
+converts everything to the run format's units (:mod:`endocal.runs.format`), and the bending
+angles are computed by thesis eq. 1 from the poses exactly as for endocal's own runs (the
+aligned table is built by the same code).
 
 Rows
 ----
@@ -56,10 +60,10 @@ import pandas as pd
 
 from endocal.errors import OutputExistsError, OutputPathError, RunFormatError
 from endocal.probe import TRANSLATION, ProbeConfig, load_probe
-from endocal.runs.aligned import CMD, CSV_SUFFIXES, MEAS, check_aligned, load_aligned, measured_at
+from endocal.runs.aligned import CMD_SUFFIXES, CSV_SUFFIXES, MEAS, check_aligned, cmd_column, load_aligned, measured_at
 from endocal.runs.csvchecks import (MAX_GAP_S, ReadingGaps, check_aligned_rows, check_base_order, check_distance,
-                                    check_knob_to_bend, check_knobs, check_rate, measured_angle_warnings,
-                                    reading_gaps)
+                                    check_knob_to_bend, check_knobs, check_rate, check_unit_names,
+                                    measured_angle_warnings, reading_gaps)
 from endocal.runs.format import atomic_write_bytes, check_parent, parquet_bytes, prepare_output, software_versions
 from endocal.runs.imported import tracker_stream, write_imported_run
 from endocal.runs.textable import read_csv_table, sniff_delimiter
@@ -70,6 +74,9 @@ TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "datetime": None}  #
 ANGLE_UNITS = ("deg", "rad", "ticks")
 _SCALE = {"deg": 1.0, "rad": 180.0 / np.pi, "mm": 1.0, "m": 1000.0}  # to the run's deg or mm
 LENGTH_UNITS = {"mm": 1.0, "m": 1000.0}
+#: Units of a bending axis' drive: a knob's angle (kept in deg), or a linear stage's tendon
+#: displacement (kept in mm).
+DRIVE_UNITS = (*ANGLE_UNITS, *LENGTH_UNITS)
 CURRENT_UNITS = {"mA": 1.0, "A": 1000.0}
 QUAT_ORDERS = ("xyzw", "wxyz")
 _MAP_KEYS = {"probe", "time", "knobs", "tip", "base", "angles", "extras"}
@@ -147,6 +154,11 @@ class _Knob:
     ticks_per_rev: float
     direction: float
     current_factor: float
+
+    @property
+    def run_unit(self) -> str:
+        """The run's unit of this drive: ``mm`` for a length (a linear stage, the insertion), else ``deg``."""
+        return "mm" if self.unit in LENGTH_UNITS else "deg"
 
     @property
     def per_unit(self) -> float:
@@ -240,6 +252,16 @@ class CsvMap:
     def role_of(self, column: str) -> str:
         """The map key naming ``column`` (the first, when several do)."""
         return next(role for role, c in self.roles() if c == column)
+
+    def unit(self, dof: str) -> str:
+        """The run's unit of degree of freedom ``dof``: ``mm`` for a bending axis driven by a linear
+        stage (and the insertion), else the probe's (:meth:`~endocal.probe.ProbeConfig.unit`)."""
+        k = self.knobs.get(dof)
+        return k.run_unit if k is not None else self.probe.unit(dof)
+
+    def drive_units(self) -> dict[str, str]:
+        """Bending axis -> the unit its drive is commanded in, as ``run.json`` records it."""
+        return {a: self.unit(a) for a in self.probe.bending_axes}
 
 
 def _table(d, key: str, where: str, known: set[str]) -> dict:
@@ -353,6 +375,10 @@ def _angles(d: dict, probe: ProbeConfig, where: str) -> dict[str, _Angle]:
         column = _column(a, "column", w, "the measured angle")
         if column == UNFILLED:  # the column before its unit
             raise _unfilled(where, f"[angles.{axis}] column")
+        if a.get("unit") in LENGTH_UNITS:
+            raise RunFormatError(f"{w}: unit = {a['unit']!r}, but a bending angle is measured in deg or rad: a length "
+                                 "is a linear drive's, given in [knobs.AXIS] unit (a tendon displacement); give the "
+                                 "angle column's unit, deg or rad")
         unit = _choice(a.get("unit", "deg"), ("deg", "rad"), "angle unit", w)
         zero = _number(a, "zero", w, 0.0, "the reading when the section is straight")
         out[axis] = _Angle(column, unit, _SCALE[unit], _direction(a, w), zero)
@@ -363,7 +389,7 @@ def _extras(d: dict, where: str) -> tuple[str, ...]:
     extras = d.get("extras", [])
     if not (isinstance(extras, list) and all(isinstance(c, str) and c for c in extras)):
         raise RunFormatError(f"{where}: extras must list column names, e.g. extras = [\"sheath_wrap_deg\"]")
-    clash = [c for c in extras if c == "t_s" or c.endswith((CMD, MEAS))]
+    clash = [c for c in extras if c == "t_s" or c.endswith((*CMD_SUFFIXES, MEAS))]
     if clash:
         raise RunFormatError(f"{where}: extra column '{clash[0]}' would pass for an aligned table's own column; "
                              "rename it in the log")
@@ -424,7 +450,9 @@ def read_map(path: str | Path) -> CsvMap:
             raise RunFormatError(f"{w}: unknown key(s) {', '.join(bad)}; it takes {', '.join(sorted(_KNOB_KEYS))}")
         if k.get("position") == UNFILLED:  # the column before its unit
             raise _unfilled(where, f"[knobs.{dof}] position")
-        unit = _choice(k.get("unit", "deg"), ANGLE_UNITS if dof != TRANSLATION else ("mm", "m"), "unit", w)
+        units = (DRIVE_UNITS if dof in probe.bending_axes else tuple(LENGTH_UNITS) if dof == TRANSLATION
+                 else ANGLE_UNITS)
+        unit = _choice(k.get("unit", "deg"), units, "unit", w)
         if unit == "ticks" and ("zero_ticks" not in k or "ticks_per_rev" not in k):
             raise RunFormatError(f"{w}: unit 'ticks' needs zero_ticks and ticks_per_rev (e.g. 2048 and 4096)")
         if unit == "ticks" and "zero" in k:
@@ -455,6 +483,7 @@ def read_map(path: str | Path) -> CsvMap:
     unfilled = [role for role, c in cmap.roles() if c == UNFILLED]
     if unfilled:
         raise _unfilled(where, unfilled[0])
+    check_unit_names(cmap, where)
     valid = {p.valid for p in (tip, base) if p is not None and p.valid}  # one flag may serve both sensors
     named = [(role, c) for role, c in cmap.roles() if c not in valid]
     cols = [c for _, c in named]
@@ -639,7 +668,7 @@ def _motor(df: pd.DataFrame, t: np.ndarray, cmap: CsvMap, where: str) -> tuple[d
         raise RunFormatError(f"{where}: no row has every knob position ({', '.join(k.position for k in cmap.knobs.values())})")
     motor = {"t_s": t[is_motor]}
     for dof in probe.dofs:
-        u = probe.unit(dof)
+        u = cmap.unit(dof)
         k = cmap.knobs.get(dof)
         p = pos[dof][is_motor] if k is not None else np.zeros(int(is_motor.sum()))
         g = goal[dof][is_motor] if dof in goal else p
@@ -757,10 +786,10 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
     df, t, dropped, merged = _clock(df, cmap, dedupe, where)
     lines = df.index.to_numpy()
     motor, is_motor, incomplete = _motor(df, t, cmap, where)
-    if not cmap.angles:
-        # with measured angles the probe only names the axes (a bench's pulley may turn past any
-        # probe knob's limits): the knobs are checked against the limits of a probe's run only
-        check_knobs(motor, cmap, where)
+    # with measured angles the probe only names the axes (a bench's pulley may turn past any probe
+    # knob's limits): the knobs are checked against the limits of a probe's run only (a linear drive
+    # against a tendon's travel either way)
+    check_knobs(motor, cmap, where, probe_limits=not cmap.angles)
     check_rate(motor["t_s"], cmap, TIME_UNITS, where)
     probe = cmap.probe
 
@@ -770,7 +799,10 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
               "map_sha256": hashlib.sha256(map_text).hexdigest() if map_text else None}
     dt = np.diff(motor["t_s"])
     rate = float(1.0 / np.median(dt)) if dt.size and np.median(dt) > 0 else None
-    columns = {"time": cmap.time_column or f"{cmap.sample_rate_hz:g} Hz", **{d: k.position for d, k in cmap.knobs.items()},
+    # a drive in another unit than the probe's knobs says so: "ap (mm) <- Tendon Disp."
+    columns = {"time": cmap.time_column or f"{cmap.sample_rate_hz:g} Hz",
+               **{d if cmap.unit(d) == probe.unit(d) else f"{d} ({cmap.unit(d)})": k.position
+                  for d, k in cmap.knobs.items()},
                **{f"{a}{MEAS}": ang.column for a, ang in cmap.angles.items()}}
     first = (lambda mask: int(lines[np.argmax(mask)]) if mask.any() else None)
 
@@ -794,6 +826,7 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
         gaps = reading_gaps(covered, t[is_read], motor["t_s"], lines[is_motor])
         unused, invalid = ~(is_motor | incomplete | is_read), np.zeros(len(df), bool)
         _write_table(out, table, {"source": source, "backend": backend(unused, invalid, gaps), "command": command,
+                                  "drive_units": {a: cmap.unit(a) for a in cmap.angles},
                                   "software": software_versions()})
         return replace(result(out, int(is_read.sum()), len(table), invalid, unused, gaps),
                        unit_warnings=tuple(unit_warnings))
@@ -814,7 +847,7 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
     invalid, unused = is_frame & ~good, ~(is_motor | incomplete | is_frame)
     tracker = tracker_stream(tip[is_frame], base[is_frame], valid[is_frame])
     meta = write_imported_run(out, motor, tracker, probe, source=source, backend=backend(unused, invalid, gaps),
-                              command=command, wall0=wall0)
+                              command=command, wall0=wall0, drive_units=cmap.drive_units())
     return result(out, int(is_frame.sum()), meta["counts"].get("aligned_rows", 0), invalid, unused, gaps,
                   meta.get("alignment_error"))
 
@@ -870,13 +903,13 @@ def _angles_table(df: pd.DataFrame, t: np.ndarray, motor: dict, cmap: CsvMap,
     t_read, t_motor = t[is_read], motor["t_s"]
     ok = measured_at(t_read, t_motor, MAX_GAP_S)
     check_aligned_rows(int(ok.sum()), t_motor, t_read, "angle reading", cmap, where)
-    probe = cmap.probe
     table = {"t_s": t_motor[ok]}
     for axis in cmap.angles:
-        table[axis + CMD] = motor[f"{axis}_goal_deg"][ok]
+        u = cmap.unit(axis)
+        table[cmd_column(axis, u)] = motor[f"{axis}_goal_{u}"][ok]
         table[axis + MEAS] = np.interp(t_motor[ok], t_read, meas[axis][is_read])
     for dof, k in cmap.knobs.items():
-        u = probe.unit(dof)
+        u = cmap.unit(dof)
         if k.goal or dof not in cmap.angles:
             table[f"{dof}_pos_{u}"] = motor[f"{dof}_pos_{u}"][ok]
         if k.current:
@@ -885,7 +918,7 @@ def _angles_table(df: pd.DataFrame, t: np.ndarray, motor: dict, cmap: CsvMap,
         table[col] = motor[col][ok]
     out = pd.DataFrame(table)
     check_aligned(out, where)
-    warnings = measured_angle_warnings({dof: motor[f"{dof}_pos_{probe.unit(dof)}"][ok] for dof in cmap.knobs},
+    warnings = measured_angle_warnings({dof: motor[f"{dof}_pos_{cmap.unit(dof)}"][ok] for dof in cmap.knobs},
                                        {axis: table[axis + MEAS] for axis in cmap.angles}, cmap, where)
     return is_read, ok, out, warnings
 

@@ -4,11 +4,17 @@
 
     RUN/
       run.json          what was run: protocol + parameters, probe, backend, seed, versions,
-                        start/end time (UTC), units, status, row counts
+                        start/end time (UTC), units, each bending axis' drive unit, status,
+                        row counts
       motor/            motor stream, a Parquet dataset (part-NNNNNN.parquet, one per flush)
       tracker/          EM-tracker stream, a Parquet dataset (long format, one row per sensor frame)
       truth/            simulator ground truth (simulator runs only)
       aligned.parquet   one row per motor tick: t_s, <axis>_cmd_deg, <axis>_meas_deg, + numeric extras
+
+A bending axis is driven by a knob (its command and motor columns in deg: ``ap_goal_deg``,
+``ap_cmd_deg``) or, in a lab's imported log, by a linear stage pulling its tendon (in mm:
+``ap_goal_mm``, ``ap_cmd_mm``); ``run.json``'s ``drive_units`` records which
+(:mod:`endocal.runs.aligned`).
 
 The streams are folders of Parquet parts so that a crash (``kill -9``) loses at most the
 part being buffered: each part is written to a hidden temporary name and renamed into
@@ -57,7 +63,7 @@ STREAMS = (MOTOR, TRACKER, TRUTH)
 UNITS = {
     "t_s": "seconds, monotonic from run start (motor clock)",
     "*_deg": "degrees (knob angles, probe rotation, bending angles)",
-    "*_mm": "millimetres",
+    "*_mm": "millimetres (positions, insertion, a linear stage's tendon displacement)",
     "*_dps": "degrees per second",
     "*_mmps": "millimetres per second",
     "*_ma": "milliamperes",
@@ -222,8 +228,12 @@ def check_parent(out: Path) -> None:
 
 
 def run_meta(*, protocol: dict, probe, backend: dict, seed, realtime: bool, command: str | None,
-             sample_rate_hz, planned_duration_s: float) -> dict:
-    """The ``run.json`` of a run about to be logged (``status: running``; the logger completes it)."""
+             sample_rate_hz, planned_duration_s: float, drive_units: dict[str, str] | None = None) -> dict:
+    """The ``run.json`` of a run about to be logged (``status: running``; the logger completes it).
+
+    ``drive_units`` maps each bending axis to the unit its drive is commanded in (``deg`` for a
+    knob, ``mm`` for a linear stage; default deg for every axis).
+    """
     return {
         "format": FORMAT_NAME,
         "version": FORMAT_VERSION,
@@ -238,6 +248,7 @@ def run_meta(*, protocol: dict, probe, backend: dict, seed, realtime: bool, comm
         "sample_rate_hz": sample_rate_hz,
         "planned_duration_s": planned_duration_s,
         "units": UNITS,
+        "drive_units": {a: (drive_units or {}).get(a, "deg") for a in probe.bending_axes},
         "streams": {"motor": MOTOR + "/", "tracker": TRACKER + "/", "aligned": ALIGNED},
     }
 

@@ -41,7 +41,8 @@ def tracker_stream(tip: np.ndarray, base: np.ndarray, valid: np.ndarray | None =
 
 
 def write_imported_run(out: Path, motor: dict[str, np.ndarray], tracker: dict[str, np.ndarray], probe: ProbeConfig, *,
-                       source: dict, backend: dict, command: str | None, wall0: float | None = None) -> dict:
+                       source: dict, backend: dict, command: str | None, wall0: float | None = None,
+                       drive_units: dict[str, str] | None = None) -> dict:
     """Write ``out`` as a complete run folder and return its ``run.json`` content; staged beside
     ``out`` and renamed into place (:func:`endocal.runs.format.write_folder_staged`), so a
     failure halfway leaves nothing behind.
@@ -58,18 +59,21 @@ def write_imported_run(out: Path, motor: dict[str, np.ndarray], tracker: dict[st
         What was imported (``name``, ``source`` path, ``sha256``...), recorded as the run's protocol.
     backend : dict
         How it was recorded and imported (``name`` names the importer).
+    drive_units : dict, optional
+        Bending axis -> the unit of its drive (``mm`` for a linear stage, whose motor columns are
+        ``<axis>_goal_mm`` ...); deg when not given. Recorded in ``run.json``.
     """
     wall0 = time.monotonic() if wall0 is None else wall0
     return write_folder_staged(out, lambda stage: _write_run(stage, motor, tracker, probe, source, backend, command,
-                                                              wall0))
+                                                              wall0, drive_units))
 
 
 def _write_run(out: Path, motor: dict, tracker: dict, probe: ProbeConfig, source: dict, backend: dict,
-               command: str | None, wall0: float) -> dict:
+               command: str | None, wall0: float, drive_units: dict[str, str] | None) -> dict:
     dt = np.diff(motor["t_s"])
     rate = float(1.0 / np.median(dt)) if dt.size and np.median(dt) > 0 else None
     meta = run_meta(protocol=source, probe=probe, backend=backend, seed=None, realtime=True, command=command,
-                    sample_rate_hz=rate, planned_duration_s=float(motor["t_s"][-1]))
+                    sample_rate_hz=rate, planned_duration_s=float(motor["t_s"][-1]), drive_units=drive_units)
     meta["started_utc"] = utc_now()
     create_run_folder(out)
     write_json(out / RUN_JSON, meta)

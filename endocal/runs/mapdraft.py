@@ -13,16 +13,24 @@ one, else by the numbers:
 - knob positions: a column named for a probe axis (``ap_present_ticks``), else per-motor columns
   numbered by a suffix as ROS writes a JointState (``position0``, ``goal1``: motor 0 is the
   probe's first axis, marked CHECK; a numbered ``effort`` is its current, as Dynamixel drivers
-  publish it, marked CHECK); whole numbers within one servo turn are ticks (zero at
+  publish it, marked CHECK), else a bench's one drive: a column named for the driving side
+  (``knob``, ``motor``, ``pulley``), else like a linear drive's travel (``Tendon Disp.``,
+  ``stroke``, ``extension``), else like a position (``pos``, ``position``), the choice marked
+  CHECK unless one name says knob or motor; whole numbers within one servo turn are ticks (zero at
   mid-turn, 4096 per turn, as the XM430 the thesis uses), values within +-2 pi are radians, else
-  degrees; a column of an EM pose is never a knob;
+  degrees; a displacement is millimetres when its numbers plainly are (a travel of 0.2 to 200)
+  and ``FILL IN`` otherwise; a column of an EM pose, a component of an x/y/z triple (``Pos x``) or a
+  column named like a current, torque, force or load (``Motor Curr.``) is never a knob position
+  (a bench's motor current becomes its knob's ``current``);
 - EM positions: below 2 in magnitude are metres, else millimetres;
-- a measured angle within +-pi is radians, else degrees.
+- a measured angle within +-pi is radians, else degrees; of several angle columns (``Angle x``,
+  ``Angle y``, ``Angle z``) the one that follows the drive best, marked CHECK.
 
 Every line decided by the numbers, or by a default, is marked ``CHECK`` with the evidence,
 and every role the import needs that nothing matched (a knob per bending axis with poses) is
 left as ``"FILL IN"``, which the import refuses naming the role. The remaining numeric columns
-that fill every row, but for clocks and counters (a ROS header's ``stamp`` and ``seq``), become
+that fill every row, but for clocks and counters (a ROS header's ``stamp`` and ``seq``) and the
+components of x/y/z triples (a tip's pose: what the model predicts, no covariate), become
 ``extras`` (covariates for ``load:COLUMN``).
 """
 
@@ -38,6 +46,7 @@ import numpy as np
 import pandas as pd
 
 from endocal.probe import load_probe
+from endocal.runs.colnames import ANGLE_UNIT_WORDS, DISPLACEMENT_WORDS, EFFORT_WORDS, unit_named, words
 from endocal.runs.csvlog import UNFILLED as FILL, read_log_table
 from endocal.runs.format import LOG_RATE_RANGE_HZ
 
@@ -46,12 +55,17 @@ _TIME_UNIT = {"s": "s", "sec": "s", "secs": "s", "seconds": "s", "ms": "ms", "ms
               "milliseconds": "ms", "us": "us", "usec": "us", "micros": "us", "ns": "ns", "nsec": "ns",
               "nanos": "ns", "nanoseconds": "ns"}
 _GOAL = {"goal", "cmd", "command", "commanded", "target", "setpoint", "sp", "desired", "demand"}
-_CURRENT = {"current", "cur", "ma", "amp", "amps", "effort"}  # a JointState's effort: a servo's current
+_CURRENT = {"current", "cur", "curr", "ma", "amp", "amps", "effort"}  # a JointState's effort: a servo's current
 #: words of a knob's position: those that name the driving side outright, then generic ones
 _DRIVE = {"knob", "motor", "pulley", "input", "drive", "actuator", "servo", "present", "in"}
 _POSITION = _DRIVE | {"pos", "position", "actual", "angle", "enc", "encoder"}
-_ANGLE_UNIT = {"deg": "deg", "degree": "deg", "degrees": "deg", "rad": "rad", "radian": "rad", "radians": "rad",
-               "tick": "ticks", "ticks": "ticks", "raw": "ticks", "counts": "ticks", "count": "ticks"}
+#: words of a linear drive's travel: a tendon pulled by a stage (``Tendon Disp.``)
+_LINEAR = DISPLACEMENT_WORDS | {"tendon", "stage", "linear"}
+_ANGLE_UNIT = ANGLE_UNIT_WORDS
+#: a travel (1st to 99th percentile) plainly in millimetres: a tendon pulled 0.2 mm bends a section a
+#: few degrees (57/r deg per mm at r mm off the axis), a stage moves at most a few tens of mm; below it
+#: the numbers may be metres, above it micrometres, and the draft leaves the unit to fill in
+_MM_SPAN = (0.2, 200.0)
 _MEASURED = {"joint", "bend", "bending", "theta", "meas", "measured", "output", "camera", "angle"}
 _SENSORS = {"tip": {"tip", "distal", "sensor1", "s1"}, "base": {"base", "proximal", "ref", "sensor0", "s0"}}
 _AXES = {"x", "y", "z", "px", "py", "pz"}
@@ -60,17 +74,26 @@ _ROTATION = {"q", "quat", "quaternion", "orientation", "rotation", "rot"}
 _LENGTH_UNIT = {"mm": "mm", "m": "m"}
 #: words of an EM sensor's pose columns (``field.base.pose.position.x``): never a knob
 _POSE_WORDS = {"tip", "distal", "base", "proximal", "pose", "orientation", "quaternion", "quat", "quality"}
-_NOT_KNOB = _GOAL | _CURRENT | (_MEASURED - {"angle"}) | _POSE_WORDS
+_NOT_KNOB = _GOAL | _CURRENT | EFFORT_WORDS | (_MEASURED - {"angle"}) | _POSE_WORDS
 #: words of columns that are no covariate: clocks, and counters such as a ROS header's seq
 _NOT_EXTRA = _TIME | {"seq", "sequence", "index", "idx", "counter", "header"}
 #: a word ending in a motor's number, as ROS writes the arrays of a JointState: position0, goal1
 _NUMBERED = re.compile(r"([a-z]+?)(\d+)")
 
 
-def words(name: str) -> list[str]:
-    """A column name's words, lower case: ``apPresentTicks`` and ``ap_present_ticks`` give ap, present, ticks."""
-    spaced = re.sub(r"(?<=[a-z0-9])(?=[A-Z])", " ", str(name))
-    return [w for w in re.split(r"[^A-Za-z0-9]+", spaced.lower()) if w]
+def components(cols: list[str]) -> set[str]:
+    """The columns that are one component of an x/y/z triple (``Pos x``, ``Pos y``, ``Pos z``;
+    ``angle_x`` ...): a pose's position or orientation, never a drive or a covariate."""
+    out = set()
+    for c in cols:
+        ws = words(c)
+        if not ws or ws[-1] not in ("x", "y", "z"):
+            continue
+        stem = ws[:-1]
+        triple = [d for d in cols if words(d)[:-1] == stem and words(d)[-1:] in (["x"], ["y"], ["z"])]
+        if len({words(d)[-1] for d in triple}) == 3:
+            out.add(c)
+    return out
 
 
 @dataclass
@@ -240,6 +263,8 @@ class _Drafter:
         self.unmatched: list[str] = []
         self.taken: set[str] = set()
         self.repeated_stamps = 0
+        self.components = components(self.cols)
+        self.knob_columns: dict[str, str] = {}  # axis -> the drafted knob position column
 
     def draft(self) -> Draft:
         w = self.w
@@ -261,7 +286,7 @@ class _Drafter:
         else:
             self._angles(list(knobs) or list(self.probe.bending_axes[:1]))
         extras = [c for c in self.cols if c not in self.taken and not set(words(c)) & _NOT_EXTRA
-                  and _values(self.df, c).size == len(self.df) > 0]
+                  and c not in self.components and _values(self.df, c).size == len(self.df) > 0]
         if extras:  # a top-level key: before the first table
             w.lines[5:5] = ["# further numeric columns, carried into the table (covariates for load:COLUMN): drop "
                             "what is not one", "extras = [" + "".join(f"\n    {_toml(c)}," for c in extras) + "\n]"]
@@ -295,6 +320,7 @@ class _Drafter:
     def _knob(self, axis: str, pos: str, goal: str | None, cur: str | None, what: str, check: str = "") -> None:
         w = self.w
         self.taken |= {pos} | ({goal} if goal else set()) | ({cur} if cur else set())
+        self.knob_columns[axis] = pos
         w.key("position", pos, what, check=check, where=f"[knobs.{axis}] ")
         _knob_unit(w, self.df, pos, axis)
         if goal:
@@ -303,7 +329,8 @@ class _Drafter:
             w.key("current", cur, "motor current", where=f"[knobs.{axis}] ",
                   check="a JointState's effort read as the servo's current (Dynamixel drivers publish mA there); "
                         "delete the line if it is a torque" if "effort" in cur.lower() else "")
-            w.key("current_unit", "A" if words(cur)[-1:] == ["a"] or "amp" in words(cur) else "mA", "mA or A")
+            cur_unit, why = _current_unit(self.df, cur)
+            w.key("current_unit", cur_unit, "mA or A", check=why, where=f"[knobs.{axis}] ")
         self.roles[f"knob {axis}"] = pos + (f" (goal {goal})" if goal else "")
 
     def _knobs(self, poses: bool) -> list[str]:
@@ -313,7 +340,7 @@ class _Drafter:
         axes, found = list(self.probe.bending_axes), []
         for axis in axes:
             goal = _pick(self.cols, _GOAL, need={axis}, taken=self.taken)
-            pos = _pick(self.cols, _POSITION | _ANGLE_UNIT.keys(), avoid=_NOT_KNOB, need={axis},
+            pos = _pick(self.cols, _POSITION | _ANGLE_UNIT.keys() | _LINEAR | {"mm"}, avoid=_NOT_KNOB, need={axis},
                         taken=self.taken | ({goal} if goal else set()))
             if pos is None:
                 pos, goal = goal, None
@@ -346,19 +373,46 @@ class _Drafter:
         return found
 
     def _bench_knob(self) -> list[str]:
-        """A bench's one motor, named for what it is rather than for a probe axis."""
+        """A bench's one drive, named for what it is rather than for a probe axis: the driving side
+        (``knob``, ``motor``), else a linear drive's travel (``Tendon Disp.``), else a position; never
+        a current, torque, force or load, nor a component of an x/y/z triple. The choice is marked
+        CHECK unless one column names the driving side."""
         axes = list(self.probe.bending_axes)
-        goal = _pick(self.cols, _GOAL, avoid=_CURRENT | {"tip"}, taken=self.taken)
-        pos = (_pick(self.cols, _DRIVE, avoid=_NOT_KNOB, taken=self.taken)
-               or _pick(self.cols, _POSITION, avoid=_NOT_KNOB, taken=self.taken) or goal)
+        taken = self.taken | self.components
+        goal = _pick(self.cols, _GOAL, avoid=_CURRENT | EFFORT_WORDS | {"tip"}, taken=taken)
+        check = ""
+        drive = _candidates(self.cols, _DRIVE, avoid=_NOT_KNOB, taken=taken)
+        linear = _candidates(self.cols, _LINEAR, avoid=_NOT_KNOB, taken=taken)
+        generic = _candidates(self.cols, _POSITION, avoid=_NOT_KNOB, taken=taken)
+        if drive:
+            pos = drive[0]
+            if len(drive) > 1:
+                check = f"of {', '.join(drive)}, the first named for the driving side is taken"
+        elif linear:
+            pos = linear[0]
+            word = next((x for x in words(pos) if x in DISPLACEMENT_WORDS), None) or next(
+                x for x in words(pos) if x in _LINEAR)
+            others = list(dict.fromkeys(c for c in linear + generic if c != pos))
+            check = (f"named like a linear drive's travel ({word}), read as the drive"
+                     + (f" (also: {', '.join(others)})" if others else ""))
+        elif generic:
+            pos = generic[0]
+            word = next(x for x in words(pos) if x in _POSITION)
+            check = (f"named like a position ({word}), read as the drive"
+                     + (f" (also: {', '.join(generic[1:])})" if len(generic) > 1 else ""))
+        else:
+            pos = goal
+            if goal:
+                check = "the only goal column, read as the drive's position (no column named for one)"
         self.w.table(f"knobs.{axes[0]}", "the one driven axis of a bench is the probe's first")
         if pos is None:
-            self.w.key("position", FILL, "the driving knob or pulley, as its encoder reads it")
-            self.w.key("unit", FILL, "deg, rad or ticks: that column's unit")
+            self.w.key("position", FILL, "the driving knob, pulley or linear stage, as its encoder reads it")
+            self.w.key("unit", FILL, "deg, rad, ticks or mm: that column's unit")
             self.unmatched.append(f"[knobs.{axes[0]}] position")
             return []
-        self._knob(axes[0], pos, None if goal == pos else goal, None,
-                   "the driving knob or pulley, as its encoder reads it")
+        cur = _pick(self.cols, _CURRENT - {"effort"}, avoid=_GOAL | _POSE_WORDS, taken=taken | {pos})
+        self._knob(axes[0], pos, None if goal == pos else goal, cur,
+                   "the driving knob, pulley or linear stage, as its encoder reads it", check=check)
         return [axes[0]]
 
     def _poses(self, sensors: dict) -> None:
@@ -392,9 +446,14 @@ class _Drafter:
         measured = [c for c in self.cols if c not in self.taken and set(words(c)) & _MEASURED
                     and _values(self.df, c).size]
         for i, axis in enumerate(axes):
-            col = next((c for c in measured if axis in words(c)), None) or (measured[i] if i < len(measured) else None)
+            col = next((c for c in measured if axis in words(c)), None)
+            check = ""
+            if col is None and len(measured) > 1 and axis in self.knob_columns:
+                col, check = _follows(self.df, measured, self.knob_columns[axis])
+            elif col is None and i < len(measured):
+                col = measured[i]
             w.table(f"angles.{axis}", "the measured bending angle (an encoder, a camera)")
-            w.key("column", col or FILL, "")
+            w.key("column", col or FILL, "", check=check, where=f"[angles.{axis}] ")
             if col is None:
                 # no unit guessed for a column nobody named: one read wrongly imports at 57 times the angle
                 w.key("unit", FILL, "deg or rad: that column's unit")
@@ -411,14 +470,70 @@ class _Drafter:
             self.roles[f"angle {axis}"] = col
 
 
-def _knob_unit(w: _Writer, df: pd.DataFrame, col: str, axis: str) -> None:
-    unit, why = _angle_unit(df, col, ticks_ok=True)
-    w.key("unit", unit, "deg, rad or ticks", check=why, where=f"[knobs.{axis}] ")
+def _candidates(cols: list[str], want: set[str], *, avoid: set[str], taken: set[str]) -> list[str]:
+    """Every free column with a word of ``want`` and none of ``avoid``, in the log's order."""
+    return [c for c in cols if c not in taken and set(words(c)) & want and not set(words(c)) & avoid]
+
+
+def _follows(df: pd.DataFrame, cols: list[str], knob: str) -> tuple[str, str]:
+    """Of several angle columns, the one that follows the drive ``knob`` best (largest |correlation|),
+    and the CHECK saying so: the bend moves with the drive, a pose's other angles barely do."""
+    k = pd.to_numeric(df[knob], errors="coerce").to_numpy(float)
+    r = {}
+    for c in cols:
+        v = pd.to_numeric(df[c], errors="coerce").to_numpy(float)
+        ok = np.isfinite(k) & np.isfinite(v)
+        r[c] = abs(float(np.corrcoef(k[ok], v[ok])[0, 1])) if ok.sum() > 2 and np.ptp(v[ok]) > 0 and np.ptp(k[ok]) > 0 \
+            else 0.0
+    best = max(cols, key=lambda c: r[c])
+    others = ", ".join(f"{c} {r[c]:.2f}" for c in cols if c != best)
+    return best, f"of {len(cols)} angle columns the one that follows '{knob}' (|r| = {r[best]:.2f}; {others})"
+
+
+def _current_unit(df: pd.DataFrame, col: str) -> tuple[str, str]:
+    """A current column's unit (mA or A) and, when the name does not say, the evidence for it."""
+    ws = words(col)
+    if ws[-1:] == ["a"] or {"amp", "amps", "ampere", "amperes"} & set(ws):
+        return "A", ""
+    if "ma" in ws or "effort" in ws:  # a JointState's effort: Dynamixel drivers publish mA
+        return "mA", ""
+    v = _values(df, col)
+    size = float(np.quantile(np.abs(v), 0.99)) if v.size else 0.0
+    # a motor drawing under 20 mA at its peak moves nothing: numbers that small are amperes
+    return ("A", f"currents up to {size:.3g} read as amperes") if size < 20 else \
+        ("mA", f"currents up to {size:.4g} read as milliamperes")
+
+
+def _linear_unit(df: pd.DataFrame, col: str) -> tuple[str, str]:
+    """A linear drive's unit: ``mm`` with the evidence when its travel is plainly millimetres
+    (:data:`_MM_SPAN`), else ``FILL IN`` with why."""
+    v = _values(df, col)
+    if v.size == 0:
+        return FILL, "no numbers: mm or m"
+    lo, hi = np.quantile(v, [0.01, 0.99])
+    span = float(hi - lo)
+    if _MM_SPAN[0] <= span <= _MM_SPAN[1]:
+        return "mm", f"a travel of {span:.3g} ({lo:.3g}..{hi:.3g}) read as millimetres"
+    return FILL, (f"a travel of {span:.3g} ({lo:.3g}..{hi:.3g}): mm or m? (plainly mm would span "
+                  f"{_MM_SPAN[0]:g} to {_MM_SPAN[1]:g})")
+
+
+def _knob_unit(w: _Writer, df: pd.DataFrame, col: str, axis: str) -> str:
+    """Write a knob's unit (and its tick keys, direction); return the unit written."""
+    named = unit_named(col)
+    if named in ("mm", "m"):
+        unit, why = named, ""
+    elif named is None and set(words(col)) & _LINEAR:
+        unit, why = _linear_unit(df, col)
+    else:
+        unit, why = _angle_unit(df, col, ticks_ok=True)
+    w.key("unit", unit, "deg, rad, ticks, or mm for a linear drive", check=why, where=f"[knobs.{axis}] ")
     if unit == "ticks":
         w.key("zero_ticks", 2048, check="the tick count with the knob at 0 deg (probe straight)",
               where=f"[knobs.{axis}] ")
         w.key("ticks_per_rev", 4096, "XM430: 4096")
     w.key("direction", 1, "1, or -1 when a positive count bends the tip towards -y")
+    return unit
 
 
 def write_draft(log: str | Path, out: str | Path, *, force: bool = False) -> Draft:

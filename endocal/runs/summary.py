@@ -6,15 +6,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from endocal.models.data import reversals
-from endocal.runs.aligned import CMD, MEAS, AlignedData, load_aligned
+from endocal.runs.aligned import MEAS, AlignedData, load_aligned
 
 
 @dataclass
 class AxisSummary:
+    """One axis: its command's range (in ``drive_unit``: deg, or mm for a linear drive), its
+    measured angle's (deg), and the command's reversals."""
+
     axis: str
     cmd_range_deg: tuple[float, float]
     meas_range_deg: tuple[float, float]
     reversals: int
+    drive_unit: str = "deg"
 
 
 @dataclass
@@ -49,13 +53,14 @@ def summarize(path: str | Path | AlignedData) -> DataSummary:
     t = data.t_s
     axes = []
     for axis in data.axes:
-        cmd, meas = data.table[axis + CMD].to_numpy(float), data.table[axis + MEAS].to_numpy(float)
+        cmd, meas = data.cmd(axis), data.table[axis + MEAS].to_numpy(float)
         axes.append(
             AxisSummary(
                 axis,
                 (float(cmd.min()), float(cmd.max())),
                 (float(meas.min()), float(meas.max())),
                 reversals(cmd),
+                data.drive_unit(axis),
             )
         )
     meta = data.meta

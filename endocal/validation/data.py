@@ -5,14 +5,17 @@ hands each model the columns its effect terms may ask for:
 
 ``other_cmd_deg``, ``other_meas_deg``
     the other bending axis's knob command and measured angle (``coupling``), when the
-    data has a second axis (also under their own names, ``ml_cmd_deg``, ``ml_meas_deg``);
+    data has a second axis (also under their own names, ``ml_cmd_deg``, ``ml_meas_deg``;
+    ``ml_cmd_mm`` for a linear drive);
 every other numeric column
     kept under its own name (``sheath_wrap_deg``, knob currents, ...) for ``load:COLUMN``
     (columns of text, a fixture's name say, and columns with empty or infinite cells are
     left out).
 
 Several tables become several runs of one :class:`HysteresisData` (operator states restart
-at each); only the extra columns every table has are kept.
+at each); only the extra columns every table has are kept. The axis' drive unit (deg for a
+knob, mm for a linear stage: :attr:`~endocal.runs.aligned.AlignedData.drive_units`) becomes the
+data's ``drive_unit``; tables that disagree on it are refused.
 """
 
 from __future__ import annotations
@@ -25,13 +28,21 @@ import pandas as pd
 from scipy.ndimage import median_filter
 
 from endocal.errors import ModelError
-from endocal.models.data import OTHER_CMD, HysteresisData
+from endocal.models.data import OTHER_CMD, HysteresisData, common_drive_unit
 from endocal.runs.aligned import AlignedData
 
 #: Extra column holding the other bending axis's measured angle (deg).
 OTHER_MEAS = "other_meas_deg"
 #: A command that spans less than this never excites its axis (deg): nothing to validate or report.
 MIN_SPAN_DEG = 1.0
+#: The same for a linear drive (mm): a tendon r = 2 to 5 mm off the axis bends the section 57/r deg
+#: per mm pulled, so 0.1 mm is 1 to 3 deg of bend, about what a knob's 1 deg gives.
+MIN_SPAN_MM = 0.1
+
+
+def min_cmd_span(data: HysteresisData) -> float:
+    """The least span of ``data``'s command that excites its axis, in its drive unit."""
+    return MIN_SPAN_MM if data.cmd_unit == "mm" else MIN_SPAN_DEG
 
 
 def _as_list(aligned) -> list[AlignedData]:
@@ -144,8 +155,9 @@ def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str, planes=No
     Raises
     ------
     ModelError
-        A table lacks ``axis`` (the message names the table and the axes it has), or
-        ``planes`` is given for a table without both bending axes.
+        A table lacks ``axis`` (the message names the table and the axes it has), tables
+        command ``axis`` in different units, or ``planes`` is given for a table without both
+        bending axes.
 
     Samples where the command or the measured angle spikes (:func:`spikes`), or the measured
     angle is a reading held while the knob moved (:func:`held`), are left out; with ``dropped`` a
@@ -157,6 +169,13 @@ def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str, planes=No
         if axis not in a.axes:
             raise ModelError(f"{a.source}: no axis '{axis}' in the data (it has {', '.join(a.axes)}); "
                              "name one of those axes, or give data of this one")
+    units = {a.drive_unit(axis) for a in tables}
+    if len(units) > 1:
+        odd = next(a for a in tables if a.drive_unit(axis) != tables[0].drive_unit(axis))
+        raise ModelError(f"{tables[0].source} commands the {axis} drive in {tables[0].drive_unit(axis)}, {odd.source} "
+                         f"in {odd.drive_unit(axis)}: records of a knob and of a linear drive are not one model's "
+                         "data; give records of one drive")
+    unit = common_drive_unit(units)
     if planes is not None:
         tables = [_through_planes(a, axis, planes) for a in tables]
     common = set.intersection(*(set(a.extras) for a in tables))
@@ -170,12 +189,12 @@ def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str, planes=No
     for a in tables:
         extras = {c: a.table[c].to_numpy(float) for c in numeric}
         if other is not None:
-            extras[OTHER_CMD] = a.cmd_deg(other)
+            extras[OTHER_CMD] = a.cmd(other)
             extras[OTHER_MEAS] = a.meas_deg(other)
             # also under their own names, for effects that name them (``coupling:ml_meas_deg``)
-            extras[f"{other}_cmd_deg"] = extras[OTHER_CMD]
+            extras[a.cmd_column(other)] = extras[OTHER_CMD]
             extras[f"{other}_meas_deg"] = extras[OTHER_MEAS]
-        cmd, meas, t = a.cmd_deg(axis), a.meas_deg(axis), np.asarray(a.t_s, float)
+        cmd, meas, t = a.cmd(axis), a.meas_deg(axis), np.asarray(a.t_s, float)
         bad_cmd, bad_meas = spikes(cmd), spikes(meas)
         frozen = held(meas, cmd) & ~bad_cmd & ~bad_meas
         keep = ~(bad_cmd | bad_meas | frozen)
@@ -185,7 +204,7 @@ def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str, planes=No
                                 int(frozen.sum()), float(t[np.argmax(~keep)])))
             cmd, meas, t = cmd[keep], meas[keep], t[keep]
             extras = {k: v[keep] for k, v in extras.items()}
-        runs.append(HysteresisData(cmd_deg=cmd, meas_deg=meas, t_s=t, extras=extras))
+        runs.append(HysteresisData(cmd_deg=cmd, meas_deg=meas, t_s=t, extras=extras, drive_unit=unit))
     return runs[0] if len(runs) == 1 else HysteresisData.from_runs(runs)
 
 
@@ -291,6 +310,7 @@ def prefix(data: HysteresisData, n: int) -> HysteresisData:
         t_s=None if data.t_s is None else data.t_s[:n],
         extras={k: v[:n] for k, v in data.extras.items()},
         run_starts=starts,
+        drive_unit=data.drive_unit,
     )
 
 

@@ -15,7 +15,7 @@ from endocal.errors import ModelError
 from endocal.models import HysteresisData
 from endocal.models.base import HysteresisModel
 from endocal.runs.aligned import AlignedData
-from endocal.validation.data import MIN_SPAN_DEG, axis_data, check_columns, glitch_note, load_candidates
+from endocal.validation.data import axis_data, check_columns, glitch_note, load_candidates, min_cmd_span
 from endocal.validation.metrics import ErrorMetrics, error_metrics
 from endocal.validation.regimes import RegimeBreakdown, error_by_regime
 from endocal.validation.residuals import (ResidualTests, cut_start, residual_tests, unexplained_shape,
@@ -74,7 +74,8 @@ class ValidationResult:
     axis : str
         The model's bending axis.
     model : dict
-        ``path``, ``base``, ``effects``, ``equation``.
+        ``path``, ``base``, ``effects``, ``label``, ``equation``, ``drive_unit`` (the command's: deg, or mm for
+        a linear drive), ``fit_warnings``.
     data : list of dict
         ``source``, ``sha256``, ``n_samples`` per table.
     metrics : ErrorMetrics
@@ -203,6 +204,7 @@ def _axis_of(datas, model: HysteresisModel, axis: str | None, planes, bending_ax
     ax = _resolve_axis(model, tables, what)
     dropped: list = []
     data = axis_data(tables, ax, planes, dropped)
+    model.check_drive_unit(data, f"{', '.join(str(a.source) for a in tables)} ({what})")
     info = [{"source": str(a.source), "sha256": a.sha256, "n_samples": len(a.table),
              "duration_s": float(np.ptp(a.table["t_s"].to_numpy()))} for a in tables]
     for src, n_cmd, n_meas, n_held, t0 in dropped:
@@ -294,8 +296,9 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     Raises
     ------
     ModelError
-        Unfitted model, a model for an axis the data lacks, ``load:`` on a missing or
-        constant column, estimation data no model can be fitted on.
+        Unfitted model, a model for an axis the data lacks or commands in another unit (a knob's
+        deg, a linear drive's mm), ``load:`` on a missing or constant column, estimation data no
+        model can be fitted on.
     """
     model._require_fitted()
     data, ax, info, axes_all, val_paths, val_glitches = _axis_of(datas, model, axis, planes, bending_axes)
@@ -307,10 +310,11 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
                          f"{MIN_VALIDATION_SAMPLES} (the residual's autocorrelation is tested at lag 1 and more): "
                          "validate on a record of the knob moving, e.g. one back-and-forth sweep")
     span = float(np.ptp(data.cmd_deg))
-    if span < MIN_SPAN_DEG:
+    if span < min_cmd_span(data):
         where = ", ".join(map(str, val_paths or data_paths or ["the validation data"]))
-        raise ModelError(f"{where}: the {ax} command spans only {span:.2f} deg: the record does not excite this axis, "
-                         f"so there is no hysteresis to judge; validate on a record that moves the {ax} knob")
+        raise ModelError(f"{where}: the {ax} command spans only {span:.2f} {data.cmd_unit}: the record does not excite "
+                         f"this axis, so there is no hysteresis to judge; validate on a record that moves the {ax} "
+                         "knob")
     paths = list(data_paths) if data_paths is not None else (val_paths or ["DATA"])
     est, est_info = None, []
     if train is not None:
@@ -361,7 +365,8 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
                                 scheme_reason=reason)
     if beyond:
         lo, hi = model.cmd_range_deg_
-        notes.append(f"{beyond} samples command beyond the model's fitted range [{lo:.3g}, {hi:.3g}] deg: predicted by "
+        notes.append(f"{beyond} samples command beyond the model's fitted range [{lo:.3g}, {hi:.3g}] "
+                     f"{model.drive_unit_}: predicted by "
                      "continuing the model there (an extrapolation); refit on data that covers them")
     pointers = residual_pointers(model, data, resid, regimes, scan)
     shift = None
@@ -378,7 +383,7 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     notes = [n for n in notes if n] + list(scan.notes)
     comp = None
     if compare is not None and scan.scheme != "none":
-        compare._require_fitted()
+        compare.check_drive_unit(data, "the data (the --compare model)")
         old_pred, _ = predict_extrapolated(compare, data)
         stride = scan.stride
         with one_blas_thread():
@@ -395,7 +400,8 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
             new_heldout_rmse_deg=scan.baseline_rmse_heldout_deg)
     rep = getattr(model, "fit_report_", None)
     model_info = {"path": model_path, "base": model.base_name, "effects": labels, "label": model_label(model),
-                  "equation": model.equation(), "fit_warnings": list(rep.warnings) if rep is not None else []}
+                  "equation": model.equation(), "drive_unit": model.drive_unit_,
+                  "fit_warnings": list(rep.warnings) if rep is not None else []}
     return ValidationResult(axis=ax, model=model_info, data=info, metrics=metrics, regimes=regimes,
                             residuals=resid, scan=scan, notes=tuple(notes), compare=comp, pointers=tuple(pointers),
                             estimation=est_info, shift=shift,

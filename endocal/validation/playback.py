@@ -154,11 +154,17 @@ def task_space_trajectory(traj: Trajectory, probe: ProbeConfig, models: dict, pl
     Raises
     ------
     ModelError
-        A model for an axis the probe does not have, or none for an axis the protocol moves.
+        A model for an axis the probe does not have, of a linear drive (its commands in mm, the
+        probe's knobs in deg), or none for an axis the protocol moves.
     """
-    for axis in models:
+    for axis, model in models.items():
         if axis not in probe.bending_axes:
             raise ModelError(f"a model is for axis {axis!r}, but probe '{probe.name}' has {', '.join(probe.bending_axes)}")
+        if model.drive_unit_ != "deg":
+            raise ModelError(f"the {axis} model was fitted on a drive commanded in {model.drive_unit_} (a linear stage "
+                             f"pulling the tendon), but the knobs of probe '{probe.name}' that a protocol plays are "
+                             "commanded in deg: such a model is held against records offline (validate DATA, report), "
+                             "not played")
     moving = [a for a in probe.bending_axes if a in traj.moving_dofs]
     if moving and not set(models) & set(moving):
         raise ModelError(f"the model(s) are for axis {', '.join(repr(a) for a in models)}, but this protocol moves "

@@ -157,11 +157,12 @@ def regime_masks(data: HysteresisData, *, reversal_frac: float = 0.1, hold_min_s
     hold = hold_mask(data, hold_min_s)
     moving = ~hold
     near = moving & (reversal_distance_deg(data) < reversal_frac * span)
-    out = [("motion", f"near reversal (< {reversal_frac * span:.3g} deg after)", near),
+    cu = data.cmd_unit  # the command's unit: deg, or mm for a linear drive
+    out = [("motion", f"near reversal (< {reversal_frac * span:.3g} {cu} after)", near),
            ("motion", "steady motion", moving & ~near),
            ("motion", f"hold (>= {hold_min_s:g} s still)", hold)]
     speed = np.abs(speed_dps(data))
-    unit = "deg/s" if data.t_s is not None else "deg/sample"
+    unit = f"{cu}/s" if data.t_s is not None else f"{cu}/sample"
     out += [("speed", name, m) for name, m in _bands(speed, moving, ".3g", unit, ("slow", "medium", "fast"))]
     centre = 0.5 * (float(data.cmd_deg.max()) + float(data.cmd_deg.min()))
     dist = np.abs(data.cmd_deg - centre)
@@ -170,7 +171,7 @@ def regime_masks(data: HysteresisData, *, reversal_frac: float = 0.1, hold_min_s
         edges = [0.0, half / 3, 2 * half / 3]
         for lo, hi, word in zip(edges, edges[1:] + [np.inf], ("inner", "middle", "outer")):
             bound = f"{lo:.3g}..{hi:.3g}" if np.isfinite(hi) else f">= {lo:.3g}"
-            out.append(("amplitude", f"{word} third (|cmd - {centre:.3g}| {bound} deg)", (dist >= lo) & (dist < hi)))
+            out.append(("amplitude", f"{word} third (|cmd - {centre:.3g}| {bound} {cu})", (dist >= lo) & (dist < hi)))
     if OTHER_CMD in data.extras and not is_constant(data.extras[OTHER_CMD]):
         out += [("other axis", f"other knob {name}", m)
                 for name, m in _bands(data.extras[OTHER_CMD], np.ones(n, bool), ".3g", "deg")]

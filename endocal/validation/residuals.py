@@ -279,12 +279,12 @@ def unexplained_start(data: HysteresisData, resid_deg: np.ndarray, what: str = "
             f"{ratio:.1f}x the {ra:.3g} deg after it (see the note on its start)")
 
 
-def _start_words(u: np.ndarray) -> str:
-    """``"starts mid-swing (command 1.8 deg within 0..3.6, moving down)"``."""
+def _start_words(u: np.ndarray, unit: str = "deg") -> str:
+    """``"starts mid-swing (command 1.8 deg within 0..3.6, moving down)"`` (``unit``: the command's)."""
     span = float(np.ptp(u))
     moved = u[np.argmax(np.abs(u - u[0]) > 0.01 * span)] - u[0]
     where = "mid-swing" if u.min() < u[0] < u.max() else "at a turning point"
-    return (f"starts {where} (command {u[0]:.3g} deg within {u.min():.3g}..{u.max():.3g}, moving "
+    return (f"starts {where} (command {u[0]:.3g} {unit} within {u.min():.3g}..{u.max():.3g}, moving "
             f"{'up' if moved > 0 else 'down'})")
 
 
@@ -308,17 +308,17 @@ def cut_start(data: HysteresisData, resid_deg: np.ndarray, what: str = "validati
     if starts:
         st = max(starts, key=lambda s: s.rmse_rest_deg - s.rmse_estimated_deg)
         which = f"the {what}" if data.n_runs == 1 else f"{len(starts)} of {data.n_runs} {what}s (the largest gain)"
-        return (f"{which} {_start_words(data.cmd_deg[runs[st.run]])}: run from an estimated start, "
-                f"{st.describe()}: a record cut from a longer motion starts where that motion left the knob, not "
-                "in the relaxed state a model assumes; every model here, candidates too, runs it from the start "
-                "that predicts it best")
+        return (f"{which} {_start_words(data.cmd_deg[runs[st.run]], data.cmd_unit)}: run from an estimated start, "
+                f"{st.describe(data.cmd_unit)}: a record cut from a longer motion starts where that motion left the "
+                "knob, not in the relaxed state a model assumes; every model here, candidates too, runs it from the "
+                "start that predicts it best")
     found = _unexplained_starts(data, resid_deg)
     if not found:
         return ""
     _, rb, ra, a = max(found)
     which = f"the {what}" if data.n_runs == 1 else f"{len(found)} of {data.n_runs} {what}s (the worst)"
     u = data.cmd_deg[next(sl for sl in runs if sl.start == a)]
-    return (f"{which} {_start_words(u)}: its error before the first reversal is {rb:.3g} deg RMS, "
+    return (f"{which} {_start_words(u, data.cmd_unit)}: its error before the first reversal is {rb:.3g} deg RMS, "
             f"{rb / ra:.1f}x the {ra:.3g} deg after it. No start tried predicts it (relaxed, from 0, cut from a "
             "periodic motion, after a sweep the other way): a step, a first sweep from a relaxed sheath, or a tip "
             "still bent where the model never saw the knob starts a record so; that stretch measures the start, not "

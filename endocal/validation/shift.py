@@ -61,8 +61,10 @@ class RecordShift:
     zero_deg, zero_rmse_deg : float
         The constant output shift ``c`` and the RMSE with it.
     width_deg, gain, offset_deg, friction_rmse_deg : float
-        The loop change ``w`` (knob deg per side, > 0 wider), the slope factor ``g``, the
-        offset ``a`` and the RMSE with them.
+        The loop change ``w`` (knob deg per side, > 0 wider; in ``cmd_unit``), the slope factor
+        ``g``, the offset ``a`` and the RMSE with them.
+    cmd_unit : str
+        The command's unit: deg, or mm for a linear drive (``width_deg`` is in it).
     """
 
     rmse_deg: float
@@ -72,6 +74,7 @@ class RecordShift:
     gain: float
     offset_deg: float
     friction_rmse_deg: float
+    cmd_unit: str = "deg"
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -118,7 +121,7 @@ def record_shift(model: HysteresisModel, data: HysteresisData) -> RecordShift:
     if r > rmse:  # the bounded search found nothing better than the model as it stands
         w, r, a, g = 0.0, rmse, 0.0, 1.0
     return RecordShift(rmse_deg=rmse, zero_deg=c, zero_rmse_deg=_rms(p + c - y), width_deg=w, gain=float(g),
-                       offset_deg=float(a), friction_rmse_deg=r)
+                       offset_deg=float(a), friction_rmse_deg=r, cmd_unit=data.cmd_unit)
 
 
 def moving_speed_dps(data: HysteresisData) -> float:

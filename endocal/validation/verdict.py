@@ -242,7 +242,7 @@ def shift_pointers(shift, scan, covariates: list[str] = (), speeds_dps: tuple[fl
             "and validation data back to back; a drift that goes on across records shows in one long record with "
             "drift fitted on its first part")]
     wider = "wider" if shift.width_deg > 0 else "narrower"
-    evidence = (f"{fitted}; a loop {abs(shift.width_deg):.3g} knob deg per side {wider} with "
+    evidence = (f"{fitted}; a loop {abs(shift.width_deg):.3g} knob {shift.cmd_unit} per side {wider} with "
                 f"{100 * (shift.gain - 1):+.0f} % slope, fitted on this record alone, brings it to {fr:.3g} deg "
                 f"(-{100 * (1 - fr / base):.0f} %)")
     out = []
@@ -253,7 +253,8 @@ def shift_pointers(shift, scan, covariates: list[str] = (), speeds_dps: tuple[fl
             for effect in ("delay", "rate"):
                 out.append(Pointer(
                     effect,
-                    f"{evidence}; the knob moves {pace} here ({speeds_dps[1]:.3g} vs {speeds_dps[0]:.3g} deg/s while "
+                    f"{evidence}; the knob moves {pace} here ({speeds_dps[1]:.3g} vs {speeds_dps[0]:.3g} "
+                    f"{shift.cmd_unit}/s while "
                     f"moving)",
                     "untested",
                     "a lag or a friction that grows with speed makes the loop wider the faster the knob moves, and the "

@@ -1,0 +1,61 @@
+"""What the words of a log's column names say: the vocabulary a map's draft guesses roles by
+(:mod:`endocal.runs.mapdraft`) and its import checks units against (:mod:`endocal.runs.csvchecks`).
+
+A name is split into lower-case words at underscores, spaces, dots and case changes
+(``apPresentTicks``, ``ap_present_ticks`` and ``Tendon Disp.`` give ap, present, ticks and
+tendon, disp).
+"""
+
+from __future__ import annotations
+
+import re
+
+#: words naming an angle's unit, and the unit they name
+ANGLE_UNIT_WORDS = {"deg": "deg", "degree": "deg", "degrees": "deg", "rad": "rad", "radian": "rad", "radians": "rad",
+                    "tick": "ticks", "ticks": "ticks", "raw": "ticks", "counts": "ticks", "count": "ticks"}
+#: words naming a length's unit, and the unit they name (``m`` only as a name's last word: ``stage_pos_m``)
+LENGTH_UNIT_WORDS = {"mm": "mm", "millimetre": "mm", "millimetres": "mm", "millimeter": "mm", "millimeters": "mm",
+                     "m": "m", "metre": "m", "metres": "m", "meter": "m", "meters": "m"}
+#: words of a linear drive's travel: a tendon pulled (or a stage moved) by so many mm
+DISPLACEMENT_WORDS = {"disp", "displ", "displacement", "stroke", "extension", "elongation", "travel"}
+#: words of what a drive exerts rather than where it is: a motor's current, a torque, a force or a load
+#: (a column so named is never a position)
+EFFORT_WORDS = {"current", "cur", "curr", "ma", "amp", "amps", "ampere", "amperes", "effort", "torque", "trq",
+                "force", "load", "tension", "nm", "newton", "newtons"}
+
+
+def words(name: str) -> list[str]:
+    """A column name's words, lower case: ``apPresentTicks`` and ``ap_present_ticks`` give ap, present, ticks."""
+    spaced = re.sub(r"(?<=[a-z0-9])(?=[A-Z])", " ", str(name))
+    return [w for w in re.split(r"[^A-Za-z0-9]+", spaced.lower()) if w]
+
+
+#: words that hint at servo ticks without naming a unit (a raw reading, encoder counts)
+_TICK_HINTS = {"raw", "count", "counts"}
+
+
+def unit_named(name: str) -> str | None:
+    """The unit a column's name says (its last unit word: ``deg``, ``rad``, ``ticks``, ``mm``, ``m``), or None.
+
+    ``raw`` and ``counts`` hint at ticks (a draft reads them so) but name no unit here."""
+    ws = words(name)
+    for i in range(len(ws) - 1, -1, -1):
+        w = ws[i]
+        if w in ANGLE_UNIT_WORDS and w not in _TICK_HINTS:
+            return ANGLE_UNIT_WORDS[w]
+        if w in LENGTH_UNIT_WORDS and (w != "m" or i == len(ws) - 1):
+            return LENGTH_UNIT_WORDS[w]
+    return None
+
+
+def named_length(name: str) -> str:
+    """Why a column's name says it holds a length (its length unit, else a displacement word), or ``""``."""
+    unit = unit_named(name)
+    if unit is not None:
+        return f"its name says {unit}" if unit in ("mm", "m") else ""
+    disp = next((w for w in words(name) if w in DISPLACEMENT_WORDS), None)
+    return f"it is named like a displacement ({disp})" if disp else ""
+
+
+__all__ = ["ANGLE_UNIT_WORDS", "DISPLACEMENT_WORDS", "EFFORT_WORDS", "LENGTH_UNIT_WORDS", "named_length", "unit_named",
+           "words"]
