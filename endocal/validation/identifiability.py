@@ -104,4 +104,3 @@ FITTABILITY = {
     "creep": time_reason("creep"),
     "rate": time_reason("rate"),
 }
-
