@@ -1,4 +1,4 @@
-"""Domain errors.
+"""Domain errors (and the one warning a model gives).
 
 Every error a user can cause subclasses a builtin (so library callers can catch
 ``ValueError`` or ``OSError`` as usual) and :class:`EndocalError` (so the CLI can
@@ -33,6 +33,10 @@ class OutputExistsError(EndocalError, FileExistsError):
 
 class OutputPathError(EndocalError, OSError):
     """An output path cannot be created or written."""
+
+
+class OutOfRangeWarning(UserWarning):
+    """Commands beyond a model's fitted range were clamped (``out_of_range="clamp"``)."""
 
 
 class HardwareError(EndocalError, RuntimeError):

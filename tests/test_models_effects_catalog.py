@@ -20,7 +20,7 @@ import pandas as pd
 import pytest
 
 from endocal.errors import ModelError
-from endocal.models import HysteresisData, StreamingCompensator, load_model, make_model, save_model
+from endocal.models import HysteresisData, load_model, make_model, save_model
 from endocal.models.effects import EFFECTS, catalog, make_effect
 from tests._models_signals import PAPER_TABLE1
 
@@ -212,16 +212,16 @@ def test_streaming_compensator_matches_the_batch_inverse_or_refuses():
         m = make_model("pi", ["envelope", spec]).set_parameters({**PAPER_TABLE1, **values}, cmd_range_deg=(-70, 70))
         y_des = m.predict(HysteresisData(cmd_deg=0.8 * d.cmd_deg, t_s=d.t_s))
         u = m.inverse(y_des, t_s=d.t_s)
-        comp = StreamingCompensator(m, dt_s=DT_S)
+        comp = m.compensator(dt_s=DT_S)
         streamed = np.array([comp.step(v) for v in y_des[:3000]])
         assert np.max(np.abs(streamed - u[:3000])) < 1e-9, effect
     with pytest.raises(ModelError, match="give dt_s"):
-        StreamingCompensator(m)
+        m.compensator()
     for effect in ("delay", "load", "coupling"):
         spec, values, _ = TRUTH[effect]
         m = make_model("pi", ["envelope", spec]).set_parameters({**PAPER_TABLE1, **values})
         with pytest.raises(ModelError, match="cannot be compensated one sample at a time"):
-            StreamingCompensator(m, dt_s=DT_S)
+            m.compensator(dt_s=DT_S)
 
 
 # ------------------------------------------------------------------ simulator

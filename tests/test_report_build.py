@@ -14,18 +14,16 @@ import pandas as pd
 import pytest
 
 from endocal.errors import ModelError, OutputExistsError, RunFormatError
-from endocal.models import load_model, make_model, save_model
+from endocal.models import HysteresisData, load_model, make_model, save_model
 from endocal.planes import load_planes
 from endocal.planes.from_runs import segment_runs
 from endocal.report import build_report
 from endocal.report import figures as F
 from endocal.report.ladder import FOLDS, MAX_CV_SAMPLES
 from endocal.runs.aligned import load_aligned
-from endocal.validation.data import axis_data, prefix
+from endocal.validation.data import axis_data
 from endocal.validation.metrics import error_metrics
-from endocal.validation.offline import predict_extrapolated, validate_offline
-from endocal.validation.folds import fold_bounds, heldout_errors
-from endocal.validation.structure import effect_labels
+from endocal.validation.offline import validate_offline
 from tests.test_cli_excite import endocal
 
 
@@ -182,22 +180,39 @@ def test_bad_inputs_are_domain_errors(sim, tmp_path):
     assert out.read_text() == "keep" and not (tmp_path / "report.json").exists()
 
 
+def _rolling_origin_by_hand(model, table, axis: str) -> tuple[float, float, int, int]:
+    """Held-out and in-sample RMSE of ``model``'s structure on one record, from the method's definition:
+    numpy slices of the table's columns and the models' own fit and predict, none of the validation code
+    the ladder runs (folds, decimation, held-out errors, scored predictions).
+
+    Decimated to at most MAX_CV_SAMPLES (every ``stride``-th row); the first half only trains; the rest
+    is cut into FOLDS blocks; fold k is fitted on everything before block k and run from the record's
+    start over the end of block k. The in-sample error is each fold's own fit residual.
+    """
+    t, u, y = (table[c].to_numpy() for c in ("t_s", f"{axis}_cmd_deg", f"{axis}_meas_deg"))
+    stride = -(-u.size // MAX_CV_SAMPLES)
+    t, u, y = t[::stride], u[::stride], y[::stride]
+    edges = np.linspace(round(0.5 * u.size), u.size, FOLDS + 1).round().astype(int)
+    held, fit_sq, n_fit = [], 0.0, 0
+    for a, b in zip(edges[:-1], edges[1:]):
+        m = make_model(model.base_name, [e.label for e in model.effects_], **model.get_settings(), axis=axis,
+                       out_of_range="extrapolate").fit(HysteresisData(cmd_deg=u[:a], meas_deg=y[:a], t_s=t[:a]))
+        held.append(m.predict(HysteresisData(cmd_deg=u[:b], meas_deg=y[:b], t_s=t[:b]))[a:b] - y[a:b])
+        fit_sq, n_fit = fit_sq + m.fit_report_.rmse_deg ** 2 * a, n_fit + a
+    return float(np.sqrt(np.mean(np.concatenate(held) ** 2))), float(np.sqrt(fit_sq / n_fit)), stride, u.size
+
+
 def test_ladder_heldout_equals_a_direct_rolling_origin_computation(sim, report):
     root, p = sim
     rep, _ = report
-    hd = axis_data(load_aligned(root / "held"), "ap")
-    stride = -(-hd.n_samples // MAX_CV_SAMPLES)
-    d = hd.decimate(stride) if stride > 1 else hd
-    bounds = fold_bounds(d.n_samples, FOLDS)
+    table = load_aligned(root / "held").table
     for label in ("linear", "pi_env"):
         model = load_model(p[label])
-        err, fitted = heldout_errors(model, effect_labels(model), d, bounds)
-        train = np.concatenate([predict_extrapolated(m, prefix(d, a))[0] - d.meas_deg[:a] for m, (a, _) in zip(fitted, bounds)])
-        assert d.run_starts.size == 1  # one record: its folds are plain prefixes
+        heldout, train, stride, n = _rolling_origin_by_hand(model, table, "ap")
         step = next(s for s in rep.ladder if s["data"] == "held" and s["model"] == label)
-        assert step["heldout_rmse_deg"] == pytest.approx(np.sqrt(np.mean(err**2)), rel=1e-12)
-        assert step["train_rmse_deg"] == pytest.approx(np.sqrt(np.mean(train**2)), rel=1e-12)
-        assert step["stride"] == stride and step["n_samples"] == d.n_samples and step["folds"] == FOLDS
+        assert step["heldout_rmse_deg"] == pytest.approx(heldout, rel=1e-12)
+        assert step["train_rmse_deg"] == pytest.approx(train, rel=1e-12)
+        assert step["stride"] == stride and step["n_samples"] == n and step["folds"] == FOLDS
         lo, hi = step["heldout_ci"]
         assert lo <= step["heldout_rmse_deg"] <= hi
         # the model file's own numbers stay beside them

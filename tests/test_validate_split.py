@@ -294,7 +294,13 @@ def test_a_zero_moved_between_the_records_is_named(sine_sweeps, tmp_path):
 def test_the_same_condition_names_no_change_between_the_records(sine_sweeps):
     d = _validate_json(sine_sweeps, sine_sweeps / "pe.json", sine_sweeps / "val")
     assert not {"load", "drift"} & {p["effect"] for p in d["pointers"]}, d["pointers"]
-    assert d["shift"]["friction_rmse_deg"] > 0.7 * d["shift"]["rmse_deg"] or d["suspects"]
+    s = d["shift"]
+    # the same sheath and the same zero: neither a zero shift nor a friction change explains the record
+    # (measured: the zero 0.03 deg, leaving the 0.88 deg RMSE as it is; the friction change 0.77 deg, the
+    # loop width taking up part of the slack the model lacks, which the scan names as deadzone instead)
+    assert abs(s["zero_deg"]) < 0.2 and s["zero_rmse_deg"] > 0.95 * s["rmse_deg"], s
+    assert s["friction_rmse_deg"] > 0.7 * s["rmse_deg"], s
+    assert d["suspects"][0]["effect"] == "deadzone", d["suspects"]
 
 
 def test_a_load_that_varies_only_in_the_validation_data_is_pointed_at():

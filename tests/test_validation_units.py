@@ -12,16 +12,17 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from endocal.cli.refit import refit_command
 from endocal.errors import ModelError
 from endocal.models import HysteresisData
 from endocal.runs.aligned import AlignedData
 from endocal.validation.data import OTHER_CMD, axis_data, check_columns, load_candidates, prefix
-from endocal.validation.regimes import error_by_regime, hold_mask, reversal_distance_deg, turning_points
-from endocal.validation.residuals import residual_tests
-from endocal.cli.refit import refit_command
 from endocal.validation.folds import check_cv_data, fold_bounds, fold_split
+from endocal.validation.identifiability import creep_reason
 from endocal.validation.paired import holm, paired_test
 from endocal.validation.refit import Refit, refit_path
+from endocal.validation.regimes import error_by_regime, hold_mask, reversal_distance_deg, turning_points
+from endocal.validation.residuals import residual_tests
 
 FS = 100.0
 
@@ -333,3 +334,19 @@ def test_time_quarters_of_several_records_are_quarters_of_each():
     assert [name for name, _ in both] == [f"quarter {q} of each of the 2 records" for q in (1, 2, 3, 4)]
     # each quarter holds a quarter of every record: 100 + 50 samples
     assert all(m.sum() == 150 and m[:400].sum() == 100 for _, m in both)
+
+
+def test_creep_check_looks_for_the_move_before_a_hold_on_its_own_record_clock():
+    # Issue 27.4: records laid end to end restart their clocks, so the concatenated t_s is not
+    # sorted; searching it for "2 s before the hold" landed in the next record (an empty slice,
+    # a traceback). A short record that stops after a move, then a long one that never holds.
+    t1, t2 = np.arange(1000) / FS, np.arange(10000) / FS  # 10 s, then 100 s
+    u1 = 40 * np.sin(2 * np.pi * 0.2 * np.minimum(t1, 8.0))  # moves, then holds from 8 s
+    u2 = 40 * np.sin(2 * np.pi * 0.1 * t2)
+    runs = [HysteresisData(cmd_deg=u, meas_deg=u, t_s=t) for u, t in ((u1, t1), (u2, t2))]
+    assert creep_reason(HysteresisData.from_runs(runs)) is None  # the hold after the first record's move
+    assert creep_reason(HysteresisData.from_runs(runs[::-1])) is None  # in either order
+    # without that hold there is none to see creep in; a record that starts at rest is no hold after a move
+    still_start = np.where(t2 < 5.0, 0.0, u2)
+    moving = [HysteresisData(cmd_deg=u, meas_deg=u, t_s=t) for u, t in ((u2, t2), (still_start, t2))]
+    assert creep_reason(HysteresisData.from_runs(moving)).startswith("no holds: creep cannot be identified")

@@ -36,7 +36,8 @@ import numpy as np
 from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
-from endocal.errors import ModelError
+from endocal.errors import ModelError, OutOfRangeWarning
+from endocal.models.compensator import StreamingCompensator
 from endocal.models.data import HysteresisData, as_data
 from endocal.models.effects import resolve_effects
 from endocal.models.effects.base import Effect, InputEffect, OutputEffect
@@ -80,10 +81,6 @@ def min_fit_samples(n_free: int) -> int:
     runs and its report warns.
     """
     return 2 * n_free + 20
-
-
-class OutOfRangeWarning(UserWarning):
-    """Commands beyond the fitted range were clamped (``out_of_range="clamp"``)."""
 
 
 @dataclass
@@ -902,6 +899,21 @@ class HysteresisModel(ABC):
                 break
         u = self._range_check(np.asarray(u, dtype=float), "command needed for the desired angle")
         return d.split(u) if was_list else u
+
+    # ------------------------------------------------------------------ streaming
+    def compensator(self, dt_s: float | None = None) -> StreamingCompensator:
+        """A streaming compensator for a control loop: ``step(desired_deg) -> cmd_deg``.
+
+        Parameters
+        ----------
+        dt_s : float, optional
+            The loop's fixed sample period (s); needed by time-based effects that stream
+            (``rate``, ``creep``).
+
+        See :class:`endocal.models.compensator.StreamingCompensator` (which reads the model
+        through its attributes only, so it does not import this module).
+        """
+        return StreamingCompensator(self, dt_s=dt_s)
 
     # ------------------------------------------------------------------ printing
     def effect_params(self, effect) -> dict[str, float]:

@@ -14,8 +14,7 @@ import warnings
 
 import numpy as np
 
-from endocal.errors import ModelError
-from endocal.models.base import HysteresisModel, OutOfRangeWarning
+from endocal.errors import ModelError, OutOfRangeWarning
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import InputEffect
 from endocal.models.effects.base import OutputFilter
@@ -40,7 +39,7 @@ class StreamingCompensator:
         effect without ``dt_s``.
     """
 
-    def __init__(self, model: HysteresisModel, dt_s: float | None = None):
+    def __init__(self, model, dt_s: float | None = None):
         model._require_fitted()
         for e in model.effects_:
             if not e.streamable:

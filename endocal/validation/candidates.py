@@ -26,7 +26,6 @@ def takes_column(name: str) -> bool:
     return False
 
 
-
 def candidate_effects(model: HysteresisModel, data: HysteresisData, candidates: Sequence[str] | None,
                       load_columns: Sequence[str] | None, bending_axes: Sequence[str], *,
                       train: HysteresisData, rolling: bool) -> tuple[list[str], dict[str, str]]:
@@ -96,4 +95,3 @@ def candidate_effects(model: HysteresisModel, data: HysteresisData, candidates: 
         else:
             tested.append(c)
     return tested, untestable
-

@@ -130,7 +130,6 @@ def still_blocks(data: HysteresisData, bounds: Sequence[tuple[int, int]]) -> int
     return still
 
 
-
 def fold_errors(model: HysteresisModel, effects: Sequence[str], data: HysteresisData,
                 bound: tuple[int, int]) -> tuple[np.ndarray, HysteresisModel]:
     """Held-out errors ``pred - meas`` (deg) of ``base + effects`` on one rolling-origin fold, and its fitted model.
@@ -167,4 +166,3 @@ def heldout_errors(model: HysteresisModel, effects: Sequence[str], data: Hystere
     """
     out = [fold_errors(model, effects, data, bd) for bd in bounds]
     return np.concatenate([e for e, _ in out]), [m for _, m in out]
-

@@ -55,10 +55,13 @@ def creep_reason(data: HysteresisData) -> str | None:
     t = data.t_s
     starts = np.flatnonzero(hold & ~np.concatenate([[False], hold[:-1]]))
     for k in starts:
-        run0 = data.run_starts[np.searchsorted(data.run_starts, k, side="right") - 1]
-        j = np.searchsorted(t, t[k] - 2.0) if t is not None else k - 20
-        j = max(int(j), int(run0))
-        if k > run0 and np.ptp(data.cmd_deg[j:k + 1]) >= 0.05 * span:
+        run0 = int(data.run_starts[np.searchsorted(data.run_starts, k, side="right") - 1])
+        if k == run0:
+            continue  # a record that starts at rest: no move before this hold
+        # the 2 s before the hold, within its own record: each record's clock starts again (the
+        # concatenated t_s is not sorted), so a search over all of it can land in another record
+        j = run0 + int(np.searchsorted(t[run0:k + 1], t[k] - 2.0)) if t is not None else max(k - 20, run0)
+        if np.ptp(data.cmd_deg[j:k + 1]) >= 0.05 * span:
             return None
     return ("no holds: creep cannot be identified (it shows as the tip still moving after the knob stops: "
             "run `staircase`)")
@@ -101,4 +104,3 @@ FITTABILITY = {
     "creep": time_reason("creep"),
     "rate": time_reason("rate"),
 }
-

@@ -61,7 +61,6 @@ def holm(p: Sequence[float]) -> np.ndarray:
     return adj
 
 
-
 def min_units_for(n_candidates: int, alpha: float) -> int:
     """Fewest paired units with which the best of ``n_candidates`` can reach Holm-corrected ``alpha``.
 
@@ -105,4 +104,3 @@ def unit_test(err_base: np.ndarray, err_cand: np.ndarray, units: Units, n_flips:
         flips = rng.choice(np.array([-1.0, 1.0]), size=(min(1000, n_flips - a), n)) @ sums
         hits += np.count_nonzero(flips >= observed * (1 - 1e-12))
     return float((1 + hits) / (1 + n_flips))
-

@@ -69,4 +69,3 @@ def predict_extrapolated(model: HysteresisModel, data: HysteresisData) -> tuple[
 def predict_errors(model: HysteresisModel, data: HysteresisData) -> np.ndarray:
     """``pred - meas`` (deg) of a fitted model run over ``data`` from its start (continued beyond its fitted range)."""
     return predict_extrapolated(model, data)[0] - data.meas_deg
-

@@ -122,8 +122,9 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     jobs : int, optional
         Processes for the fits (:func:`endocal.validation.parallel.n_jobs`).
     refit_suffix : str
-        Ends the refit's file name (:func:`~endocal.validation.refit.refit_path`): ``-all`` when ``data_paths`` fold the
-        validation data in, so that model does not take the name of the one the scan scored.
+        Ends the refit's file name (:func:`~endocal.validation.refit.refit_path`): ``-all`` when
+        ``data_paths`` fold the validation data in, so that model does not take the name of the
+        one the scan scored.
 
     Returns
     -------
@@ -218,7 +219,6 @@ def check_fit_data(data: HysteresisData, what: str = "data") -> None:
     if turning_points(data).size < 1:
         raise ModelError(f"the {what} never reverses the knob ({data.n_samples} samples): a hysteresis model needs "
                          "at least one reversal (one back-and-forth sweep) to see both branches of the loop")
-
 
 
 def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5, alpha: float = 0.05,
@@ -353,4 +353,3 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), folds, stride,
                       d.n_samples, alpha, min_gain_pct, scheme="rolling-origin", scheme_reason=scheme_reason,
                       still_blocks=still)
-

@@ -150,4 +150,3 @@ class ScanResult:
                    "units": self.units, "min_units": self.min_units, "test": test,
                    "still_blocks": self.still_blocks},
         }
-
