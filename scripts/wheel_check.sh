@@ -18,6 +18,7 @@ TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
 step() { local t0=$SECONDS; printf '== %s\n' "$1"; "${@:2}"; printf '   (%d s)\n' $((SECONDS - t0)); }
 fail() { echo "wheel-check: $*" >&2; exit 1; }
+quiet() { "$@" >/dev/null; }
 
 build() {
   "$BUILD_PY" -m build --outdir "$TMP/dist" "$ROOT" >"$TMP/build.log" 2>&1 || { cat "$TMP/build.log"; fail "python -m build failed"; }
@@ -42,7 +43,7 @@ step "install $(basename "$WHEEL") and its dependencies into a fresh venv" insta
 mkdir "$TMP/work"
 cd "$TMP/work"
 E=$TMP/venv/bin/endocal
-step "endocal --help (in an empty folder)" "$E" --help >/dev/null
+step "endocal --help (in an empty folder)" quiet "$E" --help
 [ "$("$E" --version)" = "endocal $VERSION" ] || fail "endocal --version says '$("$E" --version)', not 'endocal $VERSION'"
 where=$("$TMP/venv/bin/python" -c 'import endocal; print(endocal.__file__)')
 case "$where" in "$TMP/venv/"*) ;; *) fail "endocal imported from $where, not from the installed wheel";; esac
