@@ -44,7 +44,8 @@ mkdir "$TMP/work"
 cd "$TMP/work"
 E=$TMP/venv/bin/endocal
 step "endocal --help (in an empty folder)" quiet "$E" --help
-[ "$("$E" --version)" = "endocal $VERSION" ] || fail "endocal --version says '$("$E" --version)', not 'endocal $VERSION'"
+said=$("$E" --version)
+[ "$said" = "endocal $VERSION" ] || fail "endocal --version says '$said', not 'endocal $VERSION'"
 where=$("$TMP/venv/bin/python" -c 'import endocal; print(endocal.__file__)')
 case "$where" in "$TMP/venv/"*) ;; *) fail "endocal imported from $where, not from the installed wheel";; esac
 step "endocal excite planes --out planes --seed 1 (the demo's first command)" \
@@ -60,5 +61,5 @@ assert run["status"] == "complete", run["status"]
 assert source.name == "planes.toml" and source.parent.name == "_protocols" and shipped in source.parents, source
 assert Path("planes/aligned.parquet").is_file()
 EOF
-"$E" info planes >/dev/null
-echo "wheel-check: $(basename "$WHEEL") installs into a fresh venv and runs outside the source tree"
+step "endocal info planes (the run reads back)" quiet "$E" info planes
+echo "wheel-check: $(basename "$WHEEL") installs into a fresh venv and runs outside the source tree ($SECONDS s in all)"
