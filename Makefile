@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 DEMO   := demo-out
 
-.PHONY: install test demo bench docs clean data-samples
+.PHONY: install test wheel-check demo bench docs clean data-samples
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -18,6 +18,11 @@ install: $(STAMP)
 # One worker per core (pytest-xdist); a test file stays on one worker, so its module fixtures run once.
 test: $(STAMP)
 	$(BIN)/python -m pytest -n auto --dist loadfile --durations=12
+
+# The wheel a user installs: built (sdist, then wheel), installed into a fresh venv, and run outside
+# the source tree (`endocal --help`, the demo's first command); scripts/wheel_check.sh.
+wheel-check: $(STAMP)
+	PYTHON=$(PYTHON) bash scripts/wheel_check.sh $(BIN)/python
 
 demo: $(STAMP)
 	bash scripts/demo.sh $(DEMO)

@@ -22,6 +22,7 @@ import pytest
 
 from endocal.errors import ModelError
 from endocal.models import HysteresisData, load_model, make_model
+from endocal.models.io import model_to_dict
 from endocal.runs.aligned import load_aligned
 from tests._cli import endocal, one_line_exit_2
 
@@ -239,7 +240,7 @@ def test_a_model_records_its_drive_unit_prints_in_it_and_refuses_another():
     assert "slack_mm=" in eq and "band_mm=" in eq and "_deg" not in eq.split(";")[1], eq
     assert eq.startswith("ap_deg = ")  # the bend stays in degrees
     assert mm.parameter_labels()["deadzone_slack_deg"] == "deadzone_slack_mm"
-    assert mm.to_dict()["drive_unit"] == "mm" and deg.to_dict()["drive_unit"] == "deg"
+    assert model_to_dict(mm)["drive_unit"] == "mm" and model_to_dict(deg)["drive_unit"] == "deg"
     np.testing.assert_allclose(mm.predict(HysteresisData(x, drive_unit="mm")), mm.predict(x))
     with pytest.raises(ModelError, match=r"fitted on a drive commanded in mm .* command it in deg"):
         mm.predict(HysteresisData(x, drive_unit="deg"))
@@ -248,7 +249,7 @@ def test_a_model_records_its_drive_unit_prints_in_it_and_refuses_another():
     with pytest.raises(ModelError, match="different units"):
         HysteresisData.from_runs([HysteresisData(x, drive_unit="mm"), HysteresisData(x, drive_unit="deg")])
     # a model file written before drives had units is a knob's
-    d = deg.to_dict()
+    d = model_to_dict(deg)
     del d["drive_unit"]
     from endocal.models import model_from_dict
 

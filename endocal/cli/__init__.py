@@ -7,11 +7,29 @@ object, and renders it. Library errors become one line on stderr and exit code 2
 from __future__ import annotations
 
 import typer
+from typer.core import TyperGroup
 
-from endocal import __version__
+
+class Group(TyperGroup):
+    """A command group whose ``--help`` flag is ``False`` when not given (Typer leaves it ``None``).
+
+    Typer 0.29 converts every parameter value that is not already of its type through
+    pydantic, so a ``None`` help flag on the way to a subcommand (``endocal fit planes
+    --help``, ``endocal excite RUN``) imported pydantic: a tenth of a second on every
+    command's start, for nothing. Every group of the command line uses this class (root
+    here, the others in :mod:`endocal.cli.commands`).
+    """
+
+    def get_help_option(self, ctx):
+        option = super().get_help_option(ctx)
+        if option is not None and option.default is None:
+            option.default = False
+        return option
+
 
 app = typer.Typer(
     name="endocal",
+    cls=Group,
     help="Calibration and experiment toolkit for robot-driven, tendon-driven flexible endoscopes.\n\n"
     "The loop: `excite` a probe (simulated by default) -> `fit` bending planes and hysteresis -> "
     "`validate` the model against measurements -> `report`.",
@@ -26,6 +44,8 @@ app = typer.Typer(
 
 def _version(value: bool) -> None:
     if value:
+        from endocal._version import __version__
+
         typer.echo(f"endocal {__version__}")
         raise typer.Exit()
 

@@ -1,6 +1,10 @@
-"""Registers every subcommand on the root app (kept apart so importing the app stays cheap)."""
+"""Registers every subcommand on the root app (kept apart so importing the app stays cheap).
 
-from endocal.cli import app
+Every module imported here is imported by every command's ``--help``: what a command needs
+beyond typer and rich it imports inside its function (tests/test_cli_startup.py holds this).
+"""
+
+from endocal.cli import Group, app
 from endocal.cli import emulate as _emulate
 from endocal.cli import fit as _fit
 from endocal.cli import imports as _imports
@@ -18,7 +22,7 @@ app.command("effects")(effects)
 app.command("validate")(validate)
 app.command("report")(report)
 app.command("import-ros")(import_ros)
-app.add_typer(_protocols.app, name="protocols")
-app.add_typer(_fit.app, name="fit")
-app.add_typer(_imports.app, name="import")
-app.add_typer(_emulate.app, name="emulate")
+app.add_typer(_protocols.app, name="protocols", cls=Group)
+app.add_typer(_fit.app, name="fit", cls=Group)
+app.add_typer(_imports.app, name="import", cls=Group)
+app.add_typer(_emulate.app, name="emulate", cls=Group)

@@ -40,10 +40,10 @@ def _value(v: Any) -> str:
 @cli_errors
 def _list(ctx: typer.Context) -> None:
     """List the protocols: name, duration, axes and what each is for."""
+    if ctx.invoked_subcommand is not None:  # (before the import: `protocols show --help` stays instant)
+        return
     from endocal.protocols import list_protocols, load_protocol, protocol_dirs
 
-    if ctx.invoked_subcommand is not None:
-        return
     rows = []
     for name, description, _path in list_protocols():
         proto = load_protocol(name)

@@ -11,9 +11,6 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from endocal.cli._common import cli_errors, err, out, refuse_input_as_output
-from endocal.runs.aligned import CSV_SUFFIXES
-
-_DATA_SUFFIXES = (".parquet", *CSV_SUFFIXES)
 
 
 def split_paths(paths: list[Path], data: list[Path]) -> tuple[list[Path], list[Path]]:
@@ -23,9 +20,11 @@ def split_paths(paths: list[Path], data: list[Path]) -> tuple[list[Path], list[P
     ``r2`` arrives as a positional argument: positional run folders and tables (``.parquet``,
     ``.csv``) are records, everything else is a model file.
     """
+    from endocal.runs.aligned import CSV_SUFFIXES
+
     models, records = [], list(data)
     for p in paths:
-        (records if p.is_dir() or p.suffix.lower() in _DATA_SUFFIXES else models).append(p)
+        (records if p.is_dir() or p.suffix.lower() in (".parquet", *CSV_SUFFIXES) else models).append(p)
     return models, records
 
 

@@ -24,7 +24,6 @@ from endocal.cli._common import (
 )
 from endocal.cli.refit import refit_command, with_refit_commands
 from endocal.errors import ModelError
-from endocal.validation.metrics import METRIC_KEYS
 
 _UNITS = {"rmse_deg": "deg", "mae_deg": "deg", "max_deg": "deg", "median_deg": "deg", "median_pct": "%"}
 
@@ -47,6 +46,8 @@ def previous_model_path(model_path: Path, effects: list[str]) -> Path | None:
 
 
 def _metrics_table(title: str, metrics) -> Table:
+    from endocal.validation.metrics import METRIC_KEYS
+
     t = Table(title=title, title_justify="left", show_edge=False)
     t.add_column("metric")
     t.add_column("value", justify="right")
