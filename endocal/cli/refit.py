@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import json
 import shlex
+from typing import TYPE_CHECKING
 
-from endocal.validation.refit import Refit
+if TYPE_CHECKING:  # the command line's help must not load the library (numpy, scipy)
+    from endocal.validation.refit import Refit
 
 
 def refit_command(refit: Refit) -> str:
