@@ -194,27 +194,35 @@ _SHORT = {
 def keyed(text: str, kind: str = "warning", key: str | None = None) -> str:
     """``kind[KEY]: fact`` -- one line for the summary (``--explain`` prints ``text`` in full)."""
     key = key or key_of(text)
+    if key not in KEYS:  # a key printed is a key the docs explain
+        raise KeyError(f"warning key {key!r} is not in endocal.cli.messages.KEYS")
     return f"{kind}[{key}]: {_SHORT.get(key, head)(text)}"
 
 
-#: Keys whose messages each name one parameter (``name = value ...``): several become one line naming them all.
-_PER_PARAMETER = {"at-bound": "sit at a bound of their range", "unidentified": "have standard errors above their values"}
+#: Keys whose messages each begin with a name (a parameter's ``name = value``, an effect's ``effect: ...``):
+#: several make one line naming them all. Key -> (what ends the name, what the line says of them).
+_GROUPED = {
+    "at-bound": (" = ", "sit at a bound of their range"),
+    "unidentified": (" = ", "have standard errors above their values"),
+    "untestable": (": ", "cannot be tested on this data"),
+}
 
 
 def keyed_lines(messages, kind: str = "warning") -> list[str]:
     """One :func:`keyed` line per message, in order; empty messages skipped. A message is its text
-    (its key found from its words) or ``(key, text)``. Several messages of one parameter-wise key
-    (:data:`_PER_PARAMETER`) make one line naming the parameters."""
+    (its key found from its words) or ``(key, text)``. Several messages of a key that names a
+    parameter or an effect first (:data:`_GROUPED`) make one line naming them."""
     pairs = [(m if isinstance(m, tuple) else (key_of(m), m)) for m in messages if m]
     pairs = [(k, t) for k, t in pairs if t]
     lines, done = [], set()
     for k, t in pairs:
         group = [x for kx, x in pairs if kx == k]
-        if k in _PER_PARAMETER and len(group) > 1:
+        if k in _GROUPED and len(group) > 1:
             if k not in done:
                 done.add(k)
-                names = ", ".join(_PREFIX.sub("", x).split(" = ", 1)[0] for x in group)
-                lines.append(f"{kind}[{k}]: {names} {_PER_PARAMETER[k]}")
+                end, says = _GROUPED[k]
+                names = ", ".join(dict.fromkeys(_PREFIX.sub("", x).split(end, 1)[0] for x in group))
+                lines.append(f"{kind}[{k}]: {names} {says}")
             continue
         lines.append(keyed(t, kind, k))
     return lines
