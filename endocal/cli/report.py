@@ -107,6 +107,8 @@ def _summary(rep) -> None:
             line += f", {f.margin_pct:.0f} % below {f.runner_up}: "
             line += ("not tested" if f.p_value is None else
                      f"{'significant' if f.significant else 'not significant'} (p = {f.p_value:.2g})")
+            if "record more cycles to decide" in f.sentence:  # no p-value could fall below alpha
+                line += ": too few cycles to decide, record more"
         out.print(line, markup=False)
     notes = [f"note[not-evaluated]: {n.model} on {n.data} ({n.axis})" for n in rep.not_evaluated]  # why: --explain
     notes += keyed_lines([note for g in rep.groups for e in g.evaluations for note in e.notes], "note")
