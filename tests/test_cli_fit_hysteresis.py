@@ -22,7 +22,8 @@ def run(tmp_path_factory):
 
 def test_fit_prints_the_equation_and_saves_a_model_that_predicts_the_data(run, tmp_path):
     out = tmp_path / "bs.json"
-    proc = endocal("fit", "hysteresis", run, "--axis", "ap", "--model", "bspline", "--effects", "envelope", "--out", out)
+    proc = endocal("fit", "hysteresis", run, "--axis", "ap", "--model", "bspline", "--effects", "envelope", "--out", out,
+                   "--explain")
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.startswith("ap_deg = BSpline3(f(cmd))") and "RMSE" in proc.stdout
     assert "evaluations; converged" in proc.stdout and "termination condition" not in proc.stdout, proc.stdout
@@ -95,11 +96,24 @@ def test_start_from_a_fitted_model_refits_from_its_values_and_records_it(run, tm
 def test_the_fit_states_its_sample_rate_and_questions_a_clock_in_ms(run, tmp_path):
     ok = endocal("fit", "hysteresis", run, "--axis", "ap", "--model", "linear", "--out", tmp_path / "a.json")
     assert ok.returncode == 0 and " Hz) from 1 source(s)" in ok.stdout and "is t_s in seconds" not in ok.stdout
+    # the summary: the equation, the RMSE (what the model file holds), nothing to warn of; then the
+    # file written and the next command
+    rmse = load_model(tmp_path / "a.json").fit_report_.rmse_deg
+    lines = ok.stdout.splitlines()
+    assert len(lines) == 2 and lines[0].startswith("ap_deg = ") and lines[1].startswith(f"RMSE {rmse:.3f} deg on ")
+    assert ok.stderr.splitlines() == [f"wrote {tmp_path / 'a.json'}", f"next: endocal validate {tmp_path / 'a.json'} "
+                                      "RECORDS (records it was not fitted on)"], ok.stderr
     table = load_aligned(run).table
     table["t_s"] *= 1000.0  # a lab's clock in ms written as t_s
     table.to_csv(tmp_path / "ms.csv", index=False)
     slow = endocal("fit", "hysteresis", tmp_path / "ms.csv", "--axis", "ap", "--model", "linear", "--out",
                    tmp_path / "b.json")
-    assert slow.returncode == 0 and "is t_s in seconds?" in slow.stdout, slow.stdout
+    # one line, with its key (the docs explain it) and the question
+    assert slow.returncode == 0 and "warning[slow-clock]: 0.1 samples per second: is t_s in seconds?\n" in slow.stdout, \
+        slow.stdout
+    assert len(slow.stdout.splitlines()) == 3, slow.stdout
+    slow = endocal("fit", "hysteresis", tmp_path / "ms.csv", "--axis", "ap", "--model", "linear", "--out",
+                   tmp_path / "b.json", "--force", "--explain")
+    assert slow.returncode == 0 and "is t_s in seconds? (a clock in ms reads 1000x too slow" in slow.stdout, slow.stdout
     val = endocal("validate", tmp_path / "a.json", tmp_path / "ms.csv", "--cv", "rolling")
-    assert val.returncode == 0 and "is t_s in seconds?" in val.stdout, val.stdout
+    assert val.returncode == 0 and "warning[slow-clock]:" in val.stdout and "is t_s in seconds?" in val.stdout, val.stdout

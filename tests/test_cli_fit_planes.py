@@ -37,10 +37,14 @@ def test_deviation_angles_recovered_and_compensated(planes_run, tmp_path):
 
 
 def test_human_output_names_angles_cis_and_sweeps(planes_run, tmp_path):
-    proc = endocal("fit", "planes", planes_run, "--out", tmp_path / "p.json", "--bootstrap", "20")
+    proc = endocal("fit", "planes", planes_run, "--out", tmp_path / "p.json", "--bootstrap", "20", "--explain")
     assert proc.returncode == 0, proc.stderr
     for text in ("alpha_y+", "alpha_x-", "CI", "after compensation", "delta", "sweeps used: x+: planes#"):
         assert text in proc.stdout
+    # the summary: the angles, not the sweeps; then the file and the next command
+    proc = endocal("fit", "planes", planes_run, "--out", tmp_path / "p.json", "--bootstrap", "20", "--force")
+    assert proc.stdout.startswith("bending planes (") and "alpha_x-" in proc.stdout and "sweeps used" not in proc.stdout
+    assert len(proc.stdout.splitlines()) == 6 and proc.stderr.splitlines()[-1].startswith("next: endocal fit hysteresis")
     one_line_error(endocal("fit", "planes", planes_run, "--out", tmp_path / "p.json"), "already exists")
 
 

@@ -67,7 +67,13 @@ def test_report_writes_html_json_csv_and_prints_the_summary(files):
     # bspline follows the curved, backlashed drive; linear cannot bend: the held-out record says so
     held = next(s for s in saved["summary"] if s["data"] == "b")
     assert held["best"] == "bspline" and held["significant"] is True
-    assert held["sentence"] in res.stdout
+    # the summary: one line per record, the best model, by how much, significant or not (the
+    # sentences with their tests, and the ladder, with --explain)
+    assert res.stdout.splitlines()[1] == (f"b (table), ap: bspline best, RMSE {held['best_rmse_deg']:.3g} deg, "
+                                          f"{held['margin_pct']:.0f} % below linear: significant "
+                                          f"(p = {held['p_value']:.2g})"), res.stdout
+    assert len(res.stdout.splitlines()) == 2 and res.stdout.startswith("a (table), ap [in-sample for linear, bspline]")
+    assert res.stderr.splitlines()[-1].startswith(f"next: open {out} in a browser"), res.stderr
     assert saved["provenance"]["command"].startswith("endocal ")
     # the ladder refits each structure on rolling-origin folds of each record: the curve and the
     # backlash are real, so bspline's held-out error is well below linear's, significantly
@@ -75,7 +81,7 @@ def test_report_writes_html_json_csv_and_prints_the_summary(files):
         lin, bsp = [s for s in saved["ladder"] if s["data"] == data]
         assert (lin["model"], bsp["model"]) == ("linear", "bspline")
         assert bsp["heldout_rmse_deg"] < 0.8 * lin["heldout_rmse_deg"] and bsp["significant"] is True
-    assert "ladder b, ap (held-out RMSE deg" in res.stdout
+    assert "ladder" not in res.stdout  # said by --explain (tests/test_report_build.py checks its sentences)
 
 
 def test_json_output_carries_the_same_numbers(files):
@@ -123,8 +129,13 @@ def test_two_reports_share_a_folder(files):
     # each page's JSON and metrics CSV are named after it, so a second report does not collide
     for name in ("linear", "bspline"):
         res = CliRunner().invoke(_app(), ["report", str(files / f"{name}.json"), "--data", str(files / "a.csv"),
-                                          "--out", str(files / "both" / f"{name}.html"), "--bootstrap", "50", "-q"])
+                                          "--out", str(files / "both" / f"{name}.html"), "--bootstrap", "50", "-q",
+                                          *(["--explain"] if name == "bspline" else [])])
         assert res.exit_code == 0, res.output
+        saved = json.loads((files / "both" / f"{name}.json").read_text())
+        # --explain prints the findings' sentences in full; the summary its verdict
+        assert (saved["summary"][0]["sentence"] in res.stdout) == (name == "bspline"), res.stdout
+        assert f"{name} best, RMSE" in res.stdout or name == "bspline"
     for name in ("linear", "bspline"):
         saved = json.loads((files / "both" / f"{name}.json").read_text())
         assert [m["model"] for m in saved["metrics"]] == [name]

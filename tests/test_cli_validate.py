@@ -76,12 +76,24 @@ def test_refitted_model_shows_the_error_falling(drifting):
     save_model(make_model("bspline", ["drift"], axis="ap").fit(axis_data(aligned, "ap")), tmp / "m-drift.json")
     res = _invoke(tmp / "m-drift.json", csv, "--json-out", tmp / "v.json")
     assert res.exit_code == 0, res.output
-    assert "Watch the error fall" in res.stdout and "bspline -> " not in res.stdout
-    assert "bspline+drift" in res.stdout and "Which effect is missing: nothing" in res.stdout
     d = json.loads(_invoke(tmp / "m-drift.json", csv, "--json").stdout)
+    c = d["compare"]
+    # the summary: the model by its label (not the file's stem), the error falling from the model it was
+    # refitted from (found by the refit command's naming), nothing missing, the next command
+    lines = res.stdout.splitlines()
+    # fitted on this record: no "validation RMSE", but the rolling origin's held-out one
+    assert lines[0].startswith(f"bspline+drift on axis ap: RMSE {d['metrics']['rmse_deg']:.3g} deg (95 % CI ") and \
+        f"held-out {d['heldout_rmse_deg']:.3g} deg (rolling origin)" in lines[0], res.stdout
+    assert lines[1] == (f"error fell {abs(c['change_pct']):.0f} % since bspline (m.json): held-out RMSE "
+                        f"{c['old_heldout_rmse_deg']:.3g} -> {c['new_heldout_rmse_deg']:.3g} deg"), res.stdout
+    assert any(ln.startswith("nothing missing: no catalog effect lowers") for ln in lines), res.stdout
+    assert lines[-2] == (f"next: compare the models on these records, with figures: endocal report {tmp / 'm.json'} "
+                         f"{tmp / 'm-drift.json'} --data {csv} --out report.html"), res.stdout
+    full = _invoke(tmp / "m-drift.json", csv, "--explain")
+    assert "Watch the error fall" in full.stdout and "bspline -> " not in full.stdout
+    assert "bspline+drift" in full.stdout and "Which effect is missing: nothing" in full.stdout
     # --json-out keeps the terminal view and writes the same object --json prints (what scripts parse)
     assert json.loads((tmp / "v.json").read_text()) == d
-    c = d["compare"]
     assert c["old_label"] == "bspline" and c["new_label"] == "bspline+drift"
     assert c["new_heldout_rmse_deg"] <= 0.5 * c["old_heldout_rmse_deg"]
     assert c["new_heldout_rmse_deg"] <= 1.5 * noise
@@ -112,9 +124,12 @@ def test_bad_input_is_one_line_and_exit_2(drifting, tmp_path):
     # residual tests still run; the scan says why it cannot and what to give it
     short = tmp_path / "short.csv"
     pd.read_csv(csv).iloc[:300].to_csv(short, index=False)
-    res = _invoke(tmp / "m.json", short)
+    res = _invoke(tmp / "m.json", short, "--explain")
     assert res.exit_code == 0, res.output
     assert "rmse_deg" in res.stdout and "not tested" in res.stdout and "--train" in res.stdout
+    res = _invoke(tmp / "m.json", short)  # the summary: the error, and why nothing was tested, what to give
+    assert res.exit_code == 0 and res.stdout.startswith("bspline on axis ap: RMSE "), res.output
+    assert any(ln.startswith("missing: not tested: ") and "--train" in ln for ln in res.stdout.splitlines())
     # estimation data that never reverses: nothing can be fitted, one line, exit 2
     _one_line_exit_2(_invoke(tmp / "m.json", csv, "--train", short), "never reverses")
     # nothing to validate on

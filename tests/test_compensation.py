@@ -102,9 +102,18 @@ def test_validate_protocol_cli_prints_metrics_and_uncompensated(model, tmp_path)
     from endocal.validation.metrics import METRIC_KEYS
 
     save_model(model, tmp_path / "ap.json")
-    proc = endocal("validate", tmp_path / "ap.json", "--protocol", "triangle", "--set", "amplitude_deg=30", "--json")
+    proc = endocal("validate", tmp_path / "ap.json", "--protocol", "triangle", "--set", "amplitude_deg=30",
+                   "--json-out", tmp_path / "v.json")
     assert proc.returncode == 0, proc.stderr
-    d = json.loads(proc.stdout)
+    d = json.loads((tmp_path / "v.json").read_text())
     assert set(METRIC_KEYS) <= set(d["metrics"]) and set(METRIC_KEYS) <= set(d["uncompensated"])
     assert d["metrics"]["rmse_deg"] < d["uncompensated"]["rmse_deg"] / 5
+    # the summary: both errors with their intervals, and what the model saves (every metric with --explain)
+    c, u = d["metrics"], d["uncompensated"]
+    lines = proc.stdout.splitlines()
+    assert lines[0] == (f"compensated (triangle on sim): RMSE {c['rmse_deg']:.3g} deg (95 % CI {c['ci']['rmse_deg'][0]:.3g} "
+                        f".. {c['ci']['rmse_deg'][1]:.3g}), max {c['max_deg']:.3g} deg"), proc.stdout
+    assert lines[1].startswith(f"uncompensated: RMSE {u['rmse_deg']:.3g} deg") and lines[1].endswith(
+        f": the model lowers the RMSE {100 * (1 - c['rmse_deg'] / u['rmse_deg']):.0f} %"), proc.stdout
+    assert len(lines) == 3 and lines[2].startswith("details: --explain")
     one_line_error(endocal("validate", tmp_path / "ap.json", "--protocol", "triangle", "--set", "amplitude_deg=80"), "range")

@@ -38,7 +38,7 @@ def sim_log(tmp_path_factory):
 
 def test_round_trip_gives_the_same_aligned_table(sim_log):
     tmp = sim_log
-    proc = endocal("import", "csv", tmp / "log.csv", "--map", MAP, "--out", tmp / "imported")
+    proc = endocal("import", "csv", tmp / "log.csv", "--map", MAP, "--out", tmp / "imported", "--explain")
     assert proc.returncode == 0, proc.stderr
     assert "motor samples" in proc.stdout and "ap <- ap_present_ticks" in proc.stdout
     a, b = load_aligned(tmp / "run").table, load_aligned(tmp / "imported").table
@@ -180,7 +180,7 @@ def test_a_bench_measuring_its_angle_imports_as_an_aligned_table(bench_log, tmp_
     log, a = bench_log
     text = ANGLES_MAP.read_text().replace("zero = 0.0 ", "zero = 5.0 ")
     (tmp_path / "map.toml").write_text(text)
-    proc = endocal("import", "csv", log, "--map", tmp_path / "map.toml", "--out", tmp_path / "bench.parquet")
+    proc = endocal("import", "csv", log, "--map", tmp_path / "map.toml", "--out", tmp_path / "bench.parquet", "-v")
     assert proc.returncode == 0, proc.stderr
     assert "angle readings" in proc.stdout and "ap_meas_deg <- joint_deg" in proc.stdout
     b = load_aligned(tmp_path / "bench.parquet").table
@@ -227,10 +227,17 @@ def test_a_measured_angle_map_with_a_unit_mistake_warns_naming_the_key(bench_log
     """Warned, not refused: an angles map also carries what is no angle (the real piezo's volts and
     displacement, imported by test_a_headerless_logger_file_imports_by_column_number)."""
     (tmp_path / "map.toml").write_text(edit(ANGLES_MAP.read_text()))
-    proc = endocal("import", "csv", bench_log[0], "--map", tmp_path / "map.toml", "--out", tmp_path / "t.parquet")
+    proc = endocal("import", "csv", bench_log[0], "--map", tmp_path / "map.toml", "--out", tmp_path / "t.parquet",
+                   "--explain")
     assert proc.returncode == 0, proc.stderr
     warned = [ln for ln in proc.stderr.splitlines() if ln.startswith("warning:") and "unit" in ln]
     assert len(warned) == 1 and all(f in warned[0] for f in fragments), proc.stderr
+    # the summary: one line, keyed, naming the column and the key to check
+    proc = endocal("import", "csv", bench_log[0], "--map", tmp_path / "map.toml", "--out", tmp_path / "t.parquet",
+                   "--force")
+    warned = [ln for ln in proc.stderr.splitlines() if ln.startswith("warning")]
+    assert len(warned) == 1 and warned[0].startswith("warning[unit]: ") and fragments[0] in warned[0], proc.stderr
+    assert f"[angles.ap] unit" in warned[0] and proc.stderr.splitlines()[-1].startswith("next: endocal fit")
 
 
 def test_a_geared_bench_whose_motor_turns_far_more_than_its_joint_imports_without_a_word(bench_log, tmp_path):
@@ -462,13 +469,19 @@ def test_invalid_tracker_frames_and_incomplete_motor_rows_are_left_out_and_count
     log.loc[empty, "tip_qx"] = np.nan
     log.loc[no_knob, "ap_present_ticks"] = np.nan
     log.to_csv(tmp_path / "gaps.csv", index=False)
-    proc = endocal("import", "csv", tmp_path / "gaps.csv", "--map", MAP, "--out", tmp_path / "r")
+    proc = endocal("import", "csv", tmp_path / "gaps.csv", "--map", MAP, "--out", tmp_path / "r", "--explain")
     assert proc.returncode == 0, proc.stderr
     n_frames = int(log["tip_x_m"].notna().sum())
     assert f"{n_frames} tracker frames (8 invalid, left out)" in proc.stdout, proc.stdout
     first = int(min(zero_q[0], empty[0])) + 2  # data row k is on line k + 2
     assert f"8 tracker frame(s) were invalid" in proc.stderr and f"the first at line {first}" in proc.stderr
     assert "4 row(s) with knob cells but not every knob position" in proc.stderr, proc.stderr
+    # the summary: a keyed line each (where they are, with --explain)
+    short = endocal("import", "csv", tmp_path / "gaps.csv", "--map", MAP, "--out", tmp_path / "r", "--force")
+    assert short.stderr.splitlines()[:2] == [
+        "note[incomplete-rows]: 4 row(s) with knob cells but not every knob position were left out of the motor samples",
+        "note[invalid-frames]: 8 tracker frame(s) were invalid (a sensor's cell empty, its quaternion no rotation, or "
+        "flagged by the map's valid column) and left out of the aligned table"], short.stderr
     meta = _run_json(tmp_path / "r")
     assert meta["status"] == "complete"
     assert meta["counts"]["tracker_invalid_dropped"] == 8  # one sensor reading in each of the 8 frames

@@ -214,7 +214,7 @@ def test_fit_says_when_it_ran_its_record_from_an_estimated_start(tmp_path):
     part["t_s"] -= part["t_s"].iloc[0]
     part.to_csv(tmp_path / "cut.csv", index=False)
     proc = endocal("fit", "hysteresis", tmp_path / "cut.csv", "--axis", "piezo", "--model", "bspline",
-                   "--out", tmp_path / "m.json")
+                   "--out", tmp_path / "m.json", "--explain")
     assert proc.returncode == 0, proc.stderr
     said = [line for line in proc.stdout.splitlines()
             if line.startswith("note: the fitted record starts mid-swing (command 1.8 deg within 0..3.6, moving up)")]
@@ -223,6 +223,11 @@ def test_fit_says_when_it_ran_its_record_from_an_estimated_start(tmp_path):
     rest, est = (float(x) for x in STARTED.findall(said[0])[0])
     # the start moves the stretch before the first reversal, a quarter of this record (measured: -40 %)
     assert est <= 0.75 * rest and f"RMSE {est:.3f} deg" in proc.stdout  # the fit's RMSE is from that start
+    # the summary says it in one line, keyed (the docs explain the key)
+    short = endocal("fit", "hysteresis", tmp_path / "cut.csv", "--axis", "piezo", "--model", "bspline",
+                    "--out", tmp_path / "m.json", "--force")
+    assert ("note[start-estimated]: the fitted record starts mid-swing (command 1.8 deg within 0..3.6, moving up)\n"
+            in short.stdout), short.stdout
 
 
 def test_the_verdict_that_the_residual_contradicts_prints_as_text(tmp_path):
@@ -235,7 +240,7 @@ def test_the_verdict_that_the_residual_contradicts_prints_as_text(tmp_path):
     fit = endocal("fit", "hysteresis", tmp_path / "est.csv", "--axis", "piezo", "--model", "pi", "--out",
                   tmp_path / "m.json")
     assert fit.returncode == 0, fit.stderr
-    val = endocal("validate", tmp_path / "m.json", tmp_path / "val.csv")
+    val = endocal("validate", tmp_path / "m.json", tmp_path / "val.csv", "--explain")
     assert val.returncode == 0, val.stderr
     assert "Which effect is missing: no catalog effect lowers the validation RMSE" in val.stdout, val.stdout
     assert "[bold]" not in val.stdout and "[/]" not in val.stdout

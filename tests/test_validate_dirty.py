@@ -29,7 +29,7 @@ def test_tracker_glitches_are_left_out_of_the_fit_and_the_scores(sine_sweeps, tm
         table.to_csv(tmp_path / f"{name}.csv", index=False)
     res = _run("fit", "hysteresis", tmp_path / "est.csv", "--axis", "ap", "--model", "pi", "--effects", "envelope",
                "--out", tmp_path / "est.json")
-    assert "warning: left out 5 measured ap angle(s) and 1 ap command(s)" in res.output, res.output
+    assert "warning[glitches]: left out 5 measured ap angle(s) and 1 ap command(s)" in res.output, res.output
     clean_fit = json.loads((tmp / "pe.json").read_text())["fit"]["rmse_deg"]  # the same model on the clean record
     assert float(res.output.split("RMSE ")[1].split(" deg")[0]) == pytest.approx(clean_fit, rel=0.02)
     clean = _validate_json(tmp_path, tmp / "pe.json", tmp / "val")

@@ -94,6 +94,62 @@ def test_one_sweep_to_fit_one_to_validate_runs_the_whole_diagnosis(sine_sweeps):
     assert second["compare"]["new_heldout_rmse_deg"] < second["compare"]["old_heldout_rmse_deg"]
 
 
+def test_the_summary_fits_a_screen_and_explain_prints_everything(sine_sweeps, monkeypatch):
+    """The demo's kind of records (a PI + envelope fitted on one simulated acquisition, validated on
+    another): by default at most 15 lines carry how far off (the RMSE and its interval), where (the
+    worst regime), what is missing (the first suggestion, its gain and p), the untested suspects by
+    name, and the refit command; ``--explain`` prints every metric, regime, candidate, suspect and
+    note in full. One validation is rendered both ways (the scan runs once)."""
+    import endocal.validation.offline as offline
+    from endocal.cli.validate import SUMMARY_MAX_LINES
+    from endocal.cli.refit import refit_command
+    from endocal.validation.metrics import METRIC_KEYS
+
+    tmp, real, kept = sine_sweeps, offline.validate_offline, []
+
+    def once(*args, **kwargs):
+        if not kept:
+            kept.append(real(*args, **kwargs))
+        return kept[0]
+
+    monkeypatch.setattr(offline, "validate_offline", once)
+    short = _run("validate", tmp / "pe.json", tmp / "val").stdout
+    full = _run("validate", tmp / "pe.json", tmp / "val", "-v").stdout
+    r = kept[0]
+    lines = short.splitlines()
+    assert len(lines) <= SUMMARY_MAX_LINES == 15, short
+    lo, hi = r.metrics.ci["rmse_deg"]
+    assert lines[0].startswith(f"pi+envelope on axis ap: validation RMSE {r.metrics.rmse_deg:.3g} deg (95 % CI "
+                               f"{lo:.3g} .. {hi:.3g})"), short
+    w = r.regimes.worst(1)[0]
+    assert f"worst regime: {w.group}: {w.name}: RMSE {w.metrics.rmse_deg:.3g} deg" in short, short
+    s = r.suspects[0]
+    assert s.effect == "deadzone" and s.significant
+    assert (f"missing: deadzone: -{s.gain_pct:.0f} % validation RMSE ({s.base_rmse_heldout_deg:.3g} -> "
+            f"{s.rmse_heldout_deg:.3g} deg), p = {s.p_value:.2g}") in short, short
+    assert lines[-3:-1] == ["next: refit with deadzone, then validate the new model:", "  " + refit_command(s.refit)]
+    if r.pointers:  # by name only: why and how to test them with --explain
+        names = ", ".join(dict.fromkeys(p.effect for p in r.pointers))
+        assert f"untested suspects: {names}" in lines and not any(p.why in short for p in r.pointers), short
+    # every warning and note a line with its key, no longer than its fact
+    keyed = [ln for ln in lines if ln.startswith(("warning[", "note["))]
+    assert keyed and all(re.match(r"(warning|note)\[[a-z-]+\]: ", ln) for ln in keyed), short
+    assert not any(n in short for n in r.notes if ": " in n), short
+    # --explain: everything the summary leaves out, in full
+    for k in METRIC_KEYS:
+        assert k in full
+    for w in r.regimes.worst(3):
+        assert f"{w.group}: {w.name}: RMSE {w.metrics.rmse_deg:.3g} deg" in full
+    for x in r.suspects:
+        assert x.cause in full and x.signature in full and f"{x.effect}: -{x.gain_pct:.0f} %" in full
+    for p in r.pointers:
+        assert p.evidence in full and p.why in full and p.experiment in full
+    for n in r.notes:
+        assert f"note: {n}" in full
+    assert r.model["equation"] in full and "  " + refit_command(s.refit) in full
+    assert "Ljung-Box" in full and "estimation data:" in full
+
+
 def test_bad_estimation_data_is_one_line_and_exit_2(sine_sweeps, tmp_path):
     tmp = sine_sweeps
     # training data recorded in the model moved: named, with the way forward
@@ -129,14 +185,20 @@ def test_train_equal_to_the_validation_data_warns_the_scores_are_in_sample(sine_
     tmp = sine_sweeps
     d = _validate_json(tmp, tmp / "pe.json", tmp / "est")  # fitted on est, validated on est: rolling origin
     assert d["scheme"]["name"] in ("rolling-origin", "none") and "fitted on the data validated here" in d["scheme"]["reason"]
-    res = _run("validate", tmp / "pe.json", tmp / "est", "--train", tmp / "est")
+    res = _run("validate", tmp / "pe.json", tmp / "est", "--train", tmp / "est", "--explain")
     # said where the numbers are, not only in a note at the end: every RMSE line calls itself in-sample
     lines = res.stdout.splitlines()
     assert any(ln.startswith("warning: the estimation data includes the record validated here") for ln in lines)
     assert not any("validation RMSE" in ln for ln in lines), res.stdout
     assert any(ln.startswith("in-sample RMSE") for ln in lines), res.stdout
+    # the summary too, its headline first, and the warning keyed
+    out = tmp / "insample.v.json"
+    res = _run("validate", tmp / "pe.json", tmp / "est", "--train", tmp / "est", "--json-out", out)
+    lines = res.stdout.splitlines()
+    assert "in-sample RMSE" in lines[0] and not any("validation RMSE" in ln for ln in lines), res.stdout
+    assert "warning[in-sample]: the estimation data includes the record validated here" in lines, res.stdout
     # its refit commands fit the validated record too: not under the name of a refit on estimation data
-    d = _validate_json(tmp, tmp / "pe.json", tmp / "est", "--train", tmp / "est")
+    d = json.loads(out.read_text())
     outs = [shlex.split(s["command"]) for s in d["suspects"]]
     assert outs and all(c[c.index("--out") + 1].endswith("-insample.json") for c in outs), outs
     # a model refitted on estimation + validation data (--refit-on all) finds both in its file
@@ -382,7 +444,8 @@ def test_a_validation_sweep_wider_than_the_estimation_sweep_is_scored_on_the_mod
     n = d["data"][0]["n_samples"]
     assert d["beyond_samples"] == pytest.approx(n * (1 - 2 / np.pi * np.arcsin(6 / 7)), rel=0.1)
     res = _run("validate", tmp / "bs.json", tmp / "wide")
-    assert f"warning: {d['beyond_samples']} of {n} samples command beyond the range" in res.stdout, res.stdout
+    assert f"warning[beyond-range]: {d['beyond_samples']} of {n} samples command beyond the range" in res.stdout, \
+        res.stdout
 
 
 def test_the_refit_folds_the_validation_data_in_only_when_asked(sine_sweeps):
@@ -412,5 +475,5 @@ def test_a_record_mostly_beyond_the_fitted_range_gets_no_refit_command(sine_swee
     d = _validate_json(tmp, tmp / "bs-far.json", tmp / "far")
     assert d["beyond_samples"] > 0.5 * d["data"][0]["n_samples"] and d["suspects"], d["suspects"]
     res = _run("validate", tmp / "bs-far.json", tmp / "far")
-    assert "Next: refit on data that covers this record's commands" in res.stdout, res.stdout
+    assert "next: refit on data that covers this record's commands" in res.stdout, res.stdout
     assert "endocal fit hysteresis" not in res.stdout

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import json
+import shlex
 from pathlib import Path
 from typing import Optional
 
 import typer
 
 from endocal.cli._common import cli_errors, err, out, refuse_input_as_output, slow_clock_warning
+from endocal.cli.messages import EXPLAIN_HELP, keyed, keyed_lines
 from endocal.errors import OutputExistsError
 
 app = typer.Typer(help="Fit bending planes (`fit planes`), hysteresis models (`fit hysteresis`) and contact-force models (`fit force`).", no_args_is_help=True)
@@ -24,12 +26,13 @@ def planes(
     seed: int = typer.Option(0, "--seed", help="Seed of the bootstrap."),
     force: bool = typer.Option(False, "--force", help="Overwrite --out."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (deviation_deg, residual_deviation_deg, delta_deg, ...)."),
+    explain: bool = typer.Option(False, "--explain", "-v", help=EXPLAIN_HELP + " Adds the sweeps used and the tracker frames dropped."),
 ) -> None:
     """Fit the four half-planes (duodenoscope eqs. 1-2), the thesis's twist delta and the orthogonal compensator.
 
     Prints the deviation angles alpha_y+, alpha_y-, alpha_x+, alpha_x- and delta with 95 %
-    bootstrap confidence intervals, the residual deviations after compensation, and which
-    sweeps were used. Later commands take the file with `--planes planes.json`.
+    bootstrap confidence intervals and the residual deviations after compensation (with
+    `--explain`, which sweeps were used). Later commands take the file with `--planes planes.json`.
     """
     from endocal.planes import save_planes
     from endocal.planes.from_runs import calibrate_planes
@@ -42,13 +45,20 @@ def planes(
         out.print_json(json.dumps(cal.to_json()))
         return
     out.print(str(cal), markup=False)
-    by_half: dict[str, list[str]] = {}
-    for sweep in cal.sweeps_used:
-        by_half.setdefault(sweep["half_plane"], []).append(f"{sweep['run']}#{sweep['index']}")
-    out.print("sweeps used: " + "; ".join(f"{h}: {', '.join(v)}" for h, v in sorted(by_half.items())), markup=False)
     dropped = {k: v for k, v in cal.dropped_frames.items() if v}
-    out.print("tracker frames dropped: " + (", ".join(f"{k}={v}" for k, v in dropped.items()) if dropped else "none"), markup=False)
+    if explain:
+        by_half: dict[str, list[str]] = {}
+        for sweep in cal.sweeps_used:
+            by_half.setdefault(sweep["half_plane"], []).append(f"{sweep['run']}#{sweep['index']}")
+        out.print("sweeps used: " + "; ".join(f"{h}: {', '.join(v)}" for h, v in sorted(by_half.items())), markup=False)
+        out.print("tracker frames dropped: " + (", ".join(f"{k}={v}" for k, v in dropped.items()) if dropped else "none"),
+                  markup=False)
+    elif dropped:
+        out.print(keyed("tracker frames dropped: " + ", ".join(f"{k}={v}" for k, v in dropped.items()), "note",
+                        "frames-dropped"), markup=False)
     err.print(f"wrote {out_path}")
+    err.print(f"next: endocal fit hysteresis RUNS --axis AXIS --planes {shlex.quote(str(out_path))} --out MODEL.json "
+              "(the hysteresis of each axis, in the planes the knobs drive)", markup=False)
 
 
 @app.command("hysteresis")
@@ -64,14 +74,15 @@ def hysteresis(
     as_json: bool = typer.Option(False, "--json", help="Print the model file's content as JSON."),
     sets: list[str] = typer.Option([], "--set", help="A base-model setting, e.g. --set n_knots=3 (bspline: n_knots, degree; pi: n_operators, weights, offset); repeatable."),
     start_from: Optional[Path] = typer.Option(None, "--start-from", help="A fitted model (same axis and base) to start from: the effects it has start at its values. validate's refit commands use it."),
+    explain: bool = typer.Option(False, "--explain", "-v", help=EXPLAIN_HELP),
 ) -> None:
     """Fit a hysteresis model (knob command -> bending angle) of one axis.
 
     `--model pi --effects envelope` is the duodenoscope paper's modified Prandtl-Ishlinskii
     model (eqs. 5-8, analytic inverse eqs. 9-11); `bspline` is the thesis's direction-dependent
     B-splines; `linear` the piecewise-linear model in the spirit of Lee et al. The fitted
-    model prints as its equation with standard errors, and the fit report says how the
-    optimiser stopped.
+    model prints as its equation with standard errors, then its RMSE and a line per warning;
+    `--explain` adds how the optimiser stopped and each warning in full.
     """
     import sys
 
@@ -102,6 +113,16 @@ def hysteresis(
         d["provenance"] = provenance
         out.print_json(json.dumps(d))
         return
+    if explain:
+        _fit_explained(result)
+    else:
+        _fit_summary(result)
+    err.print(f"wrote {out_path}")
+    err.print(f"next: endocal validate {shlex.quote(str(out_path))} RECORDS (records it was not fitted on)", markup=False)
+
+
+def _fit_explained(result) -> None:
+    """``fit hysteresis --explain``: the equation, how the fit went, every warning and note in full."""
     rep = result.model.fit_report_
     out.print(str(result.model), markup=False)
     out.print(
@@ -118,7 +139,24 @@ def hysteresis(
         out.print(f"warning: {w}", markup=False)
     if result.cut_start:  # a start the fit estimated is said; one it could not is a warning
         out.print(f"{'note' if rep.estimated_starts else 'warning'}: {result.cut_start}", markup=False)
-    err.print(f"wrote {out_path}")
+
+
+def _fit_summary(result) -> None:
+    """``fit hysteresis``: the equation, the RMSE, one line per warning (the full text with --explain)."""
+    rep = result.model.fit_report_
+    out.print(str(result.model), markup=False)
+    out.print(f"RMSE {rep.rmse_deg:.3f} deg on {result.samples} samples ({result.duration_s:.4g} s, "
+              f"{result.rate_hz:.3g} Hz) from {len(result.sources)} source(s); "
+              + ("converged" if rep.status > 0 else "not converged"), markup=False)
+    lines = []
+    if rep.status <= 0:
+        lines.append(keyed(f"stopped before converging ({rep.message})", key="not-converged"))
+    slow = slow_clock_warning(result.samples, result.duration_s)
+    lines += keyed_lines([slow, *rep.warnings, result.glitches])
+    if result.cut_start:
+        lines.append(keyed(result.cut_start, "note" if rep.estimated_starts else "warning"))
+    for line in lines:
+        out.print(line, markup=False)
 
 
 from endocal.cli.force import fit_force_cmd  # noqa: E402  (registered here so `fit --help` lists it)

@@ -10,6 +10,7 @@ from typing import Optional
 import typer
 
 from endocal.cli._common import cli_errors, err, out, refuse_input_as_output
+from endocal.cli.messages import EXPLAIN_HELP, keyed_lines
 from endocal.cli.ros import import_ros
 
 app = typer.Typer(help="Turn logs recorded elsewhere (a lab's CSV, a ROS bag) into run folders.", no_args_is_help=True)
@@ -25,6 +26,7 @@ def import_csv_cmd(
     draft: Optional[Path] = typer.Option(None, "--draft-map", help="Instead of importing, write a first map for this log, guessed from its column names and numbers; every guess is marked CHECK."),
     dedupe: bool = typer.Option(False, "--dedupe", help="Drop rows that repeat an earlier row in every column the map uses (ROS bridges write them) and merge rows of one time stamp that fill different columns (a motor tick and a tracker frame in the same millisecond); columns the map does not use (a ROS header's arrival time, seq, frame_id) are not compared. Without it duplicated time stamps are refused."),
     force: bool = typer.Option(False, "--force", help="Replace --out if it is a run folder (or the table an angles map writes), or an existing --draft-map."),
+    explain: bool = typer.Option(False, "--explain", "-v", help=EXPLAIN_HELP + " Adds which column became which."),
 ) -> None:
     """Convert a lab's CSV log into a run folder: knob positions (deg, rad or servo ticks) or a
     linear stage's tendon displacement (mm or m, kept in mm), optional goals and currents, tip and
@@ -59,30 +61,42 @@ def import_csv_cmd(
     out.print(f"imported {log} -> {res.run_dir}: {res.rows} rows, {res.motor_rows} motor samples over "
               f"{res.duration_s:.2f} s ({rate}), {res.tracker_frames} {measured}{invalid}, "
               f"{res.aligned_rows} aligned rows", markup=False)
-    out.print("columns: " + ", ".join(f"{k} <- {v}" for k, v in res.columns.items()), markup=False)
-    if res.duplicates_dropped:
-        err.print(f"note: --dedupe dropped {res.duplicates_dropped} row(s) repeating an earlier row in every column "
-                  "the map uses", markup=False)
-    if res.rows_merged:
-        err.print(f"note: --dedupe merged {res.rows_merged} row(s) into an earlier row of the same time stamp "
-                  "(different columns filled)", markup=False)
-    if res.motor_rows_incomplete:
-        err.print(f"note: {res.motor_rows_incomplete} row(s) with knob cells but not every knob position were left "
-                  f"out of the motor samples; the first at line {res.motor_rows_incomplete_line}", markup=False)
-    if res.tracker_invalid:
-        err.print(f"note: {res.tracker_invalid} tracker frame(s) were invalid (a sensor's cell empty, its quaternion "
-                  f"no rotation, or flagged by the map's valid column) and left out of the aligned table; the first "
-                  f"at line {res.tracker_invalid_line}", markup=False)
-    if res.rows_unused:
-        err.print(f"note: {res.rows_unused} row(s) held neither a motor sample nor a "
-                  f"{'reading' if res.angles_measured else 'pose'} in the mapped columns; the first at line "
-                  f"{res.rows_unused_line}", markup=False)
-    if res.gap_warning:
-        err.print(f"warning: {res.gap_warning}", markup=False)
-    for w in res.unit_warnings:
-        err.print(f"warning: {w}", markup=False)
-    if res.alignment_error:
-        err.print(f"warning: no aligned table: {res.alignment_error}", markup=False)
+    notes = [
+        ("dedupe-dropped", f"--dedupe dropped {res.duplicates_dropped} row(s) repeating an earlier row in every column "
+         "the map uses" if res.duplicates_dropped else ""),
+        ("dedupe-merged", f"--dedupe merged {res.rows_merged} row(s) into an earlier row of the same time stamp "
+         "(different columns filled)" if res.rows_merged else ""),
+        ("incomplete-rows", f"{res.motor_rows_incomplete} row(s) with knob cells but not every knob position were left "
+         f"out of the motor samples; the first at line {res.motor_rows_incomplete_line}"
+         if res.motor_rows_incomplete else ""),
+        ("invalid-frames", f"{res.tracker_invalid} tracker frame(s) were invalid (a sensor's cell empty, its quaternion "
+         f"no rotation, or flagged by the map's valid column) and left out of the aligned table; the first at line "
+         f"{res.tracker_invalid_line}" if res.tracker_invalid else ""),
+        ("unused-rows", f"{res.rows_unused} row(s) held neither a motor sample nor a "
+         f"{'reading' if res.angles_measured else 'pose'} in the mapped columns; the first at line "
+         f"{res.rows_unused_line}" if res.rows_unused else ""),
+    ]
+    warns = [("gap", res.gap_warning or ""), *(("unit", w) for w in res.unit_warnings),
+             ("no-aligned-table", f"no aligned table: {res.alignment_error}" if res.alignment_error else "")]
+    if explain:
+        out.print("columns: " + ", ".join(f"{k} <- {v}" for k, v in res.columns.items()), markup=False)
+        for kind, messages in (("note", notes), ("warning", warns)):
+            for _, text in messages:
+                if text:
+                    err.print(f"{kind}: {text}", markup=False)
+    else:
+        # a unit warning begins with the log's path, which the line above names
+        warns = [(k, t.removeprefix(f"{log}: ")) for k, t in warns]
+        for line in keyed_lines(notes, "note") + keyed_lines(warns):
+            err.print(line, markup=False)
+    if not res.alignment_error:
+        err.print(_next_fit(res.run_dir), markup=False)
+
+
+def _next_fit(data: Path) -> str:
+    """The next command after an import: fit the hysteresis of the records just written."""
+    return (f"next: endocal fit hysteresis {shlex.quote(str(data))} --axis AXIS --out MODEL.json "
+            f"(`endocal info {shlex.quote(str(data))}` names its axes)")
 
 
 def _draft(log: Path, path: Path, force: bool) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shlex
 import sys
 from pathlib import Path
 from typing import Optional
@@ -11,6 +12,7 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from endocal.cli._common import cli_errors, err, out, refuse_input_as_output
+from endocal.cli.messages import EXPLAIN_HELP, capped, keyed_lines
 
 
 def split_paths(paths: list[Path], data: list[Path]) -> tuple[list[Path], list[Path]]:
@@ -44,6 +46,8 @@ def report(
     force: bool = typer.Option(False, "--force", help="Overwrite the report files."),
     as_json: bool = typer.Option(False, "--json", help="Print the summary and metrics as one JSON object."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+    explain: bool = typer.Option(False, "--explain", "-v", help=EXPLAIN_HELP + " Adds each finding's test, the ladder "
+                                 "of models and every note in full."),
 ) -> None:
     """Compare hysteresis models on records: metrics with 95 % CIs, statistical tests, figures, provenance.
 
@@ -51,7 +55,7 @@ def report(
     angle). Models are compared on per-half-cycle errors, because samples are autocorrelated:
     Wilcoxon signed-rank for two models, Friedman with Holm-corrected pairwise Wilcoxon tests
     for more. The summary says which model is best on which record, by how much, and whether
-    that is significant. A model that cannot be evaluated on a record is listed with the reason.
+    that is significant (`--explain`: with the test, and the ladder of models). A model that cannot be evaluated on a record is listed with the reason.
     """
     from endocal.report import build_report
     from endocal.report.result import side_files
@@ -75,9 +79,39 @@ def report(
         out.print_json(json.dumps({k: d[k] for k in ("summary", "not_evaluated", "metrics", "ladder", "notes")} |
                                   {"files": {k: str(v) for k, v in side_files(out_path).items()}}))
         return
-    for line in rep.summary_lines():
-        out.print(line, markup=False)
-    for note in rep.notes:
-        err.print(note, markup=False)
+    if explain:
+        for line in rep.summary_lines():
+            out.print(line, markup=False)
+        for note in rep.notes:
+            err.print(note, markup=False)
+    else:
+        _summary(rep)
     files = side_files(out_path)
     err.print(f"wrote {out_path} (+ {files['json'].name}, {files['csv'].name})", markup=False)
+    err.print(f"next: open {shlex.quote(str(out_path))} in a browser (figures, every metric with its interval, the "
+              "tests)", markup=False)
+
+
+def _summary(rep) -> None:
+    """``report``: the best model on each record and whether that is significant, one line per
+    note (``--explain``: the full findings, the ladder of models, every note in full)."""
+    for g in rep.groups:
+        f = g.finding
+        where = f"{f.data} ({f.signal}), {f.axis}"
+        fitted_on = [e.model for e in g.evaluations if e.in_sample]
+        if fitted_on:
+            where += f" [in-sample for {', '.join(fitted_on)}]"
+        line = f"{where}: {f.best} best, RMSE {f.best_rmse_deg:.3g} deg"
+        if f.runner_up is not None:
+            line += f", {f.margin_pct:.0f} % below {f.runner_up}: "
+            line += ("not tested" if f.p_value is None else
+                     f"{'significant' if f.significant else 'not significant'} (p = {f.p_value:.2g})")
+            if "record more cycles to decide" in f.sentence:  # no p-value could fall below alpha
+                line += ": too few cycles to decide, record more"
+        out.print(line, markup=False)
+    notes = [f"note[not-evaluated]: {n.model} on {n.data} ({n.axis})" for n in rep.not_evaluated]  # why: --explain
+    notes += keyed_lines([note for g in rep.groups for e in g.evaluations for note in e.notes], "note")
+    for line in capped(notes, 6, "notes"):
+        out.print(line, markup=False)
+    for line in capped(keyed_lines(rep.notes, "note"), 4, "notes"):
+        err.print(line, markup=False)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shlex
 import sys
 from pathlib import Path
 from typing import Optional
@@ -9,6 +10,7 @@ from typing import Optional
 import typer
 
 from endocal.cli._common import cli_errors, err, out
+from endocal.cli.messages import EXPLAIN_HELP, keyed_lines
 
 
 @cli_errors
@@ -23,6 +25,7 @@ def import_ros(
     base_topic: str = typer.Option("/aurora/base", "--base-topic", help="PoseStamped or TransformStamped of the base sensor (m)."),
     pair_tolerance: float = typer.Option(0.005, "--pair-tolerance", help="Largest time (s) between a tip and a base pose of one tracker frame."),
     force: bool = typer.Option(False, "--force", help="Replace --out if it is a run folder."),
+    explain: bool = typer.Option(False, "--explain", "-v", help=EXPLAIN_HELP),
 ) -> None:
     """Convert a ROS bag into a run folder (motor and tracker streams + aligned table).
 
@@ -39,11 +42,22 @@ def import_ros(
             raise RunFormatError(f"--joint {item!r}: write AXIS=JOINT_NAME, e.g. --joint ap=knob_ap")
         joints[axis.strip()] = name.strip()
     topics = RosTopics(joints=joint_topic, tip=tip_topic, base=base_topic, goals=goal_topic)
-    res = import_rosbag(bag, out_dir, load_probe(probe), joints, topics=topics, pair_tolerance_s=pair_tolerance,
+    probe_cfg = load_probe(probe)
+    res = import_rosbag(bag, out_dir, probe_cfg, joints, topics=topics, pair_tolerance_s=pair_tolerance,
                         force=force, command="endocal " + " ".join(sys.argv[1:]))
     out.print(f"imported {bag} -> {res.run_dir}: {res.motor_rows} motor samples, {res.tracker_frames} tracker frames, "
               f"{res.aligned_rows} aligned rows")
-    if res.unpaired_frames:
-        err.print(f"note: {res.unpaired_frames} tip poses had no base pose within {pair_tolerance:g} s and were dropped")
-    if res.alignment_error:
-        err.print(f"warning: no aligned table: {res.alignment_error}")
+    note = (f"{res.unpaired_frames} tip poses had no base pose within {pair_tolerance:g} s and were dropped"
+            if res.unpaired_frames else "")
+    warning = f"no aligned table: {res.alignment_error}" if res.alignment_error else ""
+    if explain:
+        for kind, text in (("note", note), ("warning", warning)):
+            if text:
+                err.print(f"{kind}: {text}")
+    else:
+        for line in keyed_lines([("unpaired-poses", note)], "note") + keyed_lines([("no-aligned-table", warning)]):
+            err.print(line, markup=False)
+    if not res.alignment_error:
+        axes = [a for a in probe_cfg.bending_axes if a in joints]
+        err.print(f"next: endocal fit hysteresis {shlex.quote(str(res.run_dir))} --axis {axes[0] if axes else 'AXIS'} "
+                  "--out MODEL.json", markup=False)

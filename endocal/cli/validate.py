@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shlex
 import tempfile
 from pathlib import Path
 from typing import Optional
@@ -22,6 +23,7 @@ from endocal.cli._common import (
     slow_clock_warning,
     warnings_as_lines,
 )
+from endocal.cli.messages import EXPLAIN_HELP, capped, key_of, keyed_lines
 from endocal.cli.refit import refit_command, with_refit_commands
 from endocal.errors import ModelError
 
@@ -181,6 +183,96 @@ def render(result, folded: bool = False) -> None:
         out.print(f"note: {note}", markup=False)
 
 
+#: Lines the summary of an offline validation prints at most (issue 26: a verdict a person reads at a glance).
+SUMMARY_MAX_LINES = 15
+
+
+def render_summary(result, *, folded: bool = False, model_path: Path, data: list[Path],
+                   old_path: Path | None = None) -> None:
+    """Print the summary of a :class:`~endocal.validation.offline.ValidationResult`: at most
+    :data:`SUMMARY_MAX_LINES` lines.
+
+    How far off (the RMSE with its interval), where (the worst regime), what is missing (the first
+    suggestion with its gain and p, or nothing), the untested suspects by name, one keyed line per
+    warning and note, and the next command. :func:`render` (``--explain``) prints everything.
+    """
+    m, scan, c = result.model, result.scan, result.compare
+    n = sum(d["n_samples"] for d in result.data)
+    what = _scheme_word(result)
+    lo, hi = result.metrics.ci.get("rmse_deg", (float("nan"), float("nan")))
+    # "validation" only when the model was fitted on other data; rolling origin adds its held-out RMSE
+    word = "" if scan.scheme != "estimation/validation" else "in-sample " if result.in_sample else "validation "
+    heldout = (f", held-out {scan.baseline_rmse_heldout_deg:.3g} deg (rolling origin)"
+               if scan.scheme == "rolling-origin" else "")
+    head = [f"{m['label']} on axis {result.axis}: {word}RMSE {result.metrics.rmse_deg:.3g} deg (95 % CI {lo:.3g} .. "
+            f"{hi:.3g}){heldout}, {n} samples from {len(result.data)} record(s)"]
+    if c is not None:
+        since = f"{c.old_label} ({old_path.name})" if old_path is not None else c.old_label
+        head.append(f"error {'fell' if c.change_pct < 0 else 'rose'} {abs(c.change_pct):.0f} % since {since}: {what} "
+                    f"RMSE {c.old_heldout_rmse_deg:.3g} -> {c.new_heldout_rmse_deg:.3g} deg")
+    worst = result.regimes.worst(1)
+    if worst:
+        r = worst[0]
+        head.append(f"worst regime: {r.group}: {r.name}: RMSE {r.metrics.rmse_deg:.3g} deg ({r.ratio:.2f}x "
+                    f"overall), {100 * r.fraction:.0f} % of samples")
+    verdict, then = _verdict(result, folded, model_path, data, old_path)
+    head.append(verdict)
+    if result.pointers:
+        head.append("untested suspects: " + ", ".join(dict.fromkeys(p.effect for p in result.pointers)))
+    tail = [*then, "details: --explain (every metric with its interval, regime, residual test, candidate and note)"]
+    warnings = keyed_lines([*m.get("fit_warnings", []),
+                            slow_clock_warning(n, sum(d.get("duration_s") or 0.0 for d in result.data)),
+                            ("in-sample", "the estimation data includes the record validated here" if result.in_sample
+                             else ""),
+                            ("beyond-range", f"{result.beyond_samples} of {n} samples command beyond the range the "
+                             "model was fitted on" if result.beyond_samples > 0.1 * n else "")])
+    # the CLI's own warnings say what these notes say
+    notes = [x for x in result.notes if key_of(x) not in ("in-sample", "beyond-range")]
+    lines = capped(warnings + keyed_lines(notes, "note"), SUMMARY_MAX_LINES - len(head) - len(tail),
+                   "warnings and notes")
+    for line in head + lines + tail:
+        out.print(line, markup=False)
+
+
+def _verdict(result, folded: bool, model_path: Path, data: list[Path], old_path: Path | None) -> tuple[str, list[str]]:
+    """What is missing, in one line, and the next command (lines)."""
+    scan, what = result.scan, _scheme_word(result)
+    n = sum(d["n_samples"] for d in result.data)
+    report = ("next: compare the models on these records, with figures: endocal report "
+              + shlex.join([*(str(p) for p in (old_path, model_path) if p is not None),
+                            *(a for p in data for a in ("--data", str(p))), "--out", "report.html"]))
+    if result.suspects:
+        s = result.suspects[0]
+        thin = not any(x.significant for x in result.suspects)
+        others = [x.effect for x in result.suspects[1:]]
+        verdict = (f"{'first candidate' if thin else 'missing'}: {s.effect}: -{s.gain_pct:.0f} % {what} RMSE "
+                   f"({s.base_rmse_heldout_deg:.3g} -> {s.rmse_heldout_deg:.3g} deg), "
+                   + (s.evidence if thin else f"p = {s.p_value:.2g}")
+                   + (f"; also: {', '.join(others)}" if others else ""))
+        if result.beyond_samples > 0.5 * n:
+            return verdict, ["next: refit on data that covers this record's commands (most of it lies beyond the "
+                             "model's range), then validate again"]
+        then = "validate the new model on a third record" if folded else "validate the new model"
+        return verdict, [f"next: refit with {s.effect}, then {then}:", "  " + refit_command(s.refit)]
+    if scan.scheme == "none":
+        return f"missing: not tested: {scan.scheme_reason}", []
+    if result.pointers:
+        p = result.pointers[0]
+        return ("missing: nothing the scan confirmed, but the data point at effects it could not settle",
+                [f"next: to test {p.effect}: {p.experiment}"])
+    if result.unexplained:
+        return (f"nothing missing from the catalog (no effect lowers the {what} RMSE by {scan.min_gain_pct:g} % or "
+                f"more), but {result.unexplained}", [report])
+    if scan.tested and scan.tested[0].gain_pct >= scan.min_gain_pct:
+        best = scan.tested[0]
+        return (f"nothing significant missing: the best candidate, {best.effect}, lowers the {what} RMSE by "
+                f"{best.gain_pct:.0f} % but not consistently (p = {best.p_value:.2g})", [report])
+    still = (f"; but {scan.still_blocks} of its {scan.folds} held-out blocks hold no motion of this axis"
+             if scan.still_blocks else "")
+    return (f"nothing missing: no catalog effect lowers the {what} RMSE by {scan.min_gain_pct:g} % or more{still}",
+            [report])
+
+
 @cli_errors
 def validate(
     model_path: Path = typer.Argument(..., help="Fitted model file (endocal fit hysteresis --out)."),
@@ -206,6 +298,7 @@ def validate(
     runs_out: Optional[Path] = typer.Option(None, "--runs-out", help="With --protocol: keep the played runs here (compensated/, uncompensated/); without it they are removed once scored on the simulator, and kept in a temporary folder (named) on a rig."),
     force_model: Optional[Path] = typer.Option(None, "--force-model", help="With --protocol: force.json (endocal fit force); guard both playbacks every tick."),
     max_force_n: Optional[float] = typer.Option(None, "--max-force-n", help="With --force-model: stop bending into the load at this predicted tip force (N)."),
+    explain: bool = typer.Option(False, "--explain", "-v", help=EXPLAIN_HELP + " Offline: the metrics table, the worst regimes, the residual tests, every candidate with its physics, the untested suspects with why and how to test them."),
 ) -> None:
     """Compare a model with measurements: how far off, where it fails, which physical effect is missing.
 
@@ -246,7 +339,7 @@ def validate(
             raise ModelError("give either DATA (offline validation) or --protocol (playback on a backend), not both")
         apply_out_of_range(model, out_of_range)
         _playback(model, model_path, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets,
-                  runs_out, json_out, force_model, max_force_n)
+                  runs_out, json_out, force_model, max_force_n, explain)
         return
     if force_model is not None or max_force_n is not None:
         raise ModelError("--force-model and --max-force-n guard a playback: use them with --protocol")
@@ -282,13 +375,22 @@ def validate(
         d["compare"]["path"] = str(old_path)
     if emit_json(d, as_json, json_out):
         return
+    if not explain:
+        render_summary(result, folded=bool(suffix), model_path=model_path, data=list(data), old_path=old_path)
+        return
     render(result, folded=bool(suffix))
     if old_path is not None and compare_path is None:
         err.print(f"compared with {old_path} (the model this one was refitted from)")
 
 
+def _rmse_ci(metrics) -> str:
+    """``RMSE 0.405 deg (95 % CI 0.39 .. 0.419)``."""
+    lo, hi = metrics.ci.get("rmse_deg", (float("nan"), float("nan")))
+    return f"RMSE {metrics.rmse_deg:.3g} deg (95 % CI {lo:.3g} .. {hi:.3g})"
+
+
 def _playback(model, model_path, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets,
-              runs_out, json_out, force_model=None, max_force_n=None) -> None:
+              runs_out, json_out, force_model=None, max_force_n=None, explain=False) -> None:
     from endocal.backends.registry import make_backend
     from endocal.probe import load_probe
     from endocal.protocols import load_protocol, parse_overrides
@@ -317,10 +419,22 @@ def _playback(model, model_path, protocol, backend, probe, sim_config, hardware_
         )
     if emit_json(result.to_dict(), as_json, json_out):
         return
-    out.print(_metrics_table(f"compensated: {protocol} on {backend}", result.metrics))
-    out.print(_metrics_table("uncompensated", result.uncompensated))
+    if explain:
+        out.print(_metrics_table(f"compensated: {protocol} on {backend}", result.metrics))
+        out.print(_metrics_table("uncompensated", result.uncompensated))
+    else:
+        comp, unc = result.metrics, result.uncompensated
+        lines = [f"compensated ({protocol} on {backend}): {_rmse_ci(comp)}, max {comp.max_deg:.3g} deg",
+                 f"uncompensated: {_rmse_ci(unc)}, max {unc.max_deg:.3g} deg"]
+        if unc.rmse_deg > 0:
+            change = 100.0 * (1.0 - comp.rmse_deg / unc.rmse_deg)
+            lines[-1] += f": the model {'lowers' if change >= 0 else 'raises'} the RMSE {abs(change):.0f} %"
+        for line in lines:
+            out.print(line, markup=False)
     if make_guard is not None:
         for name, events in result.events.items():
             stops = [e for e in events if e["kind"] == "stop"]
             out.print(f"force guard, {name}: {len(stops)} stop(s)" + "".join(
                 f"; t = {e['t_s']:.2f} s at {e['force_pred_n']:.3f} N" for e in stops), markup=False)
+    if not explain:
+        out.print("details: --explain (every metric with its interval)", markup=False)

@@ -1,0 +1,70 @@
+"""The keys of the summary's warnings and notes (endocal/cli/messages.py): every key printed is
+explained in KEYS, and the library's own words find their keys and their facts."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from endocal.cli import messages
+from endocal.cli._common import slow_clock_warning
+from endocal.cli.messages import KEYS, capped, head, key_of, keyed, keyed_lines
+
+CLI = Path(messages.__file__).parent
+
+
+def test_every_key_the_command_line_can_print_is_explained():
+    used = {k for k, _ in messages._RULES} | set(messages._SHORT) | set(messages._GROUPED)
+    for path in CLI.glob("*.py"):
+        text = path.read_text()
+        used |= set(re.findall(r'key="([a-z-]+)"', text))  # keyed(..., key="not-converged")
+        used |= set(re.findall(r"(?:note|warning)\[([a-z-]+)\]", text))  # f"note[not-evaluated]: ..."
+    used.discard("a-z-")
+    assert used and used <= set(KEYS), sorted(used - set(KEYS))
+    # a (key, text) pair a command passes is checked when printed
+    with pytest.raises(KeyError, match="startcut"):
+        keyed_lines([("startcut", "a record starts mid-swing")])
+    # a meaning a reader can act on: sentences, no key left blank
+    assert all(len(v) > 40 and v.endswith(".") for v in KEYS.values()), [k for k, v in KEYS.items() if len(v) <= 40]
+
+
+def test_the_library_s_warnings_find_their_keys_and_keep_their_facts():
+    from endocal.models.base import _loose_parameters, _no_better_than_a_line
+    from endocal.models.data import HysteresisData
+    from endocal.validation.data import glitch_note
+
+    owner = object()  # an effect without why_loose: each loose parameter gets its own line
+    loose = _loose_parameters(["rate_gain_s", "creep_fraction"], {"rate_gain_s": (owner, "gain_s"),
+                                                                   "creep_fraction": (owner, "fraction")},
+                              {"rate_gain_s": 0.05, "creep_fraction": 0.09}, {"rate_gain_s": 0.01, "creep_fraction": 0.15},
+                              np.array([0.0, 0.0]), np.array([0.05, 0.95]))
+    assert [key_of(w) for w in loose] == ["at-bound", "unidentified"]
+    assert keyed(loose[0]) == "warning[at-bound]: rate_gain_s = 0.05 sits at its upper bound 0.05"
+    cmd = np.tile(np.r_[np.linspace(0, 40, 50), np.linspace(40, 0, 50)], 3)
+    line = _no_better_than_a_line(HysteresisData(cmd_deg=cmd, meas_deg=0.7 * cmd), 1.0, "pi")
+    assert key_of(line[0]) == "line-fit" and head(line[0]).startswith("the fit (1 deg RMSE) is no better than")
+    glitch = glitch_note([("val.csv", 1, 5, 0, 3.0)], "ap")
+    assert key_of(glitch) == "glitches" and head(glitch).startswith("left out 5 measured ap angle(s) and 1 ap command(s)")
+    slow = slow_clock_warning(100, 1000.0)
+    assert keyed(slow) == "warning[slow-clock]: 0.1 samples per second: is t_s in seconds?"
+    # a topic first ("load: ..."): the fact after it; several make one line
+    untestable = ["load: no extra column varies in the estimation data (8 constant): load cannot be identified (log a "
+                  "covariate)", "coupling: the other knob never moves: coupling cannot be identified (run `circle`)"]
+    assert keyed(untestable[0], "note") == ("note[untestable]: load: no extra column varies in the estimation data "
+                                            "(8 constant)")
+    assert keyed_lines(untestable, "note") == ["note[untestable]: load, coupling cannot be tested on this data"]
+    # "fact; what to do": the fact
+    assert head("candidates fitted on 1 estimation sample in 6 (4335 of 26002) to keep the scan quick; the printed "
+                "refit fits every sample") == "candidates fitted on 1 estimation sample in 6 (4335 of 26002) to keep the scan quick"
+    assert key_of("something no rule knows: at all") == "other" and "other" in KEYS
+
+
+@pytest.mark.parametrize("n, budget, kept", [(3, 5, 3), (5, 5, 5), (9, 5, 4)])
+def test_capped_lines_say_how_many_more_explain_prints(n, budget, kept):
+    lines = capped([f"w{i}" for i in range(n)], budget)
+    assert len(lines) == min(n, budget) and lines[:kept] == [f"w{i}" for i in range(kept)]
+    if n > budget:
+        assert lines[-1] == f"... {n - kept} more warnings (--explain prints them)"
