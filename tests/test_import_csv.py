@@ -900,7 +900,8 @@ def test_a_probe_pulled_by_linear_stages_imports_as_a_run_in_mm(sim_log, tmp_pat
                                                                                        f'"{axis}_stage_goal"')
     text = re.sub(r"\nzero_ticks = 2048[^\n]*|\nticks_per_rev = 4096[^\n]*", "", text)
     (tmp_path / "map.toml").write_text(text.replace('unit = "ticks"', 'unit = "mm"'))
-    proc = endocal("import", "csv", tmp_path / "stage.csv", "--map", tmp_path / "map.toml", "--out", tmp_path / "run")
+    proc = endocal("import", "csv", tmp_path / "stage.csv", "--map", tmp_path / "map.toml", "--out", tmp_path / "run",
+                   "--explain")
     assert proc.returncode == 0, proc.stderr
     assert "ap (mm) <- ap_stage_present" in proc.stdout, proc.stdout
     assert _run_json(tmp_path / "run")["drive_units"] == {"ap": "mm", "ml": "mm"}

@@ -117,7 +117,7 @@ def test_a_tendon_displacement_log_is_drafted_imported_fitted_validated_and_repo
     # the import keeps the drive in mm: the command column and the table's metadata say so
     for name in ("sweep", "chirp"):
         proc = endocal("import", "csv", tmp / f"{name}.csv", "--map", tmp / "map.toml", "--out",
-                       tmp / f"{name}.parquet")
+                       tmp / f"{name}.parquet", "--explain")  # --explain: the column each role was read from
         assert proc.returncode == 0, proc.stderr
         assert "ap (mm) <- Tendon Disp." in proc.stdout, proc.stdout
     a = load_aligned(tmp / "sweep.parquet")

@@ -375,7 +375,7 @@ def _angles(d: dict, probe: ProbeConfig, where: str) -> dict[str, _Angle]:
         column = _column(a, "column", w, "the measured angle")
         if column == UNFILLED:  # the column before its unit
             raise _unfilled(where, f"[angles.{axis}] column")
-        if a.get("unit") in LENGTH_UNITS:
+        if isinstance(a.get("unit"), str) and a["unit"] in LENGTH_UNITS:
             raise RunFormatError(f"{w}: unit = {a['unit']!r}, but a bending angle is measured in deg or rad: a length "
                                  "is a linear drive's, given in [knobs.AXIS] unit (a tendon displacement); give the "
                                  "angle column's unit, deg or rad")

@@ -176,7 +176,7 @@ def read_run_json(run_dir: Path) -> dict:
 
 
 #: Fields of run.json that are JSON objects when present.
-_RUN_JSON_OBJECTS = ("protocol", "probe", "backend", "software", "units", "streams", "counts")
+_RUN_JSON_OBJECTS = ("protocol", "probe", "backend", "software", "units", "streams", "counts", "drive_units")
 
 
 def _is_run_folder(path: Path) -> bool:
