@@ -228,7 +228,7 @@ class DynamixelConfig:
         The USB adapter's latency timer as the wait for each status packet assumes it: a reply
         is awaited ``2 * latency_timer_ms + 2`` ms plus its bytes' time (dynamixel-sdk's rule,
         which assumes 16 ms, the FTDI default). Raise it for a slow USB hub or a loaded PC (the
-        emulated rig, served by a process that shares the CPU, writes 100).
+        emulated rig, served by a process that shares the CPU, writes 500).
     motors : dict
         Axis name -> :class:`MotorConfig`.
     """
