@@ -449,7 +449,8 @@ def _creep_reason(data: HysteresisData) -> str | None:
     starts = np.flatnonzero(hold & ~np.concatenate([[False], hold[:-1]]))
     for k in starts:
         run0 = data.run_starts[np.searchsorted(data.run_starts, k, side="right") - 1]
-        j = np.searchsorted(t, t[k] - 2.0) if t is not None else k - 20
+        # within this record: several records restart their clocks, so a search over all of t is unordered
+        j = int(run0) + int(np.searchsorted(t[run0:k + 1], t[k] - 2.0)) if t is not None else k - 20
         j = max(int(j), int(run0))
         if k > run0 and np.ptp(data.cmd_deg[j:k + 1]) >= 0.05 * span:
             return None
