@@ -204,6 +204,7 @@ def validate(
     runs_out: Optional[Path] = typer.Option(None, "--runs-out", help="With --protocol: keep the played runs here (compensated/, uncompensated/); without it they are removed once scored on the simulator, and kept in a temporary folder (named) on a rig."),
     force_model: Optional[Path] = typer.Option(None, "--force-model", help="With --protocol: force.json (endocal fit force); guard both playbacks every tick."),
     max_force_n: Optional[float] = typer.Option(None, "--max-force-n", help="With --force-model: stop bending into the load at this predicted tip force (N)."),
+    next_path: Optional[Path] = typer.Option(None, "--next", help="Offline: write the protocol that would settle what this validation could not (suspects it could not confirm, effects the data cannot test) to this .toml, sized from the effects seen, for the probe the records were made on (else --probe); prints the excite commands that record it."),
 ) -> None:
     """Compare a model with measurements: how far off, where it fails, which physical effect is missing.
 
@@ -221,10 +222,16 @@ def validate(
         raise ModelError(f"--folds must be 2 or more (held-out blocks of the rolling-origin scan), got {folds}")
     refuse_input_as_output("--json-out", json_out, [model_path, *(data or []), *train, *compare, planes, force_model,
                                                     sim_config, hardware_config])
-    if json_out is not None:
-        from endocal.runs.format import check_parent
+    for path in (json_out, next_path):
+        if path is not None:
+            from endocal.runs.format import check_parent
 
-        check_parent(json_out)  # before any work: a long validation must not end in an output it cannot write
+            check_parent(path)  # before any work: a long validation must not end in an output it cannot write
+    if next_path is not None:
+        if protocol is not None or trajectory is not None:
+            raise ModelError("--next designs the next recording from an offline validation: give DATA, not "
+                             "--protocol or --trajectory")
+        refuse_input_as_output("--next", next_path, [model_path, *(data or []), *train, *compare, planes])
     if trajectory is not None:
         if protocol is not None:
             raise ModelError("give either --trajectory (a tip path) or --protocol (desired angles of one axis), not both")
@@ -259,6 +266,10 @@ def validate(
     from endocal.validation.offline import validate_offline
 
     tables = [load_aligned(p) for p in data]
+    if next_path is not None:
+        from endocal.cli.next_protocol import check_next
+
+        check_next(model, tables, probe)  # a fitted range no motion fits in is refused before the validation
     plan = plan_estimation(model, tables, model_path=model_path, train_paths=train, cv=cv, planes_path=planes)
     refuse_input_as_output("--json-out", json_out, [*plan.train_paths, plan.planes_path])
     effects = [e.label for e in model.effects_]
@@ -278,11 +289,14 @@ def validate(
     d = result.to_dict()
     if old_path is not None and d["compare"] is not None:
         d["compare"]["path"] = str(old_path)
-    if emit_json(d, as_json, json_out):
-        return
-    render(result, folded=bool(suffix))
-    if old_path is not None and compare_path is None:
-        err.print(f"compared with {old_path} (the model this one was refitted from)")
+    if not emit_json(d, as_json, json_out):
+        render(result, folded=bool(suffix))
+        if old_path is not None and compare_path is None:
+            err.print(f"compared with {old_path} (the model this one was refitted from)")
+    if next_path is not None:
+        from endocal.cli.next_protocol import write_next
+
+        write_next(next_path, model, result, tables, plan.train, plan.planes, model_path, probe, as_json)
 
 
 def _playback(model, model_path, protocol, backend, probe, sim_config, hardware_config, planes, seed, as_json, sets,

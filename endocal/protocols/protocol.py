@@ -241,6 +241,32 @@ class Protocol:
             **({"design": self.design} if self.design else {}),
         }
 
+    def to_toml(self, header: str = "") -> str:
+        """The protocol as a protocol file (:func:`read_protocol_file` reads it back to an equal protocol).
+
+        Every parameter is written, resolved (defaults included), so the file says exactly what
+        runs; a ``sequence``'s segments as ``[[params.segments]]`` tables; conditions without
+        their values (a value is given per run). ``header`` becomes ``#`` comment lines on top.
+        """
+        lines = [f"# {line}".rstrip() for line in header.splitlines()]
+        lines += [f"description = {_toml_value(self.description)}", f"signal = {_toml_value(self.signal)}", "",
+                  "[params]"]
+        lines += _toml_keys({k: v for k, v in self.params.items() if k != "segments"})
+        for seg in self.params.get("segments", []) if self.signal == "sequence" else []:
+            lines += ["", "[[params.segments]]", *_toml_keys(seg)]
+        for section, table in self.sim.items():
+            lines += ["", f"[sim.{section}]", *_toml_keys(table)]
+        for name, cond in self.conditions.items():
+            lines += ["", f"[conditions.{name}]", *_toml_keys(cond)]
+        if self.design:
+            plain = {k: v for k, v in self.design.items() if not _is_tables(v)}
+            lines += ["", "[design]", *_toml_keys(plain)]
+            for key, rows in self.design.items():
+                if _is_tables(rows):
+                    for row in rows:
+                        lines += ["", f"[[design.{key}]]", *_toml_keys(row)]
+        return "\n".join(lines) + "\n"
+
     @classmethod
     def from_dict(cls, d: dict, where: str = "protocol") -> Protocol:
         """Rebuild a protocol from :meth:`to_dict` output (e.g. read back from ``run.json``).
@@ -266,6 +292,34 @@ class Protocol:
         return cls(name, str(d.get("description", "")), signal, _resolve_params(spec, params, where),
                    Path(src) if src else None, d.get("sha256"), dict(d.get("overrides") or {}), dict(d.get("sim") or {}),
                    conditions, values, dict(d.get("design") or {}))
+
+
+def _is_tables(value: Any) -> bool:
+    return isinstance(value, list) and bool(value) and all(isinstance(v, dict) for v in value)
+
+
+def _toml_value(value: Any) -> str:
+    """One TOML value: strings (escaped), booleans, numbers, lists of these."""
+    if isinstance(value, str):
+        escaped = value.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n").replace("\t", "\\t")
+        return f'"{escaped}"'
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            raise ProtocolError(f"a protocol file cannot hold the number {value!r}")
+        return repr(value)
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise ProtocolError(f"a protocol file cannot hold {value!r}")
+
+
+def _toml_keys(table: dict) -> list[str]:
+    """``key = value`` lines; a key whose value is None (an unset seed) is left out, as unset."""
+    return [f"{k} = {_toml_value(v)}" if _COLUMN.match(str(k)) else f"{_toml_value(str(k))} = {_toml_value(v)}"
+            for k, v in table.items() if v is not None]
 
 
 def _spec(signal: Any, where: str) -> SignalSpec:
