@@ -23,8 +23,9 @@ from endocal.fitting import fit_hysteresis
 from endocal.probe import PRESETS
 from endocal.protocols import load_protocol
 from endocal.runs.aligned import load_aligned
-from endocal.validation import suspects
+from endocal.validation import scan
 from endocal.validation.offline import validate_offline
+from endocal.validation.structure import template
 
 TEE = PRESETS["tee"]
 #: The demo's records (scripts/demo.sh): protocol, amplitude (deg), seed.
@@ -45,7 +46,7 @@ def records(root: Path) -> dict[str, Path]:
 def cold_split_fit(model, effects, train, stride=1):
     """The reference: a candidate structure fitted from scratch (no warm start)."""
     dt = train.decimate(stride) if stride > 1 else train
-    return suspects._template(model, effects).fit(dt)
+    return template(model, effects).fit(dt)
 
 
 def time_validate(model, val, train, paths) -> tuple[float, object]:
@@ -65,12 +66,12 @@ def main() -> None:
         n_val = sum(len(v.table) for v in val)
         n_train = sum(len(t.table) for t in train)
         fast_s, fast = time_validate(model, val, train, paths)
-        warm = suspects.split_fit
-        suspects.split_fit = cold_split_fit
+        warm = scan.split_fit  # the scan's candidate fits (scan_split, split_errors)
+        scan.split_fit = cold_split_fit
         try:
             ref_s, ref = time_validate(model, val, train, paths)
         finally:
-            suspects.split_fit = warm
+            scan.split_fit = warm
     print(f"validate, {model.base_name}+{'+'.join(e.label for e in model.effects_)} on {n_val} validation samples "
           f"(estimation: {n_train}), {len(fast.scan.tested)} candidates:")
     print(f"  warm-started candidates: {fast_s:6.1f} s (target <= 15 s); validation RMSE {fast.scan.baseline_rmse_heldout_deg:.3f} deg, "

@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from endocal.models import PIModel
+from endocal.models import PIModel, StreamingCompensator
 from endocal.models.pi import pi_exp_weights, pi_inverse_parameters, pi_thresholds
 
 TABLE1 = {
@@ -119,7 +119,7 @@ def main() -> None:
           f"{n / t_ref_inv / 1e6:.3f} M samples/s (x{t_ref_inv / t_inv:.0f})")
 
     # 3. streaming step
-    comp = truth.compensator()
+    comp = StreamingCompensator(truth)
     seq = [float(v) for v in y_des[:20000]]
     comp.reset()
     step = comp.step

@@ -31,7 +31,8 @@ from endocal.protocols import load_protocol  # noqa: E402
 from endocal.runs.aligned import AlignedData, align, check_aligned  # noqa: E402
 from endocal.sim import SimConfig, Simulator  # noqa: E402
 from endocal.validation.data import axis_data  # noqa: E402
-from endocal.validation.suspects import fold_bounds, heldout_errors, scan_effects  # noqa: E402
+from endocal.validation.folds import fold_bounds, heldout_errors  # noqa: E402
+from endocal.validation.scan import scan_effects  # noqa: E402
 
 TEE = PRESETS["tee"]
 

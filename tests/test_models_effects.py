@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from endocal.errors import ModelError
-from endocal.models import HysteresisData, load_model, make_model
+from endocal.models import HysteresisData, load_model, make_model, save_model
 from endocal.models.effects import make_effect
 from tests._models_signals import PAPER_TABLE1, damped_sine
 
@@ -36,7 +36,7 @@ def test_drift_is_recovered_on_every_base(base, drifting, tmp_path):
     y_des = m.predict(HysteresisData(cmd_deg=0.8 * data.cmd_deg, t_s=data.t_s))
     u = m.inverse(y_des, t_s=data.t_s)
     assert np.max(np.abs(m.predict(u, t_s=data.t_s) - y_des)) < 1e-8
-    m.save(tmp_path / "m.json")
+    save_model(m, tmp_path / "m.json")
     assert np.max(np.abs(load_model(tmp_path / "m.json").predict(data.cmd_deg, t_s=data.t_s)
                          - m.predict(data.cmd_deg, t_s=data.t_s))) <= 1e-12
 

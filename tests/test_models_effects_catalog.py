@@ -20,7 +20,7 @@ import pandas as pd
 import pytest
 
 from endocal.errors import ModelError
-from endocal.models import HysteresisData, load_model, make_model
+from endocal.models import HysteresisData, StreamingCompensator, load_model, make_model, save_model
 from endocal.models.effects import EFFECTS, catalog, make_effect
 from tests._models_signals import PAPER_TABLE1
 
@@ -156,7 +156,7 @@ def test_effect_explains_data_that_has_it(effect, tmp_path):
     assert with_it <= 1.5 * NOISE_DEG, (without, with_it)
     assert shown in str(m)
     # save / load: predictions and inverse exactly the same
-    m.save(tmp_path / "m.json")
+    save_model(m, tmp_path / "m.json")
     m2 = load_model(tmp_path / "m.json")
     assert np.max(np.abs(m2.predict(d) - m.predict(d))) <= 1e-12
     assert str(m2) == str(m)
@@ -212,16 +212,16 @@ def test_streaming_compensator_matches_the_batch_inverse_or_refuses():
         m = make_model("pi", ["envelope", spec]).set_parameters({**PAPER_TABLE1, **values}, cmd_range_deg=(-70, 70))
         y_des = m.predict(HysteresisData(cmd_deg=0.8 * d.cmd_deg, t_s=d.t_s))
         u = m.inverse(y_des, t_s=d.t_s)
-        comp = m.compensator(dt_s=DT_S)
+        comp = StreamingCompensator(m, dt_s=DT_S)
         streamed = np.array([comp.step(v) for v in y_des[:3000]])
         assert np.max(np.abs(streamed - u[:3000])) < 1e-9, effect
     with pytest.raises(ModelError, match="give dt_s"):
-        m.compensator()
+        StreamingCompensator(m)
     for effect in ("delay", "load", "coupling"):
         spec, values, _ = TRUTH[effect]
         m = make_model("pi", ["envelope", spec]).set_parameters({**PAPER_TABLE1, **values})
         with pytest.raises(ModelError, match="cannot be compensated one sample at a time"):
-            m.compensator(dt_s=DT_S)
+            StreamingCompensator(m, dt_s=DT_S)
 
 
 # ------------------------------------------------------------------ simulator

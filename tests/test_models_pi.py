@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from endocal.models import PIModel
+from endocal.models import PIModel, StreamingCompensator
 from endocal.models.effects.envelope import envelope, envelope_inverse
 from endocal.models.pi import pi_exp_weights, pi_inverse_initial_state, pi_inverse_parameters, pi_thresholds
 from tests._models_signals import PAPER_TABLE1, chirp, damped_sine, non_periodic, triangle
@@ -56,7 +56,7 @@ def test_initial_loading_eq11_continues_the_inverse():
     _, u = non_periodic(duration_s=30.0)
     m = paper_model()
     y = m.predict(u)
-    comp = m.compensator()
+    comp = StreamingCompensator(m)
     k = 1234
     comp.reset(history_cmd_deg=u[:k])
     out = np.array([comp.step(v) for v in y[k:k + 500]])

@@ -59,7 +59,7 @@ def test_one_cycle_to_fit_one_to_validate_every_pair_the_first_suggestion_pays(e
     from endocal.models import make_model
     from endocal.validation.data import axis_data
     from endocal.validation.offline import validate_offline
-    from endocal.validation.suspects import predict_extrapolated
+    from endocal.validation.predict import predict_extrapolated
 
     data = load_aligned(PIEZO)
     train = [_cycle(data, est)]
@@ -112,7 +112,7 @@ def test_cycles_cut_from_one_recording_are_run_from_their_estimated_start():
     from endocal.models import make_model
     from endocal.validation.data import axis_data
     from endocal.validation.offline import validate_offline
-    from endocal.validation.suspects import predict_errors
+    from endocal.validation.predict import predict_errors
 
     data = load_aligned(PIEZO)
     train = [_cycle(data, 7)]
@@ -138,7 +138,7 @@ def test_a_residual_that_follows_the_loop_is_never_called_nothing_missing():
     from endocal.models import make_model
     from endocal.validation.data import axis_data
     from endocal.validation.offline import validate_offline
-    from endocal.validation.suspects import predict_extrapolated
+    from endocal.validation.predict import predict_extrapolated
 
     data = load_aligned(PIEZO)
     train = [_cycle(data, 0)]

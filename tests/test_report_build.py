@@ -24,7 +24,8 @@ from endocal.runs.aligned import load_aligned
 from endocal.validation.data import axis_data, prefix
 from endocal.validation.metrics import error_metrics
 from endocal.validation.offline import predict_extrapolated, validate_offline
-from endocal.validation.suspects import effect_labels, fold_bounds, heldout_errors
+from endocal.validation.folds import fold_bounds, heldout_errors
+from endocal.validation.structure import effect_labels
 from tests.test_cli_excite import endocal
 
 

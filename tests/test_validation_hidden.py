@@ -125,8 +125,8 @@ def test_hidden_effect_is_ranked_first(hidden):
     assert result.suspects, (hidden, [(s.effect, round(s.gain_pct, 1), s.p_value) for s in result.scan.tested])
     top = result.suspects[0]
     assert top.effect.partition(":")[0] == hidden, [(s.effect, round(s.gain_pct, 1)) for s in result.suspects]
-    assert f"--effects {','.join(CASES[hidden][5] + [top.effect])}" in top.command
-    assert top.p_value < 0.05 and top.command.endswith(f"--out m-{top.effect.replace(':', '-')}.json")
+    assert list(top.refit.effects) == CASES[hidden][5] + [top.effect]
+    assert top.p_value < 0.05 and top.refit.out_path == f"m-{top.effect.replace(':', '-')}.json"
 
 
 @pytest.mark.parametrize("hidden", _cases(BAR_GAPS))

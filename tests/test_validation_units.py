@@ -18,7 +18,10 @@ from endocal.runs.aligned import AlignedData
 from endocal.validation.data import OTHER_CMD, axis_data, check_columns, load_candidates, prefix
 from endocal.validation.regimes import error_by_regime, hold_mask, reversal_distance_deg, turning_points
 from endocal.validation.residuals import residual_tests
-from endocal.validation.suspects import check_cv_data, fold_bounds, fold_split, holm, paired_test, refit_command, refit_path
+from endocal.cli.refit import refit_command
+from endocal.validation.folds import check_cv_data, fold_bounds, fold_split
+from endocal.validation.paired import holm, paired_test
+from endocal.validation.refit import Refit, refit_path
 
 FS = 100.0
 
@@ -147,12 +150,18 @@ def test_holm_adjustment():
 
 def test_refit_command_and_path():
     assert refit_path("models/m.json", "load:sheath_wrap_deg") == "models/m-load-sheath_wrap_deg.json"
-    cmd = refit_command(["runs/a", "b.csv"], "ap", "bspline", ["delay"], "m-delay.json")
+    cmd = refit_command(Refit(("runs/a", "b.csv"), "ap", "bspline", ("delay",), "m-delay.json"))
     assert cmd == "endocal fit hysteresis runs/a b.csv --axis ap --model bspline --effects delay --out m-delay.json"
     # a path with a space stays one argument when the printed command is pasted into a shell
-    cmd = refit_command(["lab data/run 1.csv"], "ap", "pi", ["load:wrap"], "m.json", start_from="lab data/m 0.json")
+    cmd = refit_command(Refit(("lab data/run 1.csv",), "ap", "pi", ("load:wrap",), "m.json",
+                              start_from="lab data/m 0.json"))
     assert shlex.split(cmd) == ["endocal", "fit", "hysteresis", "lab data/run 1.csv", "--axis", "ap", "--model", "pi",
                                 "--effects", "load:wrap", "--start-from", "lab data/m 0.json", "--out", "m.json"]
+    # the planes and the base's settings, in the order `fit hysteresis` documents them, values as JSON
+    cmd = refit_command(Refit(("a",), None, "bspline", ("delay",), "m.json", settings={"n_knots": 3, "knots": "auto"},
+                              planes_path="pl.json"))
+    assert shlex.split(cmd)[3:] == ["a", "--model", "bspline", "--effects", "delay", "--planes", "pl.json",
+                                    "--set", "n_knots=3", "--set", 'knots="auto"', "--out", "m.json"]
 
 
 def test_folds_of_several_runs_take_the_same_share_of_every_run():

@@ -39,7 +39,7 @@ from endocal.models import make_model
 from endocal.sim import SimConfig
 from endocal.validation.data import axis_data
 from endocal.validation.offline import validate_offline
-from endocal.validation.suspects import predict_extrapolated
+from endocal.validation.predict import predict_extrapolated
 from tests.test_validation_hidden import CASES, NO_SLACK, simulate
 
 #: the hidden set's sections without its per-case lag removal: the rig's lag stays in every case

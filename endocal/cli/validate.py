@@ -22,6 +22,7 @@ from endocal.cli._common import (
     slow_clock_warning,
     warnings_as_lines,
 )
+from endocal.cli.refit import refit_command, with_refit_commands
 from endocal.errors import ModelError
 from endocal.validation.metrics import METRIC_KEYS
 
@@ -150,7 +151,7 @@ def render(result, folded: bool = False) -> None:
             then = ("then validate the new model on a third record (this one is in its fit now)" if folded else
                     "then validate the new model")
             out.print("[bold]Next:[/] refit with the first " + ("candidate" if thin else "suspect") + f", {then}:")
-            out.print("  " + result.suspects[0].command, markup=False)
+            out.print("  " + refit_command(result.suspects[0].refit), markup=False)
     elif scan.scheme == "none":
         out.print("[bold]Which effect is missing:[/] not tested: " + escape(scan.scheme_reason))
     elif result.pointers:
@@ -283,10 +284,10 @@ def validate(
         refit_paths = list(dict.fromkeys([*plan.train_paths, *(str(p) for p in data)]))
         suffix = "-all"  # another model than the one scored: not under its name
     result = validate_offline(model, tables, train=plan.train, train_paths=refit_paths, planes=plan.planes,
-                              refit_args=plan.refit_args, scheme_reason=plan.reason, folds=folds, seed=seed,
+                              planes_path=plan.planes_path, scheme_reason=plan.reason, folds=folds, seed=seed,
                               compare=old, model_path=str(model_path), data_paths=[str(p) for p in data],
                               load_columns=load_column or None, refit_suffix=suffix)
-    d = result.to_dict()
+    d = with_refit_commands(result.to_dict(), result.scan)
     if old_path is not None and d["compare"] is not None:
         d["compare"]["path"] = str(old_path)
     if not emit_json(d, as_json, json_out):

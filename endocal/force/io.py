@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from endocal.errors import ModelError, OutputExistsError, OutputPathError
+from endocal.files import atomic_write_bytes
 from endocal.force.model import ForceModel
-from endocal.runs.format import atomic_write_bytes
 
 FORMAT = "endocal-force-model"
 VERSION = 1

@@ -1,4 +1,4 @@
-"""The estimator every hysteresis model shares: fit, predict, inverse, print, save.
+"""The estimator every hysteresis model shares: fit, predict, inverse, print (files: :mod:`~endocal.models.io`).
 
 A model is a *base* (the direction-dependent hysteresis: :mod:`~endocal.models.linear`,
 :mod:`~endocal.models.bspline`, :mod:`~endocal.models.pi`) plus *effect terms*
@@ -836,23 +836,6 @@ class HysteresisModel(ABC):
         u = self._range_check(np.asarray(u, dtype=float), "command needed for the desired angle")
         return d.split(u) if was_list else u
 
-    # ------------------------------------------------------------------ streaming
-    def compensator(self, dt_s: float | None = None):
-        """A streaming compensator for a control loop: ``step(desired_deg) -> cmd_deg``.
-
-        Parameters
-        ----------
-        dt_s : float, optional
-            The loop's fixed sample period (s); needed by time-based effects that stream
-            (``rate``, ``creep``).
-
-        See :class:`endocal.models.compensator.StreamingCompensator`.
-        """
-        from endocal.models.compensator import StreamingCompensator
-
-        self._require_fitted()
-        return StreamingCompensator(self, dt_s=dt_s)
-
     # ------------------------------------------------------------------ printing
     def effect_params(self, effect) -> dict[str, float]:
         """The fitted values of one of ``effects_``, by the effect's own (unprefixed) names."""
@@ -898,19 +881,6 @@ class HysteresisModel(ABC):
         return self._settings_repr() + f"  (unfitted; inverse: {self.inverse_kind})"
 
     __str__ = __repr__
-
-    # ------------------------------------------------------------------ files
-    def to_dict(self) -> dict:
-        """The model as a JSON-able dict (format ``endocal-model`` version 1); see :mod:`endocal.models.io`."""
-        from endocal.models.io import model_to_dict
-
-        return model_to_dict(self)
-
-    def save(self, path) -> None:
-        """Write the fitted model as human-readable JSON (never pickle)."""
-        from endocal.models.io import save_model
-
-        save_model(self, path)
 
 
 def _solve(residual, x0: np.ndarray, jac, bounds: tuple, max_nfev: int | None):

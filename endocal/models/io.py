@@ -29,9 +29,10 @@ from pathlib import Path
 import numpy as np
 
 from endocal.errors import ModelError, OutputPathError
+from endocal.files import atomic_write_bytes
 from endocal.models.base import FitReport, HysteresisModel
 from endocal.models.effects import EFFECTS
-from endocal.runs.format import atomic_write_bytes
+from endocal.models.registry import BASES
 
 FORMAT = "endocal-model"
 VERSION = 2
@@ -84,8 +85,6 @@ def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
         Not an endocal model, unknown version, unknown or missing fields, unknown base
         or effect, parameters that do not match the model.
     """
-    from endocal.models.registry import BASES
-
     if not isinstance(d, dict) or d.get("format") != FORMAT:
         raise ModelError(f"{where}: not an endocal model file (expected \"format\": \"{FORMAT}\")")
     if d.get("version") == 1:

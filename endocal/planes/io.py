@@ -15,9 +15,9 @@ import json
 from pathlib import Path
 
 from endocal.errors import ModelError, OutputExistsError, OutputPathError
+from endocal.files import atomic_write_bytes
 from endocal.planes.calibration import PlanesCalibration
 from endocal.planes.halfplanes import CalibrationError
-from endocal.runs.format import atomic_write_bytes
 
 FORMAT = "endocal-planes"
 VERSION = 1

@@ -11,11 +11,11 @@ has never seen; its in-sample RMSE is that fit's error on the estimation data.
 **Rolling origin** otherwise (the model was fitted on this record, or records nothing): on
 every record of its axis the structure is refitted and scored by the blocked rolling-origin
 cross-validation that ``endocal validate`` uses for its held-out RMSE and its effect scan
-(:mod:`endocal.validation.suspects`): the first half of the record only trains, the rest is
+(:mod:`endocal.validation.scan`): the first half of the record only trains, the rest is
 cut into ``folds`` contiguous test blocks, fold ``k`` is fitted on everything before block
 ``k`` and predicts block ``k`` with the history it really had. The calls are those of
-``validate`` (:func:`~endocal.validation.suspects.fold_bounds`,
-:func:`~endocal.validation.suspects.heldout_errors`, same folds and decimation), so a rung's
+``validate`` (:func:`~endocal.validation.folds.fold_bounds`,
+:func:`~endocal.validation.folds.heldout_errors`, same folds and decimation), so a rung's
 held-out RMSE equals the one ``validate`` prints for that model on that record.
 
 Beside it, the **in-sample** RMSE of the *same* fold fits on their own training prefixes:
@@ -24,8 +24,8 @@ real, and the gap between them is the overfit. Each rung's held-out errors are t
 against the previous rung on the same record (ladder order: models of one base together,
 fewer effects first) with the one-sided paired test ``validate`` runs under the same scheme:
 on the validation record, the sign-flip test on its units (half-cycles, or decorrelation
-blocks; :func:`~endocal.validation.suspects.unit_test`); under rolling origin, the block test of
-the effect scan (:func:`~endocal.validation.suspects.paired_test`: Diebold-Mariano loss
+blocks; :func:`~endocal.validation.paired.unit_test`); under rolling origin, the block test of
+the effect scan (:func:`~endocal.validation.paired.paired_test`: Diebold-Mariano loss
 differentials averaged over blocks of three correlation times, Wilcoxon signed-rank). Holm-
 corrected over the steps of one record.
 """
@@ -46,21 +46,12 @@ from endocal.report.stats import holm
 from endocal.validation.metrics import ErrorMetrics, error_metrics
 from endocal.validation.data import axis_data
 from endocal.validation.estimation import plan_estimation
-from endocal.validation.suspects import (
-    MAX_SCAN_SAMPLES,
-    check_cv_data,
-    check_fit_data,
-    effect_labels,
-    fitted_on,
-    fold_bounds,
-    fold_split,
-    heldout_errors,
-    one_blas_thread,
-    paired_test,
-    predict_errors,
-    split_fit,
-    unit_test,
-)
+from endocal.validation.folds import check_cv_data, fold_bounds, fold_split, heldout_errors
+from endocal.validation.paired import paired_test, unit_test
+from endocal.validation.parallel import one_blas_thread
+from endocal.validation.predict import predict_errors
+from endocal.validation.scan import MAX_SCAN_SAMPLES, check_fit_data
+from endocal.validation.structure import effect_labels, fitted_on, split_fit
 from endocal.validation.units import make_units
 
 #: Held-out blocks and the longest record scored undecimated: ``endocal validate``'s defaults

@@ -12,10 +12,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from endocal.errors import OutputExistsError, OutputPathError
+from endocal.files import atomic_write_bytes
 from endocal.planes import PlanesCalibration
 from endocal.report.evaluate import DataEntry, Group, ModelEntry, NotEvaluated
 from endocal.report.planes import PlanesView
-from endocal.runs.format import atomic_write_bytes
 from endocal.validation.metrics import METRIC_KEYS
 
 FORMAT = "endocal-report"

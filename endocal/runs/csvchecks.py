@@ -12,7 +12,6 @@ such numbers (:func:`measured_angle_warnings`), are not refused but said, for th
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -20,9 +19,7 @@ from endocal.errors import RunFormatError
 from endocal.kinematics.bending import bending_angles_deg, tip_in_base_mm
 from endocal.models.base import min_fit_samples
 from endocal.runs.format import LOG_RATE_RANGE_HZ
-
-if TYPE_CHECKING:  # csvlog imports this module: the map is only a type here
-    from endocal.runs.csvlog import CsvMap
+from endocal.runs.mapfields import ColumnMap as CsvMap  # the map csvlog reads, as the checks see it
 
 #: Longest gap between readings (tracker frames, angle readings) to interpolate across, s, as
 #: :func:`endocal.runs.aligned.align` for tracker frames: the motor samples in a longer gap have no

@@ -29,7 +29,6 @@ import platform
 import secrets
 import shutil
 import sys
-import tempfile
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -37,6 +36,7 @@ import numpy as np
 
 from endocal import __version__
 from endocal.errors import OutputExistsError, OutputPathError, RunFormatError
+from endocal.files import atomic_write_bytes
 
 FORMAT_NAME = "endocal-run"
 FORMAT_VERSION = 1
@@ -99,36 +99,6 @@ def sha256_of(path: Path) -> str:
             for block in iter(lambda: fh.read(1 << 20), b""):
                 h.update(block)
     return h.hexdigest()
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)  # read by setting; restored at once (at import, before any thread writes)
-    os.umask(mask)
-    return mask
-
-
-_UMASK = _umask()
-
-
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` so that readers see the old file or the new one, never half.
-
-    Missing folders on the way are created, as for every output of endocal (a run folder, a
-    model, a report): a user names where the file goes, not how to prepare the way.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        # mkstemp makes the file private (0600); a run or a model is for the whole lab to read,
-        # so it gets the mode any file created here would get (0644 under the usual umask 022)
-        os.fchmod(fd, 0o666 & ~_UMASK)
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def parquet_bytes(df, metadata: dict | None = None) -> bytes:

@@ -59,11 +59,6 @@ class EstimationPlan:
     planes: object | None = None
     planes_path: str | None = None
 
-    @property
-    def refit_args(self) -> list[str]:
-        """Options the refit command needs besides data, axis, model and effects."""
-        return ["--planes", self.planes_path] if self.planes_path else []
-
 
 def _locate(recorded: str, model_path: Path | None, fit_cwd: str | None = None) -> Path | None:
     """A recorded path as given (relative to the working folder), else relative to the folder the

@@ -20,22 +20,12 @@ from endocal.validation.metrics import ErrorMetrics, error_metrics
 from endocal.validation.regimes import RegimeBreakdown, error_by_regime
 from endocal.validation.residuals import (ResidualTests, cut_start, residual_tests, unexplained_shape,
                                           unexplained_start)
-from endocal.validation.suspects import (
-    MAX_SCAN_SAMPLES,
-    ScanResult,
-    check_cv_data,
-    effect_labels,
-    fitted_on,
-    fold_bounds,
-    heldout_errors,
-    one_blas_thread,
-    predict_errors,
-    predict_extrapolated,
-    predict_scored,
-    scan_effects,
-    scan_split,
-    split_errors,
-)
+from endocal.validation.folds import check_cv_data, fold_bounds, heldout_errors
+from endocal.validation.parallel import one_blas_thread
+from endocal.validation.predict import predict_errors, predict_extrapolated, predict_scored
+from endocal.validation.scan import MAX_SCAN_SAMPLES, scan_effects, scan_split, split_errors
+from endocal.validation.structure import effect_labels, fitted_on
+from endocal.validation.suspects import ScanResult
 from endocal.validation.shift import (RecordShift, covariate_changes, covariates_held, moving_speed_dps,
                                      record_shift)
 from endocal.validation.verdict import Pointer, residual_pointers, shift_pointers
@@ -230,23 +220,23 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
                      seed: int = 0, alpha: float = 0.05, min_gain_pct: float = 10.0,
                      compare: HysteresisModel | None = None, model_path: str | None = None,
                      data_paths: Sequence[str] | None = None, train_paths: Sequence[str] | None = None,
-                     planes=None, refit_args: Sequence[str] = (), scheme_reason: str | None = None,
+                     planes=None, planes_path: str | None = None, scheme_reason: str | None = None,
                      load_columns: Sequence[str] | None = None, bending_axes: Sequence[str] | None = None,
                      max_scan_samples: int = MAX_SCAN_SAMPLES, n_boot: int = 400,
                      refit_suffix: str = "") -> ValidationResult:
     """Validate a fitted model on measured data: metrics, regimes, residual tests, missing effects.
 
-    Two schemes test the candidate effects (:mod:`endocal.validation.suspects`):
+    Two schemes test the candidate effects (:mod:`endocal.validation.scan`):
 
     estimation/validation (``train`` given)
         the model's structure and each augmented structure are fitted on the estimation
         data ``train`` and scored on the validation data ``datas``, unit by unit
-        (:func:`~endocal.validation.suspects.scan_split`): the split every
+        (:func:`~endocal.validation.scan.scan_split`): the split every
         system-identification tool works with, and the one that suits short records (one
         sweep to fit, one to validate);
     rolling origin (no ``train``)
         blocked cross-validation on ``datas`` alone
-        (:func:`~endocal.validation.suspects.scan_effects`); data too short for it gets the
+        (:func:`~endocal.validation.scan.scan_effects`); data too short for it gets the
         metrics, regimes and residual tests, and a note instead of a scan.
 
     Parameters
@@ -268,16 +258,16 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     compare : HysteresisModel, optional
         A previous model: its error is shown beside this one's, under the same scheme.
     model_path : str, optional
-        Where the model came from (refit commands name their output after it).
+        Where the model came from (the suspects' refits start from it and name their output after it).
     data_paths, train_paths : sequence of str, optional
-        Validation and estimation data paths. The refit commands fit on ``train_paths``
+        Validation and estimation data paths. The suspects' refits fit on ``train_paths``
         under the estimation/validation scheme (the validation data is not folded in),
         on ``data_paths`` under rolling origin.
     planes : PlanesCalibration, optional
         The bending planes the model was fitted through: measured angles of both data sets
         are mapped into the twisted planes first, as ``fit hysteresis --planes`` did.
-    refit_args : sequence of str
-        Further options of the refit commands (``--planes planes.json``).
+    planes_path : str, optional
+        The file of ``planes``, for the suspects' refits.
     scheme_reason : str, optional
         Why this scheme runs (recorded and printed).
     load_columns : sequence of str, optional
@@ -285,11 +275,11 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     bending_axes : sequence of str, optional
         The probe's bending axes (default: the data's axes).
     max_scan_samples : int
-        Decimate longer records for the scan (see :func:`~endocal.validation.suspects.scan_effects`).
+        Decimate longer records for the scan (see :func:`~endocal.validation.scan.scan_effects`).
     n_boot : int
         Bootstrap replicates of the metrics' intervals.
     refit_suffix : str
-        Ends the refit commands' file names (``-all`` when ``train_paths`` hold the validation data).
+        Ends the refits' file names (``-all`` when ``train_paths`` hold the validation data).
 
     Returns
     -------
@@ -347,7 +337,7 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
             refit_suffix = refit_suffix or "-insample"
         scan = scan_split(model, est, data, alpha=alpha, min_gain_pct=min_gain_pct, load_columns=load_columns,
                           bending_axes=axes_all, max_samples=max_scan_samples, data_paths=list(train_paths),
-                          model_path=model_path, refit_args=refit_args,
+                          model_path=model_path, planes_path=planes_path,
                           scheme_reason=scheme_reason or "estimation data given", refit_suffix=refit_suffix)
     else:
         reason = scheme_reason or "no separate estimation data"
@@ -361,7 +351,7 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
         else:
             scan = scan_effects(model, data, folds=folds, alpha=alpha, min_gain_pct=min_gain_pct,
                                 load_columns=load_columns, bending_axes=axes_all, max_samples=max_scan_samples,
-                                data_paths=paths, model_path=model_path, refit_args=refit_args,
+                                data_paths=paths, model_path=model_path, planes_path=planes_path,
                                 scheme_reason=reason)
     if beyond:
         lo, hi = model.cmd_range_deg_

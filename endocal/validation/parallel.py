@@ -13,12 +13,18 @@ it, because pytest-xdist already runs one worker per core).
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 from collections.abc import Callable, Sequence
 from typing import Any
 
 from endocal.errors import EndocalError
+
+try:  # BLAS threads fight each other on the many small least-squares problems of a scan
+    from threadpoolctl import threadpool_limits
+except ImportError:  # pragma: no cover - threadpoolctl is a declared dependency
+    threadpool_limits = None
 
 _TASK: tuple[Callable[[Any], Any], Sequence[Any]] | None = None
 
@@ -73,3 +79,8 @@ def map_jobs(fn: Callable[[Any], Any], items: Sequence[Any], jobs: int | None = 
             return pool.map(_run, range(len(items)), chunksize=1)
     finally:
         _TASK = None
+
+
+def one_blas_thread():
+    """Context limiting BLAS to one thread (many small least-squares problems run faster that way)."""
+    return threadpool_limits(limits=1, user_api="blas") if threadpool_limits else contextlib.nullcontext()

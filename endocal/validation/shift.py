@@ -43,8 +43,8 @@ from endocal.models import HysteresisData
 from endocal.models.base import HysteresisModel
 from endocal.models.start import with_lead_ins
 from endocal.validation.data import load_candidates, speed_dps
+from endocal.validation.predict import columns_read, predict_extrapolated, predict_scored
 from endocal.validation.regimes import turning_points
-from endocal.validation.suspects import columns_read, predict_extrapolated, predict_scored
 
 #: Largest loop change searched, as a fraction of the validation command's span per side.
 MAX_WIDTH_FRAC = 0.2

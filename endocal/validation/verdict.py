@@ -1,6 +1,6 @@
 """No verdict that its own residuals contradict: effects the residuals point at but the scan did not confirm.
 
-The effect scan (:mod:`endocal.validation.suspects`) can only confirm what it can test: an
+The effect scan (:mod:`endocal.validation.scan`) can only confirm what it can test: an
 effect whose signature the estimation data (or the first training block) lacks is not
 fitted, and an effect can be tested and still not pay on the held-out data. The residual
 tests and the regimes look at the model's error directly. When they point at an effect the

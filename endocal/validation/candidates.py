@@ -1,0 +1,99 @@
+"""The candidate effects a scan tests: every catalog effect the model lacks that the data can show.
+
+``load`` takes a column (``load:sheath_wrap_deg``) and is tried on every extra column that
+varies; an effect the data cannot reveal or fit (:mod:`endocal.validation.identifiability`) is
+not tested, and why is said.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from endocal.errors import ModelError
+from endocal.models import EFFECTS, HysteresisData
+from endocal.models.base import HysteresisModel
+from endocal.validation.data import load_candidates
+from endocal.validation.identifiability import FITTABILITY, IDENTIFIABILITY, coupling_reason
+from endocal.validation.structure import effect_labels
+
+
+def takes_column(name: str) -> bool:
+    """True for catalog effects that need a column, written ``NAME:COLUMN`` (``load``)."""
+    try:
+        EFFECTS[name]()
+    except (ModelError, TypeError):
+        return True
+    return False
+
+
+
+def candidate_effects(model: HysteresisModel, data: HysteresisData, candidates: Sequence[str] | None,
+                      load_columns: Sequence[str] | None, bending_axes: Sequence[str], *,
+                      train: HysteresisData, rolling: bool) -> tuple[list[str], dict[str, str]]:
+    """The catalog effects to test, and why the others cannot be tested on this data.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        The model as it stands (its effects are not candidates).
+    data : HysteresisData
+        All the data the scan uses (load candidates must vary in it).
+    candidates, load_columns : sequence of str, optional
+        As :func:`scan_effects`.
+    bending_axes : sequence of str
+        Knob columns that are not load candidates.
+    train : HysteresisData
+        The data candidates are fitted on (the first training block, or the estimation data):
+        an effect whose parameters it cannot show (the other knob at rest, no time stamps)
+        is not fitted.
+    rolling : bool
+        Rolling-origin cross-validation: effects that need several speeds (``rate``,
+        ``delay``) or holds (``creep``) to be told from a wider loop are tested only on data
+        that has them. Under the estimation/validation scheme every fittable candidate is
+        tested: the separate validation data decides.
+
+    Returns
+    -------
+    tested : list of str
+    untestable : dict of str to str
+    """
+    have = effect_labels(model)
+    have_names = {lab.partition(":")[0] for lab in have}
+    untestable: dict[str, str] = {}
+    if candidates is None:
+        cands: list[str] = []
+        for name in EFFECTS:
+            if takes_column(name):
+                constant: list[str] = []
+                if load_columns is None:
+                    cols, constant = load_candidates(data, bending_axes)
+                else:
+                    cols = list(load_columns)
+                modelled = [c for c in cols if f"{name}:{c}" in have]
+                cols = [c for c in cols if c not in modelled]
+                if not cols and not modelled:
+                    where = "the estimation data" if not rolling else "the data"
+                    what = (f"no extra column varies in {where} ({len(constant)} constant)" if constant else
+                            f"{where} has no extra column")
+                    untestable[name] = (f"{what}: {name} cannot be identified (log a covariate such as "
+                                        "sheath_wrap_deg, at two or more values)")
+                cands += [f"{name}:{c}" for c in cols]
+            elif name not in have_names:
+                cands.append(name)
+    else:
+        cands = [c for c in candidates if c not in have]
+    tested = []
+    for c in cands:
+        name = c.partition(":")[0]
+        check = (IDENTIFIABILITY if rolling else FITTABILITY).get(name)
+        reason = check(data) if check is not None else None
+        if reason is None and name == "coupling":
+            reason = coupling_reason(train, where="the estimation data" if not rolling else
+                                      f"the first training block (the first {train.n_samples} of {data.n_samples} "
+                                      "samples)")
+        if reason is not None:
+            untestable[c] = reason
+        else:
+            tested.append(c)
+    return tested, untestable
+

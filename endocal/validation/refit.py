@@ -1,0 +1,96 @@
+"""The refit a suspect suggests: what to fit, on which data, and where to keep it.
+
+The scan tests each candidate by refitting the model's structure with it; a
+:class:`Refit` records that fit for the user to make: the estimation data, the axis, the
+base and its settings, the effects, the bending planes, the model it starts from and a
+suggested output file. It is data, not a command line: the command line renders it as
+``endocal fit hysteresis ...`` (:func:`endocal.cli.refit.refit_command`), a notebook calls
+the library with its fields.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from endocal.models.base import HysteresisModel
+from endocal.validation.structure import changed_settings, effect_labels
+
+
+@dataclass(frozen=True)
+class Refit:
+    """A fit of ``base + effects`` the scan scored, for the user to make.
+
+    Attributes
+    ----------
+    data_paths : tuple of str
+        The data to fit on (the estimation data the candidate was fitted on; with
+        ``--refit-on all`` the validation data too).
+    axis : str or None
+        The bending axis.
+    base : str
+        The base model (``bspline``, ``pi``, ...).
+    effects : tuple of str
+        Every effect of the refit, as ``--effects`` writes them (the model's own, then the candidate).
+    settings : dict
+        Base settings that differ from their defaults (``n_knots``, ...), so the refit keeps the
+        model's structure.
+    planes_path : str or None
+        The bending planes the model was fitted through.
+    start_from : str or None
+        The model under validation: the scan fitted each candidate starting from its parameters
+        (:func:`~endocal.validation.structure.split_fit`), and the refit does the same, so it is the
+        fit the scan scored rather than a fit from scratch that may stop in another local minimum.
+    out_path : str
+        Suggested model file (:func:`refit_path`).
+    """
+
+    data_paths: tuple[str, ...]
+    axis: str | None
+    base: str
+    effects: tuple[str, ...]
+    out_path: str
+    settings: dict = field(default_factory=dict)
+    planes_path: str | None = None
+    start_from: str | None = None
+
+    def to_dict(self) -> dict:
+        return {"data_paths": list(self.data_paths), "axis": self.axis, "base": self.base,
+                "effects": list(self.effects), "settings": dict(self.settings), "planes_path": self.planes_path,
+                "start_from": self.start_from, "out_path": self.out_path}
+
+
+def refit_path(model_path: str | None, effect: str, suffix: str = "") -> str:
+    """``MODEL-EFFECT.json`` beside ``MODEL.json`` (``load:col`` becomes ``load-col``), with
+    ``suffix`` before ``.json`` (``-all`` for a refit on more data than the scan scored)."""
+    tag = effect.replace(":", "-") + suffix
+    if not model_path:
+        return f"model-{tag}.json"
+    p = str(model_path)
+    stem = p[:-5] if p.endswith(".json") else p
+    return f"{stem}-{tag}.json"
+
+
+def suggest_refit(model: HysteresisModel, effect: str, data_paths: Sequence[str], *, model_path: str | None = None,
+                  planes_path: str | None = None, suffix: str = "") -> Refit:
+    """The refit of ``model``'s structure with ``effect`` added, on ``data_paths``, starting from ``model_path``.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        The model under validation.
+    effect : str
+        The candidate effect (``delay``, ``load:sheath_wrap_deg``).
+    data_paths : sequence of str
+        The data to fit on.
+    model_path : str, optional
+        The model's file: the refit starts from it and is named beside it.
+    planes_path : str, optional
+        The bending planes the model was fitted through.
+    suffix : str
+        Ends the suggested file name (:func:`refit_path`).
+    """
+    return Refit(data_paths=tuple(str(p) for p in data_paths), axis=model.axis, base=model.base_name,
+                 effects=(*effect_labels(model), effect), out_path=refit_path(model_path, effect, suffix),
+                 settings=changed_settings(model), planes_path=None if planes_path is None else str(planes_path),
+                 start_from=None if model_path is None else str(model_path))
