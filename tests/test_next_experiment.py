@@ -152,7 +152,7 @@ def test_a_load_condition_no_column_logs_is_asked_for_by_name(loop, tmp_path):
         table = load_aligned(tmp / name).table
         table.drop(columns=[c for c in table.columns if c == "sheath_wrap_deg"]).to_csv(tmp_path / f"{name}.csv",
                                                                                         index=False)
-    proc = endocal("validate", tmp / "m.json", tmp_path / "val.csv", "--train", tmp_path / "est1.csv",
+    proc = endocal("validate", tmp / "m.json", tmp_path / "val.csv", "--train", tmp_path / "est1.csv", "--train",
                    tmp_path / "est2.csv", "--next", tmp_path / "next.toml")
     assert proc.returncode == 0, proc.stderr
     proto = read_protocol_file(tmp_path / "next.toml")

@@ -41,6 +41,7 @@ How long (:mod:`endocal.validation.power`)
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import tempfile
@@ -59,13 +60,10 @@ from endocal.protocols import Protocol, SIGNALS
 from endocal.validation.data import is_constant, load_candidates
 from endocal.validation.power import POWER, units_for_power
 from endocal.validation.regimes import turning_points
-from endocal.validation.suspects import (
-    MAX_SCAN_SAMPLES,
-    _creep_reason,
-    effect_labels,
-    predict_errors,
-    split_fit,
-)
+from endocal.validation.identifiability import creep_reason
+from endocal.validation.predict import predict_errors
+from endocal.validation.scan import MAX_SCAN_SAMPLES, scan_stride
+from endocal.validation.structure import effect_labels, split_fit
 from endocal.validation.units import make_units
 
 #: Smallest amplitude (deg) a designed motion sweeps about its centre: a loop narrower than 10 deg
@@ -242,14 +240,16 @@ def _condition_column(train: HysteresisData, val: HysteresisData, axes: Sequence
 
 
 # ---------------------------------------------------------------------------- speeds at stake
-def _trial_data(model: HysteresisModel, cmd_deg: np.ndarray, t_s: np.ndarray, like: HysteresisData) -> HysteresisData:
-    """A planned motion as data the model can predict: the other knob at rest, logged covariates as in ``like``."""
+def _trial_data(model: HysteresisModel, cmd_deg: np.ndarray, t_s: np.ndarray, like: HysteresisData,
+                run_starts: np.ndarray | None = None) -> HysteresisData:
+    """A motion as data the model can predict: the other knob at rest, logged covariates as in ``like``."""
     read = {c for e in getattr(model, "effects_", []) if (c := getattr(e, "column", None))}
     extras = {OTHER_CMD: np.zeros(cmd_deg.size)}
     for c in read:
         if c in like.extras:
             extras[c] = np.full(cmd_deg.size, float(np.median(like.extras[c])))
-    return HysteresisData(cmd_deg=cmd_deg, meas_deg=None, t_s=t_s, extras=extras)
+    starts = {} if run_starts is None else {"run_starts": run_starts}
+    return HysteresisData(cmd_deg=cmd_deg, meas_deg=None, t_s=t_s, extras=extras, **starts)
 
 
 def _rms(x: np.ndarray) -> float:
@@ -337,11 +337,16 @@ def _ladder_hz(plan: _Plan, f_lo: float, f_hi: float) -> list[float]:
     return [round(f, 6) for f in up + up[-2::-1]]
 
 
-def _default_units(model: HysteresisModel, val: HysteresisData, alpha: float, m: int) -> tuple[int, float]:
-    """Half-cycles for an effect with no gain seen, and the coefficient of variation used (see the module)."""
+def _unit_errors(model: HysteresisModel, val: HysteresisData) -> tuple[np.ndarray, np.ndarray]:
+    """Squared-error sums (deg^2) and RMSE (deg) of the model on each unit of the validation record."""
     err = predict_errors(model, val)
     units = make_units(val, [err])
     sse = np.array([float(np.sum(err[a:b] ** 2)) for a, b in units.bounds])
+    return sse, np.sqrt(sse / np.array([b - a for a, b in units.bounds], dtype=float))
+
+
+def _default_units(sse: np.ndarray, alpha: float, m: int) -> tuple[int, float]:
+    """Half-cycles for an effect with no gain seen, and the coefficient of variation used (see the module)."""
     cv = float(sse.std(ddof=1) / sse.mean()) if sse.size > 1 and sse.mean() > 0 else 1.0
     cv = max(1.0, cv)
     return int(units_for_power(1.0, cv, alpha, m)), cv
@@ -372,7 +377,7 @@ def _targets(model: HysteresisModel, result, train: HysteresisData, val: Hystere
         if e not in suggested:
             put(e, "speeds", "a lag and friction growing with speed both widen the loop with speed; the records may "
                 "not reach the speeds at which the two differ")
-    if "creep" not in have and _creep_reason(train) and _creep_reason(val):
+    if "creep" not in have and creep_reason(train) and creep_reason(val):
         put("creep", "no holds", "no record holds the knob still after a move, where creep shows itself")
     if "envelope" not in have and float(np.ptp(val.cmd_deg)) < FULL_SPAN * span_deg:
         put("envelope", "not the full amplitude",
@@ -474,7 +479,11 @@ def design_next(model: HysteresisModel, result, train: HysteresisData, val: Hyst
     plan.f_typ_hz = min(_typical_speed_dps(val) / (2.0 * math.pi * plan.amplitude), plan.cap_hz(plan.amplitude))
     m = max(1, sum(1 for e in EFFECTS if e not in {lab.partition(":")[0] for lab in effect_labels(model)}))
     alpha = scan.alpha
-    n_default, cv = _default_units(model, val, alpha, m)
+    sse, unit_rmse = _unit_errors(model, val)
+    n_default, cv = _default_units(sse, alpha, m)
+    # the error of the model where it is right: its best tenth of the validation record's units (a record
+    # designed for one effect is scored against that, not against a misfit elsewhere)
+    best_deg = float(np.percentile(unit_rmse, 10)) if unit_rmse.size else scan.baseline_rmse_heldout_deg
     seen = {s.effect: s for s in scan.tested}
     notes: list[str] = []
 
@@ -484,7 +493,9 @@ def design_next(model: HysteresisModel, result, train: HysteresisData, val: Hyst
         unseen = (f"{n_default} half-cycles: the paired test reaches {alpha:g}/{m} with {100 * power:.0f} % power "
                   f"if the effect lowers every half-cycle's error by the same share (this model's error varies "
                   f"between half-cycles by a coefficient of variation of {cv:.2g}, taken as at least 1)")
-        if est is not None and est.units_needed is not None and s.gain_pct > 0:
+        # a gain under the bar says nothing of the effect where the design looks for it (faster, at
+        # the full amplitude): only a gain that clears the bar but lacks units sizes the test
+        if est is not None and est.units_needed is not None and s.gain_pct >= scan.min_gain_pct:
             n = max(n_default, int(est.units_needed))
             return n, (f"{n} half-cycles: at the gain seen (-{s.gain_pct:.0f} %, {s.evidence}) the paired test needs "
                        f"{est.units_needed} for {alpha:g}/{m} with {100 * est.power:.0f} % power; at least "
@@ -533,7 +544,7 @@ def design_next(model: HysteresisModel, result, train: HysteresisData, val: Hyst
     at_stake = [e for e in ("rate", "delay") if e in targets]
     if at_stake:
         _speed_segment(plan, model, train, val, {e: (*targets[e], *size(e)) for e in at_stake}, scan, notes,
-                       max_samples)
+                       max_samples, best_deg)
     # a candidate short of units: more of the validation record's kind of motion, as long as its power asks
     short = [(e, st, w) for e, (st, w) in targets.items() if st == "not significant" and e.partition(":")[0]
              not in ("coupling", "rate", "delay", "creep", "drift")]
@@ -582,8 +593,7 @@ def design_next(model: HysteresisModel, result, train: HysteresisData, val: Hyst
             f = min(plan.f_typ_hz, plan.cap_hz(A))
             cycles = max(1, math.ceil(n / 2))
             plan.add("sine", axes=[axis], amplitude_deg=A, offset_deg=c, frequency_hz=round(f, 6), cycles=cycles)
-        total = sum(t.half_cycles for t in plan.tests) or 2 * plan.segments[0].get("cycles", 1)
-        plan.tests.append(PlannedTest(f"load:{col}", status, why, None, int(total),
+        plan.tests.append(PlannedTest(f"load:{col}", status, why, None, 0,  # every half-cycle: counted when built
                                       f"the whole run at the new condition; with the earlier records at "
                                       f"{', '.join(f'{x:g}' for x in recorded) or 'theirs'}, load:{col} can be fitted "
                                       "across the records"))
@@ -593,19 +603,20 @@ def design_next(model: HysteresisModel, result, train: HysteresisData, val: Hyst
     return _finish(plan, name, conditions, model, model_path, probe, notes, alpha, power)
 
 
-def _speed_segment(plan: _Plan, model, train, val, at_stake: dict, scan, notes, max_samples) -> None:
-    """The same sine at several frequencies, up to the speed at which an effect at stake (``rate``,
-    ``delay``: ``effect -> (status, why, half-cycles, sized)``) fitted on the estimation data changes
-    the prediction by what the gain bar asks (:func:`speeds_at_stake`); effects no speed within the
-    probe's limits tells apart get a note instead."""
+def _speed_segment(plan: _Plan, model, train, val, at_stake: dict, scan, notes, max_samples, best_deg) -> None:
+    """The same sine at several frequencies, up to the probe's limits, for the effects at stake (``rate``,
+    ``delay``: ``effect -> (status, why, half-cycles, sized)``) that, fitted on the estimation data,
+    change the prediction somewhere within the limits by what the gain bar asks of a record where the
+    model is otherwise right (``best_deg``, its best units' RMSE) (:func:`speeds_at_stake`); effects no
+    speed within the limits tells apart get a note instead."""
     have = effect_labels(model)
     A, c = plan.amplitude, plan.centre
     _, peaks = _half_cycles(val)
     v_val = float(np.percentile(peaks, 90)) if peaks.size else 2.0 * math.pi * plan.f_typ_hz * A
     v_cap = 2.0 * math.pi * A * plan.cap_hz(A, start=False)
     g = scan.min_gain_pct / 100.0
-    need = math.sqrt(1.0 - (1.0 - g) ** 2) * scan.baseline_rmse_heldout_deg
-    stride = max(1, int(math.ceil(train.n_samples / max_samples)))
+    need = math.sqrt(1.0 - (1.0 - g) ** 2) * best_deg
+    stride = scan_stride(train, max_samples)
     grid = list(np.geomspace(max(v_val, 1.0), v_cap, 10)) if v_cap > v_val else [v_cap]
     tops = {}
     for effect, (status, why, n, sized) in at_stake.items():
@@ -615,21 +626,26 @@ def _speed_segment(plan: _Plan, model, train, val, at_stake: dict, scan, notes, 
             tops[effect] = (v_cap, sized + f"; {effect} could not be fitted on the estimation data ({exc}), so the "
                             f"segment reaches {v_cap:.3g} deg/s, the most the probe's limits allow")
             continue
-        trial = _trial_data(model, val.cmd_deg, val.t_s, val)
+        trial = _trial_data(model, val.cmd_deg, val.t_s, val, val.run_starts)
         on_val = _rms(alt.predict(trial) - model.predict(trial))
         diffs = speeds_at_stake(model, alt, c, A, grid, val)
-        # the top rungs must show it clearly (twice what the bar needs: the ladder's slower rungs dilute it);
-        # an effect that reaches the bar only at the limits is tested up to the limits
-        top = next((v for v, d in zip(grid, diffs) if d >= 2.0 * need), v_cap if max(diffs) >= need else None)
+        # the alternative fitted on the estimation data says whether a difference worth a term is possible
+        # within the limits; where it is, the ladder climbs to the limits: a lag's shift grows linearly with
+        # speed, friction growing with speed exponentially (the capstan), so the fastest rungs tell them
+        # apart, and the slower ones give the curve's shape (the alternative, fitted where the two look
+        # alike, cannot say where they part)
+        top = v_cap if max(diffs) >= need else None
         if top is None:
             notes.append(f"{effect}: fitted on the estimation data, it moves the prediction by at most "
                          f"{max(diffs):.2g} deg on a sine up to {v_cap:.3g} deg/s (the probe's limits), under the "
-                         f"{need:.2g} deg a {scan.min_gain_pct:g} % gain needs: the data so far settle it")
+                         f"{need:.2g} deg a {scan.min_gain_pct:g} % gain needs where the model errs by "
+                         f"{best_deg:.2g} deg: the data so far settle it")
             continue
-        at = diffs[grid.index(top)] if top in grid else max(diffs)
-        tops[effect] = (top, sized + f"; up to {top:.3g} deg/s, where {effect} fitted on the estimation data moves "
-                        f"the prediction by {at:.2g} deg RMS (a {scan.min_gain_pct:g} % gain needs {need:.2g}; on "
-                        f"the validation record, up to {v_val:.3g} deg/s: {on_val:.2g})")
+        first = next(v for v, d in zip(grid, diffs) if d >= need)
+        tops[effect] = (top, sized + f"; up to {top:.3g} deg/s, the most the probe's limits allow: {effect} fitted on "
+                        f"the estimation data moves the prediction by {need:.2g} deg RMS (what a "
+                        f"{scan.min_gain_pct:g} % gain needs) from {first:.3g} deg/s on, and by {on_val:.2g} on the "
+                        f"validation record (up to {v_val:.3g} deg/s)")
     if not tops:
         return
     top = max(v for v, _ in tops.values())
@@ -658,7 +674,13 @@ def _finish(plan: _Plan, name, conditions, model, model_path, probe, notes, alph
         params = SIGNALS["sequence"].resolve({"axes": axes, "segments": plan.segments}, where)
         proto = Protocol(name, f"Next experiment for {model.base_name} on {plan.axis}: tests {', '.join(suspects)}",
                          "sequence", params, conditions=conditions, design=design)
-        proto.trajectory(probe).check_limits(probe)
+        traj = proto.trajectory(probe)
+        traj.check_limits(probe)
     except (ProtocolError, LimitError) as exc:  # a design beyond what it checked itself: a bug, said plainly
         raise ModelError(f"{where} breaks a limit it was designed within ({exc})") from None
+    goal = traj.goal[plan.axis]
+    whole = int(turning_points(HysteresisData(cmd_deg=goal, meas_deg=None, t_s=traj.t_s), 0.05).size) + 1
+    tests = tuple(t if t.segment is not None else dataclasses.replace(t, half_cycles=whole) for t in tests)
+    proto = dataclasses.replace(proto, design={**design, "tests": [{k: v for k, v in t.to_dict().items()
+                                                                    if v is not None} for t in tests]})
     return NextExperiment(proto, tests, plan.axis, plan.other, (plan.lo, plan.hi), probe.name, tuple(notes))

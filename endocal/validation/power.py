@@ -3,7 +3,7 @@
 ``validate`` compares a candidate with the model as it stands unit by unit (half-cycles of
 the validation record, :mod:`endocal.validation.units`): each unit's loss differential
 ``D_u = sum_t e_base(t)^2 - e_cand(t)^2`` and the one-sided sign-flip randomisation test of
-their total (:func:`endocal.validation.suspects.unit_test`). When a candidate lowers the
+their total (:func:`endocal.validation.paired.unit_test`). When a candidate lowers the
 error but not significantly, the question a user asks next is how much more data would
 settle it. This module answers it for the test that is used.
 
@@ -25,7 +25,7 @@ Power of the sign-flip test (normal approximation)
     (The ``mu^2`` under the root is what sets this test apart from a t-test: the
     randomisation variance includes the effect itself.) The exact test cannot go below
     ``2^-N`` (every unit in favour), which bounds ``N`` from below as
-    :func:`~endocal.validation.suspects.min_units_for` says.
+    :func:`~endocal.validation.paired.min_units_for` says.
 
 Family-wise level
     ``validate`` Holm-corrects over the ``m`` candidates tested; a candidate is significant
@@ -43,6 +43,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.stats import norm
+
+from endocal.validation.paired import min_units_for
 
 #: Power a designed length aims at: the chance that the test reaches its level if the effect
 #: is as seen (80 %, the usual design target: a one-in-five chance of another inconclusive record).
@@ -63,11 +65,6 @@ def unit_differentials(err_base: np.ndarray, err_cand: np.ndarray, bounds) -> np
     return np.array([d[a:b].sum() for a, b in bounds], dtype=float)
 
 
-def min_units(n_candidates: int, alpha: float) -> int:
-    """Fewest units with which the exact sign-flip test can reach ``alpha / n_candidates`` at all (``2^-N``)."""
-    return max(1, int(math.ceil(math.log2(max(n_candidates, 1) / alpha))))
-
-
 def units_for_power(mean: float, sd: float, alpha: float, n_candidates: int = 1, power: float = POWER) -> int | None:
     """Units of the kind seen that make the sign-flip test significant with probability ``power``.
 
@@ -85,12 +82,12 @@ def units_for_power(mean: float, sd: float, alpha: float, n_candidates: int = 1,
     Returns
     -------
     int or None
-        The number of units (at least :func:`min_units`); None when ``mean <= 0``: the
+        The number of units (at least :func:`~endocal.validation.paired.min_units_for`); None when ``mean <= 0``: the
         candidate does not lower the error on average, and no length makes it significant.
     """
     if not (np.isfinite(mean) and np.isfinite(sd)) or mean <= 0:
         return None
-    floor = min_units(n_candidates, alpha)
+    floor = min_units_for(n_candidates, alpha)  # the exact test's 2^-N
     if sd <= 0:
         return floor
     z_a = float(norm.ppf(1.0 - alpha / max(n_candidates, 1)))
@@ -157,7 +154,6 @@ def evidence_phrase(estimate: PowerEstimate, kind: str, gain_pct: float, min_gai
     if estimate.units_needed is None or gain_pct <= 0:
         return "no length will: it does not lower the error on average"
     if gain_pct < min_gain_pct:
-        return (f"no length will make it a suspect: its gain is under the {min_gain_pct:g} % bar (within the noise "
-                "a suspect must clear)")
+        return f"no length will make it a suspect: its gain is under the {min_gain_pct:g} % bar"
     return (f"about {estimate.units_needed} {kind}s would make it significant at this gain "
             f"({100 * estimate.power:.0f} % power)")
