@@ -186,7 +186,7 @@ def run_excitation(
             chunk = backend.execute(t[sl], {dof: g[sl] for dof, g in trajectory.goal.items()})
             for axis, angle in trajectory.desired.items():  # what the compensated goals were meant to reach
                 chunk.motor[f"{axis}_desired_deg"] = np.asarray(angle[sl], float)
-            for name, value in trajectory.conditions.items():  # the user's condition; a backend's own reading wins
+            for name, value in getattr(trajectory, "conditions", {}).items():  # the user's condition; a backend's own wins
                 if name not in chunk.motor:
                     chunk.motor[name] = np.full(len(chunk.motor["t_s"]), float(value))
             if getattr(trajectory, "tip_desired_mm", None) is not None:  # a tip path: where the tip should be (base_home, mm)

@@ -345,11 +345,11 @@ def _unit_errors(model: HysteresisModel, val: HysteresisData) -> tuple[np.ndarra
     return sse, np.sqrt(sse / np.array([b - a for a, b in units.bounds], dtype=float))
 
 
-def _default_units(sse: np.ndarray, alpha: float, m: int) -> tuple[int, float]:
+def _default_units(sse: np.ndarray, alpha: float, m: int, power: float) -> tuple[int, float]:
     """Half-cycles for an effect with no gain seen, and the coefficient of variation used (see the module)."""
     cv = float(sse.std(ddof=1) / sse.mean()) if sse.size > 1 and sse.mean() > 0 else 1.0
     cv = max(1.0, cv)
-    return int(units_for_power(1.0, cv, alpha, m)), cv
+    return int(units_for_power(1.0, cv, alpha, m, power)), cv
 
 
 def _targets(model: HysteresisModel, result, train: HysteresisData, val: HysteresisData,
@@ -480,7 +480,7 @@ def design_next(model: HysteresisModel, result, train: HysteresisData, val: Hyst
     m = max(1, sum(1 for e in EFFECTS if e not in {lab.partition(":")[0] for lab in effect_labels(model)}))
     alpha = scan.alpha
     sse, unit_rmse = _unit_errors(model, val)
-    n_default, cv = _default_units(sse, alpha, m)
+    n_default, cv = _default_units(sse, alpha, m, power)
     # the error of the model where it is right: its best tenth of the validation record's units (a record
     # designed for one effect is scored against that, not against a misfit elsewhere)
     best_deg = float(np.percentile(unit_rmse, 10)) if unit_rmse.size else scan.baseline_rmse_heldout_deg
