@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 DEMO   := demo-out
 
-.PHONY: install test wheel-check demo bench docs clean data-samples
+.PHONY: install test test-slow wheel-check demo bench docs clean data-samples
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -18,6 +18,10 @@ install: $(STAMP)
 # One worker per core (pytest-xdist); a test file stays on one worker, so its module fixtures run once.
 test: $(STAMP)
 	$(BIN)/python -m pytest -n auto --dist loadfile --durations=12
+
+# The suites marked slow (minutes each: the closed loop of hidden effects), outside `make test`.
+test-slow: $(STAMP)
+	$(BIN)/python -m pytest -n auto --dist loadfile -m slow --durations=12
 
 # The wheel a user installs: built (sdist, then wheel), installed into a fresh venv, and run outside
 # the source tree (`endocal --help`, the demo's first command); scripts/wheel_check.sh.

@@ -193,6 +193,9 @@ def run_excitation(
             chunk = backend.execute(t[sl], {dof: g[sl] for dof, g in trajectory.goal.items()})
             for axis, angle in trajectory.desired.items():  # what the compensated goals were meant to reach
                 chunk.motor[f"{axis}_desired_deg"] = np.asarray(angle[sl], float)
+            for name, value in getattr(trajectory, "conditions", {}).items():  # the user's condition; a backend's own wins
+                if name not in chunk.motor:
+                    chunk.motor[name] = np.full(len(chunk.motor["t_s"]), float(value))
             if getattr(trajectory, "tip_desired_mm", None) is not None:  # a tip path: where the tip should be (base_home, mm)
                 for k, c in enumerate("xyz"):
                     chunk.motor[f"tip_desired_{c}_mm"] = np.asarray(trajectory.tip_desired_mm[sl, k], float)
@@ -275,10 +278,29 @@ def prepare_backend(backend: Backend, protocol, probe: ProbeConfig, *, tip_load_
     Raises
     ------
     ConfigError
-        A negative or non-finite load, a load together with a protocol obstacle, or a bad ``[sim]`` table.
+        A negative or non-finite load, a load together with a protocol obstacle, a bad ``[sim]``
+        table, or a condition's value the simulator cannot take.
+
+    Notes
+    -----
+    A condition of the protocol that the simulator models (:data:`endocal.sim.config.CONDITIONS`,
+    e.g. ``sheath_wrap_deg``) sets that physics on the simulator, as turning the rig's insertion
+    tube would; every backend logs each condition as a column (:func:`run_excitation`).
     """
+    from endocal.sim.config import CONDITIONS
+
     sections = {k: dict(v) for k, v in (getattr(protocol, "sim", None) or {}).items()}
     record: dict = {}
+    if hasattr(backend, "with_settings"):
+        for name, value in (getattr(protocol, "condition_values", None) or {}).items():
+            if name in CONDITIONS:
+                section, key = CONDITIONS[name]
+                sections.setdefault(section, {})[key] = value
+                try:
+                    backend.with_settings({section: {key: value}})
+                except ConfigError as exc:
+                    raise ConfigError(f"protocol '{protocol.name}': condition {name} = {value:g} on the simulator: "
+                                      f"{exc}") from None
     if tip_load_n is not None:
         if not np.isfinite(tip_load_n) or tip_load_n < 0:
             raise ConfigError(f"--tip-load-n must be a force of 0 N or more, got {tip_load_n!r}")

@@ -74,6 +74,7 @@ def excite(
 
     probe_cfg = load_probe(probe)
     proto = load_protocol(protocol, overrides=overrides or None)
+    proto.check_conditions()  # a condition only the user can set is asked for before anything moves
     trajectory = proto.trajectory(probe_cfg, seed=seed)
     protocol_info = proto.to_dict()
     planes = None

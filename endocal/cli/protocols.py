@@ -90,11 +90,24 @@ def show(
         f"(probe {probe_cfg.name})",
         "parameters",
     ]
-    width = max(len(f"{k} = {_value(v)}") for k, v in proto.params.items())
+    shown = {k: v for k, v in proto.params.items() if k != "segments"}
+    width = max(len(f"{k} = {_value(v)}") for k, v in shown.items())
     for q in spec.params:
-        text = f"{q.name} = {_value(proto.params[q.name])}"
         mark = "  (override)" if q.name in proto.overrides else ""
+        if q.name == "segments":  # a sequence: one line per segment, its parameters as the file sets them
+            lines.append(f"  segments  # {q.doc}{mark}")
+            for i, seg in enumerate(proto.params["segments"], 1):
+                lines.append(f"    {i}. {seg['signal']}: " + ", ".join(f"{k} = {_value(v)}" for k, v in seg.items()
+                                                                       if k != "signal"))
+            continue
+        text = f"{q.name} = {_value(proto.params[q.name])}"
         lines.append(f"  {text.ljust(width)}  # {q.doc}{mark}")
+    for cname, cond in proto.conditions.items():
+        value = proto.condition_values.get(cname)
+        lines.append(f"condition {cname} = {'(give it: --set ' + cname + '=VALUE)' if value is None else f'{value:g}'}"
+                     f"  # {cond['instruction']}")
+    if proto.design.get("suspects"):
+        lines.append(f"designed  to test {', '.join(map(str, proto.design['suspects']))}")
     out.print("\n".join(lines), markup=False)
 
 

@@ -299,6 +299,7 @@ def validate(
     force_model: Optional[Path] = typer.Option(None, "--force-model", help="With --protocol: force.json (endocal fit force); guard both playbacks every tick."),
     max_force_n: Optional[float] = typer.Option(None, "--max-force-n", help="With --force-model: stop bending into the load at this predicted tip force (N)."),
     explain: bool = typer.Option(False, "--explain", "-v", help=EXPLAIN_HELP + " Offline: the metrics table, the worst regimes, the residual tests, every candidate with its physics, the untested suspects with why and how to test them."),
+    next_path: Optional[Path] = typer.Option(None, "--next", help="Offline: write the protocol that would settle what this validation could not (suspects it could not confirm, effects the data cannot test) to this .toml, sized from the effects seen, for the probe the records were made on (else --probe); prints the excite commands that record it."),
 ) -> None:
     """Compare a model with measurements: how far off, where it fails, which physical effect is missing.
 
@@ -316,10 +317,16 @@ def validate(
         raise ModelError(f"--folds must be 2 or more (held-out blocks of the rolling-origin scan), got {folds}")
     refuse_input_as_output("--json-out", json_out, [model_path, *(data or []), *train, *compare, planes, force_model,
                                                     sim_config, hardware_config])
-    if json_out is not None:
-        from endocal.runs.format import check_parent
+    for path in (json_out, next_path):
+        if path is not None:
+            from endocal.runs.format import check_parent
 
-        check_parent(json_out)  # before any work: a long validation must not end in an output it cannot write
+            check_parent(path)  # before any work: a long validation must not end in an output it cannot write
+    if next_path is not None:
+        if protocol is not None or trajectory is not None:
+            raise ModelError("--next designs the next recording from an offline validation: give DATA, not "
+                             "--protocol or --trajectory")
+        refuse_input_as_output("--next", next_path, [model_path, *(data or []), *train, *compare, planes])
     if trajectory is not None:
         if protocol is not None:
             raise ModelError("give either --trajectory (a tip path) or --protocol (desired angles of one axis), not both")
@@ -354,6 +361,10 @@ def validate(
     from endocal.validation.offline import validate_offline
 
     tables = [load_aligned(p) for p in data]
+    if next_path is not None:
+        from endocal.cli.next_protocol import check_next
+
+        check_next(model, tables, probe)  # a fitted range no motion fits in is refused before the validation
     plan = plan_estimation(model, tables, model_path=model_path, train_paths=train, cv=cv, planes_path=planes)
     refuse_input_as_output("--json-out", json_out, [*plan.train_paths, plan.planes_path])
     effects = [e.label for e in model.effects_]
@@ -373,14 +384,17 @@ def validate(
     d = with_refit_commands(result.to_dict(), result.scan)
     if old_path is not None and d["compare"] is not None:
         d["compare"]["path"] = str(old_path)
-    if emit_json(d, as_json, json_out):
-        return
-    if not explain:
-        render_summary(result, folded=bool(suffix), model_path=model_path, data=list(data), old_path=old_path)
-        return
-    render(result, folded=bool(suffix))
-    if old_path is not None and compare_path is None:
-        err.print(f"compared with {old_path} (the model this one was refitted from)")
+    if not emit_json(d, as_json, json_out):
+        if explain:
+            render(result, folded=bool(suffix))
+            if old_path is not None and compare_path is None:
+                err.print(f"compared with {old_path} (the model this one was refitted from)")
+        else:
+            render_summary(result, folded=bool(suffix), model_path=model_path, data=list(data), old_path=old_path)
+    if next_path is not None:
+        from endocal.cli.next_protocol import write_next
+
+        write_next(next_path, model, result, tables, plan.train, plan.planes, model_path, probe, as_json)
 
 
 def _rmse_ci(metrics) -> str:

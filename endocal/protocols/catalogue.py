@@ -120,6 +120,32 @@ class SignalSpec:
     def param(self, name: str) -> Param:
         return next(q for q in self.params if q.name == name)
 
+    def resolve(self, given: dict, where: str, base: dict | None = None) -> dict:
+        """Every parameter of this signal: defaults (or ``base``), then ``given`` on top, each value checked.
+
+        Raises
+        ------
+        ProtocolError
+            A parameter the signal does not have, a value it cannot take, or parameters that
+            contradict each other (the signal's cross-check), naming ``where``.
+        """
+        known = [q.name for q in self.params]
+        unknown = [k for k in given if k not in known]
+        if unknown:
+            raise ProtocolError(
+                f"{where}: unknown parameter(s) {', '.join(repr(k) for k in unknown)} for signal '{self.name}'; "
+                f"it has {', '.join(known)}"
+            )
+        params = dict(base) if base is not None else {q.name: q.default for q in self.params}
+        for k, v in given.items():
+            params[k] = self.param(k).coerce(v, where)
+        params = {q.name: (list(params[q.name]) if isinstance(params[q.name], list) else params[q.name])
+                  for q in self.params}
+        msg = self.check(params)
+        if msg:
+            raise ProtocolError(f"{where}: {msg}")
+        return params
+
 
 def _nyquist(p: dict, *names: str) -> str | None:
     for name in names:
@@ -363,7 +389,7 @@ RANDOM = SignalSpec(
 
 def _build_staircase(tl: Timeline, p: dict, axes: list[str], seed: int) -> None:
     A, steps, hold, rate = p["amplitude_deg"], p["steps"], p["hold_s"], p["step_rate_dps"]
-    levels = signals.staircase_levels(A, steps)
+    levels = np.tile(signals.staircase_levels(A, steps), p["cycles"])
     move_s = signals.ramp_duration_s(A / steps, rate)
 
     def body(axis, offset):
@@ -382,7 +408,8 @@ STAIRCASE = SignalSpec(
     "Step-and-hold staircase 0 -> +A -> -A -> 0 with long holds (creep) and rate-limited steps.",
     (axes_param(["axis1"]), amplitude_param(60.0, "Top step, deg."), count_param("steps", 3, "Steps between 0 and the top."),
      positive_param("hold_s", 8.0, "Hold at every level, s."),
-     positive_param("step_rate_dps", 20.0, "Peak knob speed during a step, deg/s."), OFFSET, RAMP, REST, SAMPLE_RATE),
+     positive_param("step_rate_dps", 20.0, "Peak knob speed during a step, deg/s."),
+     count_param("cycles", 1, "Times the whole staircase is played (each ends at 0)."), OFFSET, RAMP, REST, SAMPLE_RATE),
     _build_staircase,
     _offset_ramp,
 )
@@ -497,11 +524,84 @@ HOLD = SignalSpec(
 )
 
 
+# sequence --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SegmentsParam(Param):
+    """The ``segments`` of a ``sequence``: a list of tables, each a signal (``signal = "..."``) and its
+    parameters, resolved like a protocol file's (defaults, then what the table sets, every value
+    checked). A segment's ``sample_rate_hz`` is the sequence's; a sequence does not nest."""
+
+    def coerce(self, value, where: str) -> list[dict]:
+        if not isinstance(value, (list, tuple)) or not value:
+            raise ProtocolError(f"{where}: parameter '{self.name}' must be a non-empty list of tables, each with a "
+                                f"'signal' (e.g. a section headed [[params.segments]]), got {value!r}")
+        out = []
+        for i, seg in enumerate(value, 1):
+            at = f"{where}, segment {i}"
+            if not isinstance(seg, dict) or not isinstance(seg.get("signal"), str):
+                raise ProtocolError(f"{at}: a segment is a table naming its 'signal', got {seg!r}")
+            name = seg["signal"]
+            if name == SEQUENCE_NAME or name not in SIGNALS:
+                kinds = ", ".join(k for k in SIGNALS if k != SEQUENCE_NAME)
+                raise ProtocolError(f"{at}: 'signal' must be one of {kinds}, got {name!r}")
+            given = {k: v for k, v in seg.items() if k != "signal"}
+            if "sample_rate_hz" in given:
+                raise ProtocolError(f"{at}: a segment plays on the sequence's motor clock: set 'sample_rate_hz' "
+                                    "in the sequence's [params], not in a segment")
+            params = SIGNALS[name].resolve(given, at)
+            del params["sample_rate_hz"]
+            out.append({"signal": name, **params})
+        return out
+
+
+SEQUENCE_NAME = "sequence"
+
+
+def _segment_params(seg: dict, sample_rate_hz: float) -> dict:
+    return {**{k: v for k, v in seg.items() if k != "signal"}, "sample_rate_hz": sample_rate_hz}
+
+
+def _build_sequence(tl: Timeline, p: dict, axes: list[str], seed: int) -> None:
+    dof = dict(zip(p["axes"], axes))  # each segment spells its axes as the sequence's list does
+    for i, seg in enumerate(p["segments"]):
+        if i:
+            tl.rest(p["rest_s"])
+        params = _segment_params(seg, p["sample_rate_hz"])
+        SIGNALS[seg["signal"]].build(tl, params, [dof[a] for a in params["axes"]], seed)
+
+
+def _sequence_check(p: dict) -> str | None:
+    for i, seg in enumerate(p["segments"], 1):
+        stray = [a for a in seg["axes"] if a not in p["axes"]]
+        if stray:
+            return (f"segment {i} ({seg['signal']}) drives {', '.join(map(repr, stray))}, which the sequence's "
+                    f"'axes' {p['axes']} do not list: list every axis a segment drives there, spelled the same way")
+        msg = SIGNALS[seg["signal"]].check(_segment_params(seg, p["sample_rate_hz"]))
+        if msg:
+            return f"segment {i} ({seg['signal']}): {msg}"
+    return None
+
+
+SEQUENCE = SignalSpec(
+    SEQUENCE_NAME,
+    "Several signals one after the other (each from rest to rest, rest_s apart): one run for several tests.",
+    (axes_param(["axis1", "axis2"], doc="Every axis a segment drives, spelled as the segments spell them."),
+     SegmentsParam("segments", [{"signal": "sine", **{k: v for k, v in SINE.resolve({}, "sine").items()
+                                                      if k != "sample_rate_hz"}}], "segments",
+                   "The signals in playing order: tables with 'signal' and that signal's parameters."),
+     REST, SAMPLE_RATE),
+    _build_sequence,
+    _sequence_check,
+)
+
+
 #: Every signal kind a protocol file can name in ``signal = "..."``.
 SIGNALS: dict[str, SignalSpec] = {
     s.name: s
     for s in (SINE, SINE_SET, SINE_VARYING, DAMPED_SINE, TRIANGLE, CHIRP, RANDOM, STAIRCASE, PLANES, CIRCLE,
-              LISSAJOUS, HOLD)
+              LISSAJOUS, HOLD, SEQUENCE)
 }
 
 

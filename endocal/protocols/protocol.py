@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,7 +35,10 @@ from endocal.protocols.catalogue import SIGNALS, SignalSpec, Timeline
 from endocal.protocols.trajectory import Trajectory
 
 # Top-level keys of a protocol file.
-_FILE_KEYS = ("description", "signal", "params", "sim")
+_FILE_KEYS = ("description", "signal", "params", "sim", "conditions", "design")
+
+#: A condition is logged as a column of that name: a column name, its unit in the name.
+_COLUMN = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 
 
 # --------------------------------------------------------------------------- protocol
@@ -42,21 +46,40 @@ _FILE_KEYS = ("description", "signal", "params", "sim")
 
 def _resolve_params(spec: SignalSpec, given: dict, where: str, base: dict | None = None) -> dict:
     """Defaults (or ``base``), then ``given`` on top; every value checked."""
-    known = [q.name for q in spec.params]
-    unknown = [k for k in given if k not in known]
-    if unknown:
-        raise ProtocolError(
-            f"{where}: unknown parameter(s) {', '.join(repr(k) for k in unknown)} for signal '{spec.name}'; "
-            f"it has {', '.join(known)}"
-        )
-    params = dict(base) if base is not None else {q.name: q.default for q in spec.params}
-    for k, v in given.items():
-        params[k] = spec.param(k).coerce(v, where)
-    params = {q.name: (list(params[q.name]) if isinstance(params[q.name], list) else params[q.name]) for q in spec.params}
-    msg = spec.check(params)
-    if msg:
-        raise ProtocolError(f"{where}: {msg}")
-    return params
+    return spec.resolve(given, where, base)
+
+
+def _conditions(raw: Any, spec: SignalSpec, where: str) -> dict:
+    """The ``[conditions]`` table checked: name -> ``{"instruction": str, "recorded": [float, ...]}``."""
+    if not isinstance(raw, dict):
+        raise ProtocolError(f"{where}: 'conditions' must be a table of conditions (a section headed "
+                            "conditions.NAME with an 'instruction')")
+    params = {q.name for q in spec.params}
+    out = {}
+    for name, cond in raw.items():
+        at = f"{where}, condition '{name}'"
+        if not _COLUMN.match(str(name)) or name in params:
+            raise ProtocolError(f"{at}: a condition is logged as a column of its name: use a column name with its "
+                                "unit (e.g. sheath_wrap_deg) that is not a parameter of the signal")
+        if not isinstance(cond, dict) or not isinstance(cond.get("instruction"), str) or not cond["instruction"].strip():
+            raise ProtocolError(f"{at}: needs an 'instruction' saying what to change and how to measure it")
+        unknown = [k for k in cond if k not in ("instruction", "recorded")]
+        if unknown:
+            raise ProtocolError(f"{at}: unknown field(s) {', '.join(map(repr, unknown))}; a condition has "
+                                "instruction, recorded")
+        recorded = cond.get("recorded", [])
+        if not isinstance(recorded, list) or not all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in recorded):
+            raise ProtocolError(f"{at}: 'recorded' must be a list of numbers (the values earlier records hold)")
+        out[str(name)] = {"instruction": " ".join(cond["instruction"].split()), "recorded": [float(x) for x in recorded]}
+    return out
+
+
+def _condition_value(name: str, value: Any, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ProtocolError(f"{where}: condition '{name}' takes a number (its value in this run, in the unit its name "
+                            f"says), got {value!r}")
+    return float(value)
 
 
 @dataclass(frozen=True)
@@ -83,6 +106,17 @@ class Protocol:
         The file's optional ``[sim]`` table: simulator settings this protocol needs (e.g.
         ``[sim.contact]``, an obstacle), in the layout of a sim config TOML. The simulator
         backend applies them over ``--sim-config``; other backends only record them.
+    conditions : dict
+        The file's optional ``[conditions]`` table: conditions of the rig that only the user
+        can set (the insertion tube's curvature, a tendon's pretension), name ->
+        ``{"instruction": ..., "recorded": [values of earlier records]}``. Each is given a
+        value per run (``--set NAME=VALUE``, :attr:`condition_values`) and logged as a
+        constant column ``NAME``; :meth:`check_conditions` refuses a run without it.
+    condition_values : dict
+        The value given to each condition (``NAME -> float``).
+    design : dict
+        The file's optional ``[design]`` table: what the protocol was designed to test (the
+        suspects ``endocal validate --next`` wrote it for), recorded with the run.
     """
 
     name: str
@@ -93,19 +127,40 @@ class Protocol:
     sha256: str | None = None
     overrides: dict = field(default_factory=dict)
     sim: dict = field(default_factory=dict)
+    conditions: dict = field(default_factory=dict)
+    condition_values: dict = field(default_factory=dict)
+    design: dict = field(default_factory=dict)
 
     @property
     def spec(self) -> SignalSpec:
         return SIGNALS[self.signal]
 
     def with_overrides(self, overrides: dict | None) -> Protocol:
-        """A copy with some parameters changed (validated like the file's)."""
+        """A copy with some parameters (or conditions' values) changed, validated like the file's."""
         if not overrides:
             return self
         where = f"override for protocol '{self.name}'"
-        params = _resolve_params(self.spec, dict(overrides), where, base=self.params)
+        given = {k: v for k, v in overrides.items() if k not in self.conditions}
+        values = {k: _condition_value(k, v, where) for k, v in overrides.items() if k in self.conditions}
+        params = _resolve_params(self.spec, given, where, base=self.params) if given else self.params
         return Protocol(self.name, self.description, self.signal, params, self.source_path, self.sha256,
-                        {**self.overrides, **dict(overrides)}, self.sim)
+                        {**self.overrides, **dict(overrides)}, self.sim, self.conditions,
+                        {**self.condition_values, **values}, self.design)
+
+    def check_conditions(self) -> None:
+        """Refuse a run of this protocol before every condition has a value.
+
+        Raises
+        ------
+        ProtocolError
+            Naming the first condition without a value, its instruction, and the ``--set`` to give.
+        """
+        for name, cond in self.conditions.items():
+            if name not in self.condition_values:
+                before = (f" (earlier records hold {', '.join(f'{x:g}' for x in cond['recorded'])})"
+                          if cond["recorded"] else "")
+                raise ProtocolError(f"protocol '{self.name}' asks for the condition '{name}': {cond['instruction']}"
+                                    f"{before}; give its value in this run as --set {name}=VALUE")
 
     def resolved_axes(self, probe: ProbeConfig) -> list[str]:
         """The protocol's ``axes`` as the probe's DoF names.
@@ -159,7 +214,9 @@ class Protocol:
         """
         axes = self.resolved_axes(probe)
         tl = self._timeline(axes, 0 if seed is None else int(seed))
-        return tl.render(probe.dofs, self.params["sample_rate_hz"], self.name)
+        traj = tl.render(probe.dofs, self.params["sample_rate_hz"], self.name)
+        traj.conditions = dict(self.condition_values)
+        return traj
 
     @property
     def duration_s(self) -> float:
@@ -179,7 +236,36 @@ class Protocol:
             "source": str(self.source_path) if self.source_path else None,
             "sha256": self.sha256,
             **({"sim": self.sim} if self.sim else {}),
+            **({"conditions": {k: {**c, "value": self.condition_values.get(k)} for k, c in self.conditions.items()}}
+               if self.conditions else {}),
+            **({"design": self.design} if self.design else {}),
         }
+
+    def to_toml(self, header: str = "") -> str:
+        """The protocol as a protocol file (:func:`read_protocol_file` reads it back to an equal protocol).
+
+        Every parameter is written, resolved (defaults included), so the file says exactly what
+        runs; a ``sequence``'s segments as ``[[params.segments]]`` tables; conditions without
+        their values (a value is given per run). ``header`` becomes ``#`` comment lines on top.
+        """
+        lines = [f"# {line}".rstrip() for line in header.splitlines()]
+        lines += [f"description = {_toml_value(self.description)}", f"signal = {_toml_value(self.signal)}", "",
+                  "[params]"]
+        lines += _toml_keys({k: v for k, v in self.params.items() if k != "segments"})
+        for seg in self.params.get("segments", []) if self.signal == "sequence" else []:
+            lines += ["", "[[params.segments]]", *_toml_keys(seg)]
+        for section, table in self.sim.items():
+            lines += ["", f"[sim.{section}]", *_toml_keys(table)]
+        for name, cond in self.conditions.items():
+            lines += ["", f"[conditions.{name}]", *_toml_keys(cond)]
+        if self.design:
+            plain = {k: v for k, v in self.design.items() if not _is_tables(v)}
+            lines += ["", "[design]", *_toml_keys(plain)]
+            for key, rows in self.design.items():
+                if _is_tables(rows):
+                    for row in rows:
+                        lines += ["", f"[[design.{key}]]", *_toml_keys(row)]
+        return "\n".join(lines) + "\n"
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "protocol") -> Protocol:
@@ -198,8 +284,42 @@ class Protocol:
         if not isinstance(params, dict):
             raise ProtocolError(f"{where}: 'params' must be a table")
         src = d.get("source")
+        raw = d.get("conditions") or {}
+        conditions = _conditions({k: {f: v for f, v in c.items() if f != "value"} if isinstance(c, dict) else c
+                                  for k, c in raw.items()} if isinstance(raw, dict) else raw, spec, where)
+        values = {k: _condition_value(k, c["value"], where) for k, c in raw.items()
+                  if isinstance(c, dict) and c.get("value") is not None}
         return cls(name, str(d.get("description", "")), signal, _resolve_params(spec, params, where),
-                   Path(src) if src else None, d.get("sha256"), dict(d.get("overrides") or {}), dict(d.get("sim") or {}))
+                   Path(src) if src else None, d.get("sha256"), dict(d.get("overrides") or {}), dict(d.get("sim") or {}),
+                   conditions, values, dict(d.get("design") or {}))
+
+
+def _is_tables(value: Any) -> bool:
+    return isinstance(value, list) and bool(value) and all(isinstance(v, dict) for v in value)
+
+
+def _toml_value(value: Any) -> str:
+    """One TOML value: strings (escaped), booleans, numbers, lists of these."""
+    if isinstance(value, str):
+        escaped = value.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n").replace("\t", "\\t")
+        return f'"{escaped}"'
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            raise ProtocolError(f"a protocol file cannot hold the number {value!r}")
+        return repr(value)
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise ProtocolError(f"a protocol file cannot hold {value!r}")
+
+
+def _toml_keys(table: dict) -> list[str]:
+    """``key = value`` lines; a key whose value is None (an unset seed) is left out, as unset."""
+    return [f"{k} = {_toml_value(v)}" if _COLUMN.match(str(k)) else f"{_toml_value(str(k))} = {_toml_value(v)}"
+            for k, v in table.items() if v is not None]
 
 
 def _spec(signal: Any, where: str) -> SignalSpec:
@@ -285,6 +405,9 @@ def read_protocol_file(path: str | Path) -> Protocol:
     sim = data.get("sim", {})
     if not isinstance(sim, dict):
         raise ProtocolError(f"{where}: 'sim' must be a table of sim config sections (e.g. a section headed sim.contact)")
+    design = data.get("design", {})
+    if not isinstance(design, dict):
+        raise ProtocolError(f"{where}: 'design' must be a table (what the protocol was designed to test)")
     return Protocol(
         name=path.stem,
         description=" ".join(data["description"].split()),
@@ -293,6 +416,8 @@ def read_protocol_file(path: str | Path) -> Protocol:
         source_path=path.resolve(),
         sha256=hashlib.sha256(raw).hexdigest(),
         sim=sim,
+        conditions=_conditions(data.get("conditions", {}), spec, where),
+        design=design,
     )
 
 

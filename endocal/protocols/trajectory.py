@@ -47,6 +47,9 @@ class Trajectory:
     tip_desired_mm : (n, 3) array or None
         Desired tip position in the base_home frame (see :mod:`endocal.protocols.paths`), mm,
         for trajectories that walk a tip path; logged as ``tip_desired_{x,y,z}_mm``.
+    conditions : dict of str to float
+        Conditions of the rig the user set for this run (the protocol's ``[conditions]``),
+        logged as constant columns of those names where the backend does not log them itself.
     """
 
     t_s: np.ndarray
@@ -56,6 +59,7 @@ class Trajectory:
     segments: tuple[Segment, ...] = ()
     desired: dict[str, np.ndarray] = field(default_factory=dict)
     tip_desired_mm: np.ndarray | None = None
+    conditions: dict[str, float] = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:

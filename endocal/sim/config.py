@@ -34,6 +34,12 @@ from endocal.errors import ConfigError
 #: The effect catalog, in the order later issues list it.
 EFFECTS = ("rate", "deadzone", "envelope", "coupling", "delay", "drift", "creep", "load")
 
+#: Conditions of the rig the simulator models and logs (a protocol's ``[conditions]``, set per run with
+#: ``--set NAME=VALUE``): condition column -> (section, key) of the sim config it sets. The wrap of the
+#: sheath along the insertion tube (its curvature) is logged as ``sheath_wrap_deg``; the capstan
+#: friction of every tendon grows with it.
+CONDITIONS = {"sheath_wrap_deg": ("tendon", "wrap_deg")}
+
 #: Half-plane names of the deviation table: first bending axis towards +y / -y, second towards +x / -x.
 HALF_PLANES = ("y+", "y-", "x+", "x-")
 

@@ -23,7 +23,7 @@ from endocal.validation.residuals import (ResidualTests, cut_start, residual_tes
 from endocal.validation.folds import check_cv_data, fold_bounds, heldout_errors
 from endocal.validation.parallel import one_blas_thread
 from endocal.validation.predict import predict_errors, predict_extrapolated, predict_scored
-from endocal.validation.scan import MAX_SCAN_SAMPLES, scan_effects, scan_split, split_errors
+from endocal.validation.scan import MAX_SCAN_SAMPLES, scan_effects, scan_split, scan_stride, split_errors
 from endocal.validation.structure import effect_labels, fitted_on
 from endocal.validation.suspects import ScanResult
 from endocal.validation.shift import (RecordShift, covariate_changes, covariates_held, moving_speed_dps,
@@ -352,7 +352,7 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     else:
         reason = scheme_reason or "no separate estimation data"
         try:
-            check_cv_data(data.decimate(max(1, -(-data.n_samples // max_scan_samples))), folds)
+            check_cv_data(data.decimate(scan_stride(data, max_scan_samples)), folds)
         except ModelError as exc:
             instead = ("validate the model on a record it was not fitted on" if fitted_on(model, data) else
                        "give the record the model was fitted on with --train to test effects on this one as a whole")

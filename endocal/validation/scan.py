@@ -37,6 +37,7 @@ from endocal.validation.folds import check_cv_data, fold_bounds, fold_errors, fo
 from endocal.validation.identifiability import creep_reason
 from endocal.validation.paired import holm, min_units_for, paired_test, unit_test
 from endocal.validation.parallel import map_jobs, one_blas_thread
+from endocal.validation.power import estimate_power, evidence_phrase
 from endocal.validation.predict import predict_errors
 from endocal.validation.refit import suggest_refit
 from endocal.validation.regimes import turning_points
@@ -49,6 +50,28 @@ from endocal.validation.units import make_units
 #: the <= 0.3 Hz loops a knob draws, and the budget that keeps the scan of every catalog
 #: effect on 60 000 samples under 30 s (bench/bench_scan.py).
 MAX_SCAN_SAMPLES = 5000
+#: Fewest samples per cycle of a record's fastest motion that a decimated scan keeps, whatever the
+#: budget: the budget's own promise above (25 per cycle of a 0.3 Hz loop). A faster record (the
+#: rungs of a speed ladder up to a knob's limit, 0.8 Hz) decimated to the budget would keep four
+#: samples a cycle, and an effect of speed fitted on them finds none (rate on a ladder to 290 deg/s:
+#: -20 % of the ladder's error fitted on every sample, 0 % on one in 30).
+MIN_SAMPLES_PER_CYCLE = 25
+
+
+def scan_stride(data: HysteresisData, max_samples: int = MAX_SCAN_SAMPLES) -> int:
+    """The decimation step of a scan: about ``max_samples`` samples, but at least :data:`MIN_SAMPLES_PER_CYCLE`
+    per cycle of the data's fastest motion (the 5th percentile of its half-cycles' lengths)."""
+    stride = max(1, int(math.ceil(data.n_samples / max_samples)))
+    if stride == 1:
+        return 1
+    turns = turning_points(data, 0.05)
+    same = np.searchsorted(data.run_starts, turns[1:], side="right") == np.searchsorted(
+        data.run_starts, turns[:-1], side="right")
+    half = np.diff(turns)[same]
+    if half.size < 2:
+        return stride
+    fast = float(np.percentile(half, 5))
+    return max(1, min(stride, int(2.0 * fast // MIN_SAMPLES_PER_CYCLE)))
 
 
 _AT_BOUND = re.compile(r"sits at its (?:lower|upper) bound (\S+):")
@@ -98,8 +121,10 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     candidate is a suspect when its corrected p-value is below ``alpha`` and it cuts the
     validation RMSE by at least ``min_gain_pct``. Without a suspect, the candidates that clear
     the gain bar are listed as suggestions, their ``evidence`` saying why they are not
-    significant: ``"not enough evidence (N units, M needed)"`` when ``val`` holds fewer units
-    than any candidate would need to reach ``alpha`` (:func:`min_units_for`), else the p-value.
+    significant: ``"not enough evidence (N units, M needed; ...)"`` when ``val`` holds fewer units
+    than any candidate would need to reach ``alpha`` (:func:`min_units_for`), else the p-value;
+    either way it says about how many units of this kind would make the candidate significant at
+    the gain seen, or that no length will (:mod:`endocal.validation.power`).
 
     Parameters
     ----------
@@ -139,7 +164,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     if train.meas_deg is None or val.meas_deg is None:
         raise ModelError("validation needs the measured angle meas_deg (deg) in estimation and validation data")
     check_fit_data(train, "estimation data")
-    stride = max(1, int(math.ceil(train.n_samples / max_samples)))
+    stride = scan_stride(train, max_samples)
     dt = train.decimate(stride) if stride > 1 else train
     have = effect_labels(model)
     tested_cands, untestable = candidate_effects(model, dt, candidates, load_columns, bending_axes,
@@ -177,14 +202,19 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
         rmse = float(np.sqrt(np.mean(err**2)))
         gain = 100.0 * (1.0 - rmse / rmse_base) if rmse_base > 0 else 0.0
         significant = bool(pa < alpha and gain >= min_gain_pct)
-        evidence = (f"not enough evidence ({units.n} units, {need} needed)" if thin else
-                    "significant" if significant else f"not significant (p = {pa:.2g} over {units.n} {units.kind}s)")
+        # how much more data would settle it, at the gain seen (the power of this very test)
+        power = estimate_power(err_base, err, units.bounds, alpha, len(fitted))
+        more = evidence_phrase(power, units.kind, gain, min_gain_pct)
+        evidence = (f"not enough evidence ({units.n} units, {need} needed; {more})" if thin else
+                    "significant" if significant else
+                    f"under the {min_gain_pct:g} % bar (p = {pa:.2g} over {units.n} {units.kind}s)" if pa < alpha else
+                    f"not significant (p = {pa:.2g} over {units.n} {units.kind}s; {more})")
         refit = suggest_refit(model, c, data_paths, model_path=model_path, planes_path=planes_path,
                               suffix=refit_suffix)
         tested.append(Suspect(effect=c, column=col or None, gain_pct=gain, p_value=float(pa), p_raw=float(p),
                               rmse_heldout_deg=rmse, base_rmse_heldout_deg=rmse_base, significant=significant,
                               refit=refit, cause=cls.cause, signature=cls.signature, protocol=cls.protocol,
-                              n_blocks=units.n, evidence=evidence, caution=cautions[c]))
+                              n_blocks=units.n, evidence=evidence, caution=cautions[c], power=power))
         errs[c] = err
     tested.sort(key=lambda s: -s.gain_pct)
     # Significant candidates are suspects. Without one, a candidate that still cuts the validation
@@ -282,7 +312,7 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
     """
     if data.meas_deg is None:
         raise ModelError("validation needs the measured angle meas_deg (deg)")
-    stride = max(1, int(math.ceil(data.n_samples / max_samples)))
+    stride = scan_stride(data, max_samples)
     d = data.decimate(stride) if stride > 1 else data
     check_cv_data(d, folds, train_frac)
     bounds = fold_bounds(d.n_samples, folds, train_frac)

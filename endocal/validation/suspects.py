@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from endocal.validation.power import PowerEstimate
 from endocal.validation.refit import Refit
 
 
@@ -50,9 +51,15 @@ class Suspect:
         (:meth:`~endocal.models.effects.base.Effect.implausible`); such a suggestion ranks
         after those without.
     evidence : str
-        ``significant``, ``not significant``, or ``not enough evidence (N units)`` when the
-        validation data holds too few independent units for any p-value to reach ``alpha``
-        (the candidate is then listed as a suggestion on its gain alone).
+        ``significant``; ``not significant (p = ... over N half-cycles; ...)``, or ``not enough
+        evidence (N units, M needed; ...)`` when the validation data holds too few independent
+        units for any p-value to reach ``alpha`` (the candidate is then listed as a suggestion on
+        its gain alone), each saying about how many units would make it significant at the gain
+        seen or that no length will; ``under the 10 % bar (p = ...)`` when significant but too
+        small to list.
+    power : PowerEstimate or None
+        Units of the validation data's kind the paired test needs at the gain seen
+        (:mod:`endocal.validation.power`; estimation/validation scheme only).
     """
 
     effect: str
@@ -71,9 +78,11 @@ class Suspect:
     screened: bool = False
     evidence: str = ""
     caution: str = ""
+    power: PowerEstimate | None = None
 
     def to_dict(self) -> dict:
-        return {k: (self.refit.to_dict() if k == "refit" else getattr(self, k)) for k in self.__dataclass_fields__}
+        return {k: (v.to_dict() if k in ("refit", "power") and v is not None else v)
+                for k in self.__dataclass_fields__ for v in (getattr(self, k),)}
 
 
 @dataclass(frozen=True)

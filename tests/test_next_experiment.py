@@ -1,0 +1,202 @@
+"""`endocal validate ... --next NEXT.toml` (endocal/validation/next_experiment.py): the protocol that settles
+what validate could not, written as an ordinary protocol file, run by `excite` on the simulator and the
+emulated rig.
+
+The records are the user's of the closed loop (tests/test_validation_closed_loop.py), shortened: the
+duodenoscope paper's damped sine and a chirp to fit on, a band-limited random run to validate on, all
+moving one knob on the default simulated probe, whose sheath wrap (180 deg) is logged constant. Such
+data cannot show coupling (the other knob never moves), load (no condition varies) or creep (no holds),
+and validate says so in words; --next must turn each into a segment or a condition.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from endocal.models import HysteresisData, load_model, make_model
+from endocal.probe import PRESETS
+from endocal.protocols import read_protocol_file
+from endocal.runs.aligned import load_aligned, read_stream
+from endocal.validation.next_experiment import (
+    CONDITION,
+    LIMIT_SHARE,
+    MIN_AMPLITUDE_DEG,
+    design_next,
+    motion_range,
+)
+from endocal.validation.power import units_for_power
+from tests._cli import ROOT, endocal, one_line_exit_2
+
+TEE = PRESETS["tee"]
+RECORDS = {
+    "est1": ["damped-sine", "--set", "period_s=10", "--seed", "0"],
+    "est2": ["chirp", "--amplitude", "50", "--set", "duration_s=60", "--seed", "0"],
+    "val": ["random", "--amplitude", "60", "--set", "duration_s=60", "--seed", "0"],
+}
+
+
+@pytest.fixture(scope="module")
+def loop(tmp_path_factory):
+    """The user's records, a B-spline with the rig's lag fitted on the estimation pair, and validate --next."""
+    tmp = tmp_path_factory.mktemp("next")
+    for name, args in RECORDS.items():
+        assert endocal("excite", *args, "--out", tmp / name, "-q").returncode == 0
+    fit = endocal("fit", "hysteresis", tmp / "est1", tmp / "est2", "--axis", "ap", "--model", "bspline", "--effects",
+                  "delay", "--out", tmp / "m.json")
+    assert fit.returncode == 0, fit.stderr
+    proc = endocal("validate", tmp / "m.json", tmp / "val", "--next", tmp / "next.toml")
+    assert proc.returncode == 0, proc.stderr
+    return tmp, proc
+
+
+def test_validate_writes_a_protocol_for_what_the_records_cannot_show(loop):
+    tmp, proc = loop
+    proto = read_protocol_file(tmp / "next.toml")
+    assert proto.signal == "sequence" and proto.design["axis"] == "ap"
+    suspects = proto.design["suspects"]
+    assert {"coupling", "creep", "load:sheath_wrap_deg"} <= set(suspects), suspects
+    by_effect = {t["effect"]: t for t in proto.design["tests"]}
+    segments = proto.params["segments"]
+    # coupling: both knobs at once; creep: moves with a hold after each; load: the whole run at a new condition
+    assert segments[by_effect["coupling"]["segment"] - 1]["signal"] == "lissajous"
+    assert segments[by_effect["coupling"]["segment"] - 1]["axes"] == ["ap", "ml"]
+    creep = segments[by_effect["creep"]["segment"] - 1]
+    assert creep["signal"] == "staircase" and creep["steps"] == 1 and creep["hold_s"] >= 5.0
+    assert "segment" not in by_effect["load:sheath_wrap_deg"]
+    assert proto.conditions["sheath_wrap_deg"]["recorded"] == [180.0]
+    # each test sized by the power calculation: the paired test at alpha / m with 80 % power when the
+    # effect lowers every half-cycle's error by the same share, the model's spread at least CV 1
+    n_min = units_for_power(1.0, 1.0, 0.05, 8)
+    assert all(t["half_cycles"] >= n_min for t in proto.design["tests"]), proto.design["tests"]
+    assert f"{n_min} half-cycles" in by_effect["coupling"]["sized"]
+    # the validate output says what it tests and how to record it, twice
+    assert "Next experiment written to" in proc.stdout and "coupling (untestable)" in proc.stdout
+    assert f"endocal excite {tmp / 'next.toml'} --out next-fit --set sheath_wrap_deg=VALUE" in proc.stdout
+    assert "--out next-val --seed 1 --set sheath_wrap_deg=VALUE" in proc.stdout
+
+
+def test_every_goal_stays_inside_the_fitted_range_and_the_probe_limits(loop):
+    tmp, _ = loop
+    model = load_model(tmp / "m.json")
+    lo, hi = model.cmd_range_deg_
+    proto = read_protocol_file(tmp / "next.toml")
+    traj = proto.trajectory(TEE)
+    traj.check_limits(TEE)  # what excite checks before anything moves
+    ap, ml = traj.goal["ap"], traj.goal["ml"]
+    assert lo - 1e-6 <= ap.min() and ap.max() <= hi + 1e-6
+    # the full fitted range is swept (envelope), and the other knob moves for coupling
+    assert ap.max() >= hi - 1e-3 and ap.min() <= lo + 1e-3 and np.ptp(ml) > 2 * MIN_AMPLITUDE_DEG
+    speed = np.abs(np.diff(ap)) * traj.sample_rate_hz
+    assert speed.max() <= LIMIT_SHARE * TEE.max_knob_speed_dps * (1 + 1e-6)
+
+
+def test_excite_asks_for_the_condition_then_logs_it(loop):
+    tmp, _ = loop
+    one_line_exit_2(endocal("excite", tmp / "next.toml", "--out", tmp / "nope", "-q"),
+                    "asks for the condition 'sheath_wrap_deg'", "earlier records hold 180",
+                    "--set sheath_wrap_deg=VALUE")
+    assert not (tmp / "nope").exists()
+    proc = endocal("excite", tmp / "next.toml", "--out", tmp / "next-fit", "--set", "sheath_wrap_deg=120", "-q")
+    assert proc.returncode == 0, proc.stderr
+    table = load_aligned(tmp / "next-fit").table
+    # the simulator models the condition: its wrap is the one given, and it logs it
+    assert np.allclose(table["sheath_wrap_deg"], 120.0)
+    meta = json.loads((tmp / "next-fit" / "run.json").read_text())
+    assert meta["protocol"]["conditions"]["sheath_wrap_deg"]["value"] == 120.0
+    assert meta["protocol"]["design"]["suspects"] == read_protocol_file(tmp / "next.toml").design["suspects"]
+    assert meta["status"] == "complete"
+
+
+def test_the_protocol_plays_on_the_emulated_rig(loop):
+    """The whole protocol is limit-checked by excite on the rig's backend before torque goes on; its first
+    seconds are played through the real dynamixel-sdk and Aurora SDK (it lasts minutes in real time), then
+    Ctrl-C stops it cleanly: the condition is logged as a column by excite, the rig does not log it."""
+    pytest.importorskip("sksurgerynditracker")
+    from endocal.emulate.rig import EmulatedRig
+
+    tmp, _ = loop
+    events = []
+    with EmulatedRig(TEE, seed=1, on_event=events.append) as rig:
+        cfg = rig.write_config(tmp / "rig.toml")
+        child = subprocess.Popen([sys.executable, "-m", "endocal", "excite", str(tmp / "next.toml"), "--backend",
+                                  "hardware", "--hardware-config", str(cfg), "--out", str(tmp / "rig-run"),
+                                  "--set", "sheath_wrap_deg=120", "-q"], cwd=ROOT, stdout=subprocess.PIPE,
+                                 stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 60
+        while "servo 2 torque on" not in events and time.monotonic() < deadline and child.poll() is None:
+            time.sleep(0.1)
+        time.sleep(3.0)
+        child.send_signal(signal.SIGINT)
+        _, stderr = child.communicate(timeout=60)
+        torque = rig.bus.torque()
+    assert child.returncode == 130, stderr
+    assert torque == {1: False, 2: False}
+    meta = json.loads((tmp / "rig-run" / "run.json").read_text())
+    assert meta["status"] == "interrupted" and meta["protocol"]["conditions"]["sheath_wrap_deg"]["value"] == 120.0
+    motor = read_stream(tmp / "rig-run", "motor")
+    assert len(motor) > 100 and np.allclose(motor["sheath_wrap_deg"], 120.0)
+
+
+def test_a_load_condition_no_column_logs_is_asked_for_by_name(loop, tmp_path):
+    tmp, _ = loop
+    # the same records as a lab's CSV tables: no sheath wrap logged
+    for name in RECORDS:
+        table = load_aligned(tmp / name).table
+        table.drop(columns=[c for c in table.columns if c == "sheath_wrap_deg"]).to_csv(tmp_path / f"{name}.csv",
+                                                                                        index=False)
+    proc = endocal("validate", tmp / "m.json", tmp_path / "val.csv", "--train", tmp_path / "est1.csv", "--train",
+                   tmp_path / "est2.csv", "--next", tmp_path / "next.toml")
+    assert proc.returncode == 0, proc.stderr
+    proto = read_protocol_file(tmp_path / "next.toml")
+    assert list(proto.conditions) == [CONDITION] and proto.conditions[CONDITION]["recorded"] == []
+    assert "log it as a column of every record" in proto.conditions[CONDITION]["instruction"]
+    assert f"--set {CONDITION}=VALUE" in proc.stdout
+    one_line_exit_2(endocal("excite", tmp_path / "next.toml", "--out", tmp_path / "run", "-q"),
+                    f"asks for the condition '{CONDITION}'", f"--set {CONDITION}=VALUE")
+
+
+def test_a_fitted_range_no_motion_fits_in_is_refused_before_validating(loop, tmp_path):
+    tmp, _ = loop
+    # a lab's table cut to where the knob swings about 35 deg: the model never saw the knob at rest
+    table = load_aligned(tmp / "val").table
+    for name in ("off", "off-val"):
+        t = table.copy()
+        t["ap_cmd_deg"] = 35.0 + 0.3 * t["ap_cmd_deg"]
+        t.to_csv(tmp_path / f"{name}.csv", index=False)
+    assert endocal("fit", "hysteresis", tmp_path / "off.csv", "--axis", "ap", "--model", "bspline",
+                   "--out", tmp_path / "m.json").returncode == 0
+    lo, hi = load_model(tmp_path / "m.json").cmd_range_deg_
+    start = time.monotonic()
+    proc = endocal("validate", tmp_path / "m.json", tmp_path / "off-val.csv", "--next", tmp_path / "next.toml")
+    one_line_exit_2(proc, f"fitted on commands in [{lo:.4g}, {hi:.4g}] deg", "rest position 0")
+    assert not (tmp_path / "next.toml").exists() and proc.stdout == ""  # refused before any validation
+    assert time.monotonic() - start < 30
+
+
+def test_a_fitted_range_too_narrow_is_refused_naming_it():
+    t = np.arange(0, 60, 0.01)
+    u = 3.0 * np.sin(2 * np.pi * 0.1 * t)
+    model = make_model("bspline", axis="ap").fit(HysteresisData(cmd_deg=u, meas_deg=0.5 * u, t_s=t))
+    with pytest.raises(ValueError, match=r"fitted on commands in \[-3, 3\] deg.*too narrow for a sweep of \+-5 deg"):
+        motion_range(model, TEE)
+    with pytest.raises(ValueError, match="axis 'ap', which probe 'duodenoscope' does not have"):
+        motion_range(model, PRESETS["duodenoscope"])
+
+
+def test_nothing_suspected_writes_nothing(loop, tmp_path, monkeypatch):
+    """When validate leaves nothing to settle, --next says so in one line, writes nothing, exits 2."""
+    import endocal.validation.next_experiment as nx
+
+    tmp, _ = loop
+    monkeypatch.setattr(nx, "_targets", lambda *a, **k: {})
+    proc = endocal("validate", tmp / "m.json", tmp / "val", "--next", tmp_path / "next.toml")
+    one_line_exit_2(proc, "nothing is suspected", "no protocol written")
+    assert not (tmp_path / "next.toml").exists() and "Which effect is missing" in proc.stdout

@@ -1,0 +1,238 @@
+"""The closed loop, the way a user works (issue 27): validate, refit what it suggests, and record what
+`validate --next` asks for when it can suggest nothing more, until every hidden effect is found.
+
+One recipe for every case; nothing is picked per case:
+
+- the simulator of tests/test_validation_hidden.py with one effect hidden (its sections, its
+  strengths), the default rig lag present (servo 2 x 30 ms, tracker 15 ms), seed 0;
+- estimation data: the duodenoscope paper's damped sine and a chirp of 50 deg; validation data: a
+  band-limited random run of 60 deg (the records of tests/test_validation_user_style.py);
+- the starting model: the first of ``STARTS`` that does not hold the hidden effect. A B-spline
+  carrying `delay` for the rig's lag is the base of every case but two: the `delay` case (the base
+  holds the effect: a B-spline without it, next in the order) and the `envelope` case (the
+  B-spline's branch shapes are free functions of the command, so any static stiffening is in the
+  base, as tests/test_validation_user_style.py shows: the paper's `pi` with `delay`, next);
+- the loop: validate (estimation/validation scheme, the scan's sample budget of the hidden-effect
+  tests); when it suggests an effect, refit with the first suggestion (on the estimation data,
+  starting from the model, as the printed refit command does); when it suggests none but
+  `validate --next` finds something to test, write that protocol, record it twice on the simulator
+  through `excite`'s own code (`prepare_backend`, `run_excitation`; a condition it asks for set to
+  2/3 of the value the records hold), add the first recording to the estimation data, refit the
+  model's structure, and validate on the second, a fresh recording of the same plan; at most two
+  added recordings; the loop ends when --next finds nothing to test or two recordings were added
+  and nothing is suggested.
+
+The bars (issue 27, "How good"): the hidden effect named, by a suggestion refitted in the loop, in 8
+of 8; the validation RMSE halved from the loop's start in at least 7 of 8; the control ends with
+nothing missing. "Halved from the loop's start" compares the model the loop started from with the
+one it ended with on the same records, the loop's last: the starting structure refitted on the
+final estimation data and scored on the final validation record (`validate END --compare START`),
+since a record the loop added (both knobs moving, say) is where the start model's error shows. That
+comparison also credits what the loop found besides the hidden effect (the cross-talk of the two
+bends through eq. 1 that `coupling` takes up, which the control finds too); the hidden effect's own
+share (the final model without it, refitted on the same data) is recorded beside it (``LoopResult``).
+
+Measured (seed 0; RMSE in deg on the loop's last records, start structure -> end; "own share": the
+end structure without the hidden effect -> with it):
+
+=========  ==============  =======================================  =====  ==================  ==================
+hidden     start           refitted in the loop, in order           added  start -> end        own share
+=========  ==============  =======================================  =====  ==================  ==================
+drift      bspline+delay   drift, coupling, load                    2      10.3 -> 0.47 (-95%)  10.4 -> 0.47 (-95%)
+delay      bspline         delay, coupling, load                    2      9.80 -> 0.50 (-95%)  8.97 -> 0.50 (-94%)
+rate       bspline+delay   coupling, rate, load                     2      2.70 -> 1.03 (-62%)  1.65 -> 1.03 (-38%)
+creep      bspline+delay   creep, coupling, load                    2      2.80 -> 0.42 (-85%)  2.39 -> 0.42 (-82%)
+load       bspline+delay   load, coupling                           2      1.90 -> 0.47 (-75%)  1.04 -> 0.47 (-55%)
+deadzone   bspline+delay   deadzone, coupling, load                 2      1.69 -> 0.43 (-75%)  0.63 -> 0.43 (-32%)
+envelope   pi+delay        envelope, tension, coupling, load        2      2.24 -> 0.58 (-74%)  1.29 -> 0.58 (-55%)
+coupling   bspline+delay   coupling, load                           2      2.14 -> 0.49 (-77%)  1.12 -> 0.49 (-57%)
+(control)  bspline+delay   coupling, load; ends with nothing missing 2     1.88 -> 0.45 (-76%)  -
+=========  ==============  =======================================  =====  ==================  ==================
+
+`load` is the sheath's wrap: the first --next asks for it (the records hold it constant), the
+recipe sets it to 120 deg, and the simulator's friction follows, so every loop finds it. `coupling`
+is named in the control too: with both knobs moving, eq. 1 reads this axis from a tip both bends put
+there through the deviated half-planes (the default probe's), which the term takes up. `rate` is
+found on the second recording, a speed ladder alone up to the probe's limits (the first, whose both-
+knob segment the start model misses by 1 deg, leaves it under the 10 % bar); its own share stays at
+-38 %: the catalog term, fitted beside the carried `delay`, takes up part of the simulator's speed-
+dependent capstan friction (-20 % of the ladder's error on its own).
+
+Expensive (a loop records and validates up to seven times: 110-250 s of one core each, 22 min for
+the file): marked ``slow``, outside the 10-minute suite; run it with ``make test-slow`` (or
+``pytest -m slow tests/test_validation_closed_loop.py``).
+"""
+
+from __future__ import annotations
+
+import functools
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from endocal.backends.sim import SimBackend
+from endocal.excite import prepare_backend, run_excitation
+from endocal.models import make_model
+from endocal.probe import PRESETS
+from endocal.protocols import read_protocol_file
+from endocal.runs.aligned import load_aligned
+from endocal.sim import SimConfig
+from endocal.validation.data import axis_data
+from endocal.validation.next_experiment import NothingSuspectedError, design_next
+from endocal.validation.offline import validate_offline
+from endocal.validation.predict import predict_errors
+from endocal.validation.structure import split_fit
+from tests.test_validation_hidden import NO_SLACK, simulate
+from tests.test_validation_user_style import HIDDEN
+
+pytestmark = pytest.mark.slow
+
+TEE = PRESETS["tee"]
+#: Starting models in a fixed order: (base, effects).
+STARTS = [("bspline", ["delay"]), ("bspline", []), ("pi", ["delay"])]
+#: Effects a base holds without the term: the B-spline's free branch shapes take up any static shape.
+HELD = {"bspline": {"envelope"}}
+SCAN_SAMPLES = 3000  # the scan's decimation budget of tests/test_validation_hidden.py
+MAX_ADDED = 2
+#: A condition --next asks for is set to this share of the value the records hold (one rule for all).
+CONDITION_SHARE = 2.0 / 3.0
+
+
+def start_for(hidden: str | None) -> tuple[str, list[str]]:
+    """The first start that does not hold the hidden effect."""
+    return next((b, e) for b, e in STARTS if hidden not in e and hidden not in HELD.get(b, set()))
+
+
+@dataclass
+class LoopResult:
+    """What one closed loop did.
+
+    Attributes
+    ----------
+    start : str
+        The starting model (``base+effects``).
+    named : list of str
+        Effects refitted in the loop, in order.
+    added : int
+        Recordings added (each recorded twice: once to fit on, once to validate on).
+    history_deg : list of float
+        Validation RMSE of the model as it stands at each validate (on that step's records).
+    start_deg, end_deg : float
+        The starting and the final structure on the loop's last records (both refitted on its final
+        estimation data, scored on its final validation record).
+    without_hidden_deg : float or None
+        The final structure without the hidden effect, on the same records (None: not named).
+    clean : bool
+        The last validate finds nothing missing (no suggestion, no pointer, nothing unexplained).
+    next_said : str
+        What the last `--next` said when it found nothing to test (empty otherwise).
+    """
+
+    start: str
+    named: list = field(default_factory=list)
+    added: int = 0
+    history_deg: list = field(default_factory=list)
+    start_deg: float = float("nan")
+    end_deg: float = float("nan")
+    without_hidden_deg: float | None = None
+    clean: bool = False
+    next_said: str = ""
+
+    @property
+    def fall_pct(self) -> float:
+        return 100.0 * (1.0 - self.end_deg / self.start_deg)
+
+
+def _record(cfg: SimConfig, path: Path, seed: int, out: Path):
+    """Run a --next protocol as `excite` does, on the simulator, and load its aligned table."""
+    proto = read_protocol_file(path)
+    values = {k: CONDITION_SHARE * c["recorded"][0] if c["recorded"] else 1.0 for k, c in proto.conditions.items()}
+    proto = proto.with_overrides(values)
+    proto.check_conditions()
+    traj = proto.trajectory(TEE, seed=seed)
+    traj.check_limits(TEE)
+    backend, rec = prepare_backend(SimBackend(cfg, TEE, seed), proto, TEE)
+    run_excitation(traj, backend, TEE, out, protocol_info={**proto.to_dict(), **rec}, seed=seed)
+    return load_aligned(out)
+
+
+def _refit(base: str, effects: list[str], start, est):
+    return make_model(base, effects, axis="ap").fit_from(start, axis_data(est, "ap"))
+
+
+@functools.lru_cache(maxsize=None)
+def run_loop(hidden: str | None) -> LoopResult:
+    """The recipe of the module docstring, for one hidden effect (None: the control)."""
+    cfg = SimConfig.default().replace(**NO_SLACK).replace(**HIDDEN.get(hidden, {}))
+    est = [simulate(cfg, "damped-sine", {}, seed=0)[0], simulate(cfg, "chirp", {"amplitude_deg": 50.0}, seed=0)[0]]
+    val = [simulate(cfg, "random", {"amplitude_deg": 60.0}, seed=0)[0]]
+    base, effects = start_for(hidden)
+    model = start = make_model(base, effects, axis="ap").fit(axis_data(est, "ap"))
+    out = LoopResult(start="+".join([base, *effects]))
+    tmp = Path(tempfile.mkdtemp(prefix=f"loop-{hidden}-"))
+    res = None
+    for _ in range(12):  # a bound the loop never reaches: at most two recordings and a refit per effect
+        res = validate_offline(model, val, train=est, model_path=str(tmp / "m.json"), max_scan_samples=SCAN_SAMPLES)
+        out.history_deg.append(res.scan.baseline_rmse_heldout_deg)
+        if res.suspects:
+            effect = res.suspects[0].effect
+            out.named.append(effect)
+            model = _refit(base, [e.label for e in model.effects_] + [effect], model, est)
+            continue
+        if out.added == MAX_ADDED:
+            break
+        try:
+            plan = design_next(model, res, axis_data(est, "ap"), axis_data(val, "ap"), TEE,
+                               model_path=str(tmp / "m.json"))
+        except NothingSuspectedError as exc:
+            out.next_said = str(exc)
+            break
+        out.added += 1
+        path = plan.write(tmp / f"next-{out.added}.toml")
+        est = est + [_record(cfg, path, 100 + out.added, tmp / f"fit-{out.added}")]
+        val = [_record(cfg, path, 200 + out.added, tmp / f"val-{out.added}")]
+        model = _refit(base, [e.label for e in model.effects_], model, est)
+    out.clean = bool(res.clean)
+    final = validate_offline(model, val, train=est, max_scan_samples=SCAN_SAMPLES, compare=start)
+    out.start_deg, out.end_deg = final.compare.old_heldout_rmse_deg, final.compare.new_heldout_rmse_deg
+    hidden_label = next((e.label for e in model.effects_ if e.label.partition(":")[0] == hidden), None)
+    if hidden_label is not None:
+        rest = [e.label for e in model.effects_ if e.label != hidden_label]
+        err = predict_errors(split_fit(model, rest, axis_data(est, "ap")), axis_data(val, "ap"))
+        out.without_hidden_deg = float(np.sqrt(np.mean(err**2)))
+    return out
+
+
+def _named(hidden: str, loop: LoopResult) -> bool:
+    return hidden in [e.partition(":")[0] for e in loop.named]
+
+
+@pytest.mark.parametrize("hidden", list(HIDDEN))
+def test_the_hidden_effect_is_named_by_a_refitted_suggestion(hidden):
+    loop = run_loop(hidden)
+    assert loop.added <= MAX_ADDED
+    assert _named(hidden, loop), (loop.start, loop.named, loop.added, loop.history_deg, loop.next_said)
+
+
+@pytest.mark.parametrize("hidden", list(HIDDEN))
+def test_the_loop_halves_the_validation_rmse_from_its_start(hidden):
+    loop = run_loop(hidden)
+    assert loop.end_deg <= 0.5 * loop.start_deg, (loop.start, loop.named, loop.start_deg, loop.end_deg)
+
+
+def test_the_bars_of_the_issue():
+    """8 of 8 named, at least 7 of 8 halved, at most two added recordings each."""
+    loops = {h: run_loop(h) for h in HIDDEN}
+    named = [h for h, lp in loops.items() if _named(h, lp)]
+    halved = [h for h, lp in loops.items() if lp.end_deg <= 0.5 * lp.start_deg]
+    assert all(lp.added <= MAX_ADDED for lp in loops.values())
+    assert len(named) == 8 and len(halved) >= 7, (named, halved)
+
+
+def test_the_control_ends_with_nothing_missing():
+    loop = run_loop(None)
+    assert loop.added <= MAX_ADDED
+    assert loop.clean, (loop.named, loop.history_deg)
