@@ -4,7 +4,7 @@ Target: every help screen in at most 0.3 s on this 2-core machine. Each is a fre
 process (what a shell, a typo or a tab completion pays), timed as the best of N runs, beside
 two references measured in the same run: ``python -c pass`` (the interpreter alone) and the
 help screen of a one-command Typer app with endocal's settings (the floor of any Typer
-command line: typer, rich and its Markdown renderer). What ``--help`` may
+command line: typer and its vendored Click; help in Click's plain format, no rich). What ``--help`` may
 import is asserted by ``tests/test_cli_startup.py``; this file only times it.
 
 Run: ``.venv/bin/python bench/bench_startup.py [--runs 7]``
@@ -33,10 +33,10 @@ COMMANDS = (
 )
 TARGET_S = 0.3
 
-#: The reference: the smallest Typer app rendering its help as endocal's does (Markdown).
+#: The reference: the smallest Typer app rendering its help as endocal's does (plain Click format).
 TYPER_FLOOR = """
 import typer
-app = typer.Typer(rich_markup_mode="markdown", add_completion=False)
+app = typer.Typer(rich_markup_mode=None, add_completion=False)
 @app.command()
 def hello(name: str = typer.Option("x", help="A name.")) -> None:
     \"\"\"Say hello.\"\"\"

@@ -1,10 +1,12 @@
-"""What the command line imports to print its help: typer and rich, not the numerical stack.
+"""What the command line imports to print its help: typer alone, not rich nor the numerical stack.
 
 `endocal --help` and `endocal COMMAND --help` must start in at most 0.3 s (issue 26; timed by
 bench/bench_startup.py). numpy, scipy, pandas, pyarrow, numba and matplotlib alone take
 0.5-1 s to import, so a command imports them inside its function, never at module level; and
 typer 0.29 converts a parameter value that is not yet of its type through pydantic (0.1 s),
-which :class:`endocal.cli.Group` spares the help path. This test asserts what is imported,
+which :class:`endocal.cli.Group` spares the help path. Help is Click's plain formatting
+(``rich_markup_mode=None``): Typer's rich help imports rich's console, Markdown and traceback
+renderers (0.1 s, half of the start-up), so rich is loaded only by a command that prints. This test asserts what is imported,
 not how long it takes: every help screen of the app, walked from the root, run in one fresh
 interpreter, then a look at ``sys.modules``.
 """
@@ -20,7 +22,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 #: Top-level packages a help screen must not import (each costs a tenth of a second or more).
-HEAVY = ("numpy", "scipy", "pandas", "pyarrow", "numba", "matplotlib", "pydantic", "importlib.metadata")
+HEAVY = ("numpy", "scipy", "pandas", "pyarrow", "numba", "matplotlib", "pydantic", "importlib.metadata", "rich")
 
 #: Runs in a child: records which endocal line first imported each heavy package, walks the
 #: whole command tree and prints every help screen, then reports as JSON on the last line.

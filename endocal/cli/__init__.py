@@ -38,7 +38,7 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     # help text is Markdown: paragraphs reflow to the terminal (with Rich markup a docstring's
     # line breaks stay and wrap raggedly) and `[angles.AXIS]` prints as written
-    rich_markup_mode="markdown",
+    rich_markup_mode=None,
 )
 
 

@@ -11,8 +11,6 @@ from pathlib import Path
 from typing import Callable, TypeVar
 
 import typer
-from rich.console import Console
-from rich.markup import escape
 
 from endocal.errors import EndocalError, HardwareError
 
@@ -21,13 +19,36 @@ HARDWARE_EXIT_CODE = 3
 
 F = TypeVar("F", bound=Callable)
 
+class _Console:
+    """A :class:`rich.console.Console` made on first use: importing rich's console costs a tenth
+    of ``endocal --help``'s start-up, and help never prints through it."""
+
+    def __init__(self, **options) -> None:
+        self._options = options
+        self._console = None
+
+    @property
+    def console(self):
+        """The rich console itself (for rich objects that take one: ``Progress(console=...)``)."""
+        if self._console is None:
+            from rich.console import Console
+
+            self._console = Console(**self._options)
+        return self._console
+
+    def __getattr__(self, name: str):
+        return getattr(self.console, name)
+
+
 #: Results go to stdout; progress and diagnostics to stderr so ``--json`` output stays clean.
-out = Console(highlight=False, soft_wrap=True)
-err = Console(stderr=True, highlight=False, soft_wrap=True)
+out = _Console(highlight=False, soft_wrap=True)
+err = _Console(stderr=True, highlight=False, soft_wrap=True)
 
 
 def fail(message: str, code: int = 2) -> None:
     """Print ``error: <message>`` on one line to stderr and exit with ``code``."""
+    from rich.markup import escape
+
     err.print(f"[bold red]error:[/] {escape(message)}", markup=True)
     raise typer.Exit(code)
 

@@ -122,7 +122,7 @@ def excite(
         BarColumn(),
         TextColumn("{task.completed:.0f}/{task.total:.0f} s"),
         TimeRemainingColumn(),
-        console=err,
+        console=err.console,
         disable=not show,
         transient=True,
     ) as bar:

@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import Optional
 
 import typer
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from endocal.cli._common import cli_errors, err, out, refuse_input_as_output
 from endocal.cli.messages import EXPLAIN_HELP, capped, keyed_lines
@@ -65,8 +64,10 @@ def report(
         refuse_input_as_output("--out" if kind == "html" else f"--out (its {kind} file)", written,
                                [*paths, *data, planes])
     show = not quiet and not as_json and err.is_terminal
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  console=err, disable=not show, transient=True) as bar:
+                  console=err.console, disable=not show, transient=True) as bar:
         task = bar.add_task("report", total=None)
 
         def progress(step: str, done: int, total: int) -> None:

@@ -10,7 +10,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from rich.table import Table
 
 from endocal.cli._common import apply_out_of_range, emit_json, err, guard_factory, out, warnings_as_lines
 from endocal.errors import ModelError
@@ -121,6 +120,8 @@ def run_trajectory(files: list[Path], compare: list[Path], trajectory: str, *, b
 
 def _render(path, results, comparison) -> None:
     m0 = results[0].metrics
+    from rich.table import Table
+
     table = Table(title=f"tip path '{path.name}' ({m0.length_mm:.1f} mm, {m0.n} points): error |P_r - P_d|")
     for col in ("models", "median mm", "RMSE mm", "max mm", "median % of path"):
         table.add_column(col, justify="left" if col == "models" else "right")

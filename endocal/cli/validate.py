@@ -5,11 +5,9 @@ from __future__ import annotations
 import shlex
 import tempfile
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
 import typer
-from rich.markup import escape
-from rich.table import Table
 
 from endocal.cli._common import (
     OUT_OF_RANGE_HELP,
@@ -26,6 +24,9 @@ from endocal.cli._common import (
 from endocal.cli.messages import EXPLAIN_HELP, capped, key_of, keyed_lines
 from endocal.cli.refit import refit_command, with_refit_commands
 from endocal.errors import ModelError
+
+if TYPE_CHECKING:
+    from rich.table import Table
 
 _UNITS = {"rmse_deg": "deg", "mae_deg": "deg", "max_deg": "deg", "median_deg": "deg", "median_pct": "%"}
 
@@ -48,6 +49,8 @@ def previous_model_path(model_path: Path, effects: list[str]) -> Path | None:
 
 
 def _metrics_table(title: str, metrics) -> Table:
+    from rich.table import Table
+
     from endocal.validation.metrics import METRIC_KEYS
 
     t = Table(title=title, title_justify="left", show_edge=False)
@@ -87,6 +90,8 @@ def _scheme_word(result) -> str:
 def render(result, folded: bool = False) -> None:
     """Print the terminal summary of a :class:`~endocal.validation.offline.ValidationResult` (``folded``: its
     refit commands fold the validation data in, --refit-on all)."""
+    from rich.markup import escape
+
     m = result.model
     scan = result.scan
     out.print(f"[bold]{m['label']}[/] on axis {result.axis}: {sum(d['n_samples'] for d in result.data)} samples "
