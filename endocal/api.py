@@ -76,8 +76,55 @@ def _refuse_existing(path: Path, force: bool) -> None:
         raise OutputExistsError(f"{path} already exists: choose another path or pass force=True")
 
 
+class _Result:
+    """What every result shares: `to_json`, its `to_dict` as strict JSON."""
+
+    def to_dict(self) -> dict:
+        raise NotImplementedError
+
+    def to_json(self) -> str:
+        """`to_dict` as strict JSON (NaN as null), indented: what the command's `--json` prints."""
+        return _json(self.to_dict())
+
+
+class _Saved(_Result):
+    """A result kept as a file (`save`, and `path` once saved or loaded); `_write` writes it."""
+
+    path: Path | None = None
+
+    def _write(self, path: Path) -> None:
+        raise NotImplementedError
+
+    def save(self, path: str | Path, *, force: bool = False) -> Path:
+        """Write the file the command's `--out` writes (versioned JSON, whole or not at all).
+
+        Parameters
+        ----------
+        path : str or Path
+        force : bool
+            Overwrite an existing file (by default it is refused).
+
+        Returns
+        -------
+        Path
+            `path`, now also the object's `path`.
+
+        Raises
+        ------
+        OutputExistsError
+            `path` exists and `force` is False.
+        OutputPathError
+            It cannot be written.
+        """
+        path = Path(path)
+        _refuse_existing(path, force)
+        self._write(path)
+        self.path = path
+        return path
+
+
 # ---------------------------------------------------------------------------- runs
-class Run:
+class Run(_Result):
     """A run folder or aligned table, loaded and checked (what `endocal info` shows).
 
     Made by `load_run` and `run_protocol`; every function that takes data takes a
@@ -129,9 +176,6 @@ class Run:
     def to_dict(self) -> dict:
         """What `endocal info RUN --json` prints."""
         return self.summary.to_dict()
-
-    def to_json(self) -> str:
-        return _json(self.to_dict())
 
     def __repr__(self) -> str:
         s = self.summary
@@ -293,7 +337,7 @@ def run_protocol(protocol: str, out: str | Path, *, backend: str = "sim", probe:
 
 
 # ---------------------------------------------------------------------------- models
-class Model:
+class Model(_Saved):
     """A fitted hysteresis model of one axis, with how it was fitted (`endocal fit hysteresis`).
 
     Made by `fit`, `load_model` and `Suggestion.refit`. It prints as its
@@ -383,36 +427,10 @@ class Model:
             d["provenance"] = self.provenance
         return d
 
-    def to_json(self) -> str:
-        return _json(self.to_dict())
-
-    def save(self, path: str | Path, *, force: bool = False) -> Path:
-        """Write the model file (versioned JSON, as `endocal fit hysteresis --out` writes it).
-
-        Parameters
-        ----------
-        path : str or Path
-        force : bool
-            Overwrite an existing file.
-
-        Returns
-        -------
-        Path
-
-        Raises
-        ------
-        OutputExistsError
-            `path` exists and `force` is False.
-        OutputPathError
-            It cannot be written.
-        """
+    def _write(self, path: Path) -> None:
         from endocal.models import save_model
 
-        path = Path(path)
-        _refuse_existing(path, force)
         save_model(self.estimator, path, provenance=self.provenance or None)
-        self.path = path
-        return path
 
     def __repr__(self) -> str:
         rep = self.fit_report
@@ -538,7 +556,7 @@ def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = ()
 
 
 # ---------------------------------------------------------------------------- validation
-class Suggestion:
+class Suggestion(_Result):
     """An effect the validation suggests adding, tested: its gain on held-out data and its p-value.
 
     Attributes
@@ -577,9 +595,6 @@ class Suggestion:
         command line renders from `refit`)."""
         return self.suspect.to_dict()
 
-    def to_json(self) -> str:
-        return _json(self.to_dict())
-
     @property
     def effects(self) -> list[str]:
         """The refit's effects: the validated model's, then this one."""
@@ -616,7 +631,7 @@ class Suggestion:
 _KINDS = {"time_series": "ts-", "loops": "loops-", "residuals": "resid-", "regimes": "regime-"}
 
 
-class Validation:
+class Validation(_Result):
     """A model held against measurements: how far off, where, what is missing (`endocal validate`).
 
     Made by `validate`. Its `repr` is the verdict: the RMSE with its interval, the
@@ -648,11 +663,17 @@ class Validation:
     notes : list of str
     clean : bool
         Nothing is missing.
+    next : NextOutcome or None
+        With `validate(..., next=PATH)`: the protocol written (`.path`), its design
+        (`.experiment`: what it tests, each effect's half-cycles and what the paired test
+        needs at the gain seen), the `excite` command lines that record it (`.excite`), or
+        why nothing was written (`.reason`) (`endocal.validation.next_experiment.NextOutcome`).
     """
 
-    def __init__(self, result, model: Model, *, records: Sequence, compare_path=None) -> None:
+    def __init__(self, result, model: Model, *, records: Sequence, compare_path=None, next=None) -> None:
         self.result = result
         self.model = model
+        self.next = next
         self._records = list(records)
         self._compare_path = compare_path
         self.suggestions = [Suggestion(s, self) for s in result.suspects]
@@ -673,10 +694,9 @@ class Validation:
         d = self.result.to_dict()
         if self._compare_path is not None and d["compare"] is not None:
             d["compare"]["path"] = str(self._compare_path)
+        if self.next is not None:
+            d["next"] = self.next.to_dict()
         return d
-
-    def to_json(self) -> str:
-        return _json(self.to_dict())
 
     def __repr__(self) -> str:
         r = self.result
@@ -684,7 +704,9 @@ class Validation:
         n = sum(d["n_samples"] for d in r.data)
         what = "in-sample" if r.in_sample else "validation" if scan.scheme == "estimation/validation" else "held-out"
         lo, hi = r.metrics.ci.get("rmse_deg", (float("nan"), float("nan")))
-        lines = [f"Validation of {r.model['label']} on axis {r.axis}: {len(r.data)} record(s), {n} samples",
+        unit = r.model.get("drive_unit") or "deg"  # the command's: a linear drive's in mm; the angles stay deg
+        drive = "" if unit == "deg" else f" (drive commanded in {unit})"
+        lines = [f"Validation of {r.model['label']} on axis {r.axis}{drive}: {len(r.data)} record(s), {n} samples",
                  f"  RMSE {r.metrics.rmse_deg:.3g} deg (95 % CI {lo:.3g} .. {hi:.3g})"
                  + (f"; {what} RMSE {scan.baseline_rmse_heldout_deg:.3g} deg" if scan.scheme != "none" else "")]
         c = r.compare
@@ -710,6 +732,11 @@ class Validation:
             lines.append("  untested suspects: " + ", ".join(p.effect for p in r.pointers) + " (see .untested)")
         if r.notes:
             lines.append(f"  {len(r.notes)} note(s) (see .notes)")
+        nx = None if self.next is None else self.next.experiment
+        if self.next is not None:
+            lines.append(f"  next: {self.next.path} written ({nx.duration_s:.0f} s on probe {nx.probe}), tests "
+                         f"{', '.join(nx.suspects)}; .next.excite records it" if nx is not None else
+                         f"  next: {self.next.reason}")
         return "\n".join(lines)
 
     def _record_figures(self):
@@ -745,7 +772,8 @@ class Validation:
 
 def validate(model: Model | str | Path, data, *, train=None, compare: Model | str | Path | bool | None = None,
              cv: str = "auto", refit_on: str = "estimation", folds: int = 5, seed: int = 0, planes=None,
-             load_columns: Sequence[str] | None = None) -> Validation:
+             load_columns: Sequence[str] | None = None, next: str | Path | None = None,
+             probe: str | Path = "tee") -> Validation:
     """Hold a model against validation records: how far off, where it fails, which effect is missing.
 
     What `endocal validate MODEL DATA...` does offline: error metrics with 95 %
@@ -780,6 +808,13 @@ def validate(model: Model | str | Path, data, *, train=None, compare: Model | st
         Overrides the bending planes the model was fitted through.
     load_columns : sequence of str, optional
         Columns to try `load:COLUMN` on (default: every varying extra column).
+    next : str or Path, optional
+        Write the next experiment there (`--next`): the protocol `excite` runs that tests
+        what this validation could not settle (`Validation.next` says what it tests, each
+        effect's half-cycles needed at the gain seen, and the `excite` command lines);
+        nothing is written when nothing is suspected (`Validation.next.reason` says so).
+    probe : str or Path
+        The probe the protocol is for when the records name none (`--probe`).
 
     Returns
     -------
@@ -791,10 +826,10 @@ def validate(model: Model | str | Path, data, *, train=None, compare: Model | st
         Bad `cv`, `refit_on` or `folds`; a model of an axis the data lacks; estimation
         data the model file names that is missing or changed; a `compare` model of another
         axis; records too short to validate on.
+        With `next`: a fitted range no designed motion fits in (checked before validating).
     RunFormatError
         A missing or malformed record, or a validation run of another probe than the model's.
     """
-    from endocal.runs.probes import check_one_probe
     from endocal.validation.estimation import plan_estimation
     from endocal.validation.offline import validate_offline
 
@@ -804,8 +839,10 @@ def validate(model: Model | str | Path, data, *, train=None, compare: Model | st
         raise ModelError(f"refit_on must be 'estimation' or 'all', got {refit_on!r}")
     m = _model(model)
     tables = _aligned(data, "validation data")
-    check_one_probe(tables, expected=m.provenance.get("probe"), what="validation runs",
-                    expected_is="the model was fitted on runs of")
+    if next is not None:
+        from endocal.validation.next_experiment import check_next
+
+        check_next(m.estimator, tables, probe)  # a fitted range no motion fits in: refused before the validation
     train_paths = [] if train is None else [str(a.source) for a in _aligned(train, "estimation data")]
     plan = plan_estimation(m.estimator, tables, model_path=m.path, train_paths=train_paths, cv=cv,
                            planes_path=_planes_path(planes))
@@ -822,11 +859,17 @@ def validate(model: Model | str | Path, data, *, train=None, compare: Model | st
                               compare=None if old is None else old.estimator,
                               model_path=None if m.path is None else str(m.path), data_paths=data_paths,
                               load_columns=load_columns, refit_suffix=suffix)
-    return Validation(result, m, records=tables, compare_path=None if old is None else old.path)
+    outcome = None
+    if next is not None:
+        from endocal.validation.next_experiment import write_next
+
+        outcome = write_next(m.estimator, result, tables, plan.train, plan.planes, next, probe=probe,
+                             model_path=m.path)
+    return Validation(result, m, records=tables, compare_path=None if old is None else old.path, next=outcome)
 
 
 # ---------------------------------------------------------------------------- reports
-class Report:
+class Report(_Result):
     """Models compared on records: metrics, paired tests, the model ladder, figures (`endocal report`).
 
     Made by `make_report`. Its `repr` is the report's summary.
@@ -932,6 +975,7 @@ def make_report(models, data, *, planes=None, out: str | Path | None = None, for
     Returns
     -------
     Report
+        `plot(figure)` draws one of its figures, `write(out)` the page with its side files.
 
     Raises
     ------
@@ -956,7 +1000,7 @@ def make_report(models, data, *, planes=None, out: str | Path | None = None, for
 
 
 # ---------------------------------------------------------------------------- planes and force
-class Planes:
+class Planes(_Saved):
     """A bending-plane calibration: the four half-planes' deviations, the twist delta and the
     orthogonal compensator (`endocal fit planes`; duodenoscope eqs. 1-4).
 
@@ -970,7 +1014,8 @@ class Planes:
     delta_deg : float
         The thesis's twist between the planes (deg).
     path : Path or None
-        The file it was loaded from or saved to.
+        The file it was loaded from or saved to (`save`: `planes.json`, what `fit hysteresis
+        --planes`, `excite --planes` and `report --planes` read).
     runs : list of Path
         The sweeps it was fitted on (where `plot` looks for the measured points).
     """
@@ -988,24 +1033,10 @@ class Planes:
         """The planes file's content: what `endocal fit planes --json` prints."""
         return self.calibration.to_json()
 
-    def to_json(self) -> str:
-        return _json(self.to_dict())
-
-    def save(self, path: str | Path, *, force: bool = False) -> Path:
-        """Write `planes.json` (what `fit hysteresis --planes`, `excite --planes` and `report --planes` read).
-
-        Raises
-        ------
-        OutputExistsError
-            `path` exists and `force` is False.
-        """
+    def _write(self, path: Path) -> None:
         from endocal.planes import save_planes
 
-        path = Path(path)
-        _refuse_existing(path, force)
-        save_planes(self.calibration, path, force=force)
-        self.path = path
-        return path
+        save_planes(self.calibration, path, force=True)  # refused before, unless force
 
     def __repr__(self) -> str:
         return "Planes: " + str(self.calibration)
@@ -1064,7 +1095,7 @@ def load_planes(path: str | Path) -> Planes:
     return Planes(_load(path), path=path, runs=[Path(path).parent])
 
 
-class ForceModel:
+class ForceModel(_Saved):
     """A contact-force model of one knob (`endocal fit force`; duodenoscope paper, eqs. 12-15).
 
     The report draws no figure of it, so it has no `plot`.
@@ -1075,6 +1106,7 @@ class ForceModel:
         The library's object (`predict`, the guard's evaluator).
     provenance : dict
     path : Path or None
+        The file it was saved to (`save`: `force.json`, what `--force-model` reads).
     """
 
     def __init__(self, model, *, provenance: dict | None = None, path: str | Path | None = None) -> None:
@@ -1088,22 +1120,10 @@ class ForceModel:
 
         return force_model_to_dict(self.model, self.provenance or None)
 
-    def to_json(self) -> str:
-        return _json(self.to_dict())
-
-    def save(self, path: str | Path, *, force: bool = False) -> Path:
-        """Write `force.json` (what `--force-model` reads).
-
-        Raises
-        ------
-        OutputExistsError
-            `path` exists and `force` is False.
-        """
+    def _write(self, path: Path) -> None:
         from endocal.force import save_force_model
 
-        path = save_force_model(self.model, path, provenance=self.provenance or None, force=force)
-        self.path = Path(path)
-        return self.path
+        save_force_model(self.model, path, provenance=self.provenance or None, force=True)  # refused before
 
     def __repr__(self) -> str:
         m = self.model

@@ -47,6 +47,25 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
         raise
 
 
+def read_text_document(path: str | Path, what: str, error: type[Exception]) -> str:
+    """The UTF-8 text of the file ``path`` (``what`` names it in messages: "model file", "hardware config").
+
+    Raises
+    ------
+    error
+        The file is missing, unreadable, or not UTF-8 text.
+    """
+    p = Path(path)
+    try:
+        return p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise error(f"{what} {p} does not exist") from None
+    except OSError as exc:
+        raise error(f"cannot read {what} {p}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise error(f"{p}: not a text file (byte {exc.start} is no UTF-8); is it an endocal {what}?") from None
+
+
 def read_json_document(path: str | Path, what: str, error: type[Exception]):
     """The parsed content of the JSON file ``path`` (``what`` names it in messages: "model file").
 
@@ -56,14 +75,7 @@ def read_json_document(path: str | Path, what: str, error: type[Exception]):
         The file is missing, unreadable, not UTF-8 text, or not JSON.
     """
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise error(f"{what} {p} does not exist") from None
-    except OSError as exc:
-        raise error(f"cannot read {what} {p}: {exc.strerror or exc}") from None
-    except UnicodeDecodeError as exc:
-        raise error(f"{p}: not a text file (byte {exc.start} is no UTF-8); is it an endocal {what}?") from None
+    text = read_text_document(p, what, error)
     try:
         return json.loads(text)
     except json.JSONDecodeError as exc:

@@ -249,6 +249,13 @@ def test_a_run_of_another_probe_is_refused_in_one_line(tmp_path):
     res = cli("fit", "hysteresis", str(tee), str(duo.path), "--axis", "ap", "--out", str(tmp_path / "m.json"))
     assert res.returncode == 2 and "a run of probe 'duodenoscope'" in res.stderr
     assert not (tmp_path / "m.json").exists()
+    # validate refuses the other probe's run as the API does (one check serves both), before any work
+    from tests._cli import one_line_exit_2
+
+    model.save(tmp_path / "tee.json")
+    one_line_exit_2(cli("validate", str(tmp_path / "tee.json"), str(duo.path), "--json-out", str(tmp_path / "v.json")),
+                    str(e.value))
+    assert not (tmp_path / "v.json").exists()
 
 
 def test_bad_arguments_are_refused_before_any_work(loop):

@@ -270,3 +270,49 @@ def test_an_aligned_table_names_its_drive_unit_in_its_command_column(tmp_path):
         b.cmd_deg("ap")
     t.assign(ap_cmd_deg=1.0).to_csv(tmp_path / "both.csv", index=False)
     one_line_exit_2(endocal("info", tmp_path / "both.csv"), "axis 'ap' has a command in deg and one in mm")
+
+
+def _imported(bench, tmp_path) -> dict:
+    """The two logs imported as the user does it (draft, review, import): name -> aligned table."""
+    assert endocal("import", "csv", bench / "sweep.csv", "--draft-map", tmp_path / "draft.toml").returncode == 0
+    (tmp_path / "map.toml").write_text(review((tmp_path / "draft.toml").read_text())[0])
+    out = {}
+    for name in ("sweep", "chirp"):
+        proc = endocal("import", "csv", bench / f"{name}.csv", "--map", tmp_path / "map.toml", "--out",
+                       tmp_path / f"{name}.parquet")
+        assert proc.returncode == 0, proc.stderr
+        out[name] = tmp_path / f"{name}.parquet"
+    return out
+
+
+def test_the_api_prints_a_linear_drives_commands_in_mm(bench, tmp_path):
+    """The Validation repr of a model of a linear drive names the drive's unit, and every command
+    quantity it prints (the regimes' bounds and speeds) is in mm; the angle errors stay in deg."""
+    import endocal as ec
+
+    runs = _imported(bench, tmp_path)
+    model = ec.fit(runs["sweep"], axis="ap", model="linear", effects=["deadzone"])
+    model.save(tmp_path / "m.json")
+    v = ec.validate(model, runs["chirp"])
+    text = repr(v)
+    assert text.splitlines()[0].startswith("Validation of linear+deadzone on axis ap (drive commanded in mm):"), text
+    worst = next(ln for ln in text.splitlines() if "worst regime" in ln)
+    assert re.search(r" mm(/s)?\)?: RMSE [\d.]+ deg", worst) and "deg/s" not in worst and " deg)" not in worst, worst
+    assert "RMSE" in text and re.search(r"RMSE [\d.]+ deg \(95 % CI", text)  # the angle's error: deg
+
+
+def test_fit_planes_on_a_linear_drive_says_planes_need_knobs(tmp_path):
+    """A planes run whose drive is linear: one line naming the linear drive's column, not a missing ap_cmd_deg."""
+    import pyarrow.parquet as pq
+
+    run = tmp_path / "planes"
+    assert endocal("excite", "planes", "--out", run, "--set", "sample_rate_hz=20", "--set", "repetitions=1",
+                   "-q").returncode == 0
+    table = pq.read_table(run / "aligned.parquet")
+    pq.write_table(table.rename_columns(["ap_cmd_mm" if c == "ap_cmd_deg" else c for c in table.column_names]),
+                   run / "aligned.parquet")
+    meta = json.loads((run / "run.json").read_text())
+    (run / "run.json").write_text(json.dumps({**meta, "drive_units": {"ap": "mm"}}))
+    one_line_exit_2(endocal("fit", "planes", run, "--out", tmp_path / "p.json"),
+                    "the ap drive is linear (column ap_cmd_mm, in mm)", "bending planes need knob drives commanded in deg")
+    assert not (tmp_path / "p.json").exists()

@@ -52,7 +52,7 @@ def loop(tmp_path_factory):
     fit = endocal("fit", "hysteresis", tmp / "est1", tmp / "est2", "--axis", "ap", "--model", "bspline", "--effects",
                   "delay", "--out", tmp / "m.json")
     assert fit.returncode == 0, fit.stderr
-    proc = endocal("validate", tmp / "m.json", tmp / "val", "--next", tmp / "next.toml")
+    proc = endocal("validate", tmp / "m.json", tmp / "val", "--next", tmp / "next.toml", "--json-out", tmp / "v.json")
     assert proc.returncode == 0, proc.stderr
     return tmp, proc
 
@@ -191,12 +191,102 @@ def test_a_fitted_range_too_narrow_is_refused_naming_it():
         motion_range(model, PRESETS["duodenoscope"])
 
 
-def test_nothing_suspected_writes_nothing(loop, tmp_path, monkeypatch):
-    """When validate leaves nothing to settle, --next says so in one line, writes nothing, exits 2."""
+
+# ---------------------------------------------------------------------------- what --json and the API carry
+#: The keys `validate --json` had before --next added its own (issue 27: add, never rename)
+JSON_KEYS = {"axis", "model", "data", "metrics", "heldout_rmse_deg", "regimes", "residuals", "suspects", "scan",
+             "scheme", "estimation", "pointers", "shift", "clean", "unexplained", "beyond_samples", "notes", "compare"}
+
+
+def test_the_json_says_what_was_designed_and_how_to_record_it(loop):
+    tmp, proc = loop
+    d = json.loads((tmp / "v.json").read_text())
+    assert set(d) == JSON_KEYS | {"next"}
+    nx = d["next"]
+    proto = read_protocol_file(tmp / "next.toml")
+    assert nx["path"] == str(tmp / "next.toml") and nx["written"] and nx["nothing_suspected"] is None
+    assert nx["suspects"] == proto.design["suspects"] and nx["probe"] == "tee"
+    assert nx["duration_s"] == pytest.approx(proto.duration_s)
+    # each effect: the half-cycles it gets, and what the paired test needs at the gain validate saw
+    tested = {t["effect"]: t for t in d["scan"]["tested"]}
+    for t in nx["tests"]:
+        assert {"effect", "status", "half_cycles", "gain_pct", "needed_half_cycles", "needed"} <= set(t)
+        seen = tested.get(t["effect"])
+        if seen is None:  # coupling, load: these records cannot test them, so no gain was seen
+            assert t["gain_pct"] is None and t["needed_half_cycles"] is None and t["needed"].startswith("no gain seen")
+            continue
+        assert t["gain_pct"] == pytest.approx(seen["gain_pct"])
+        units = seen["power"]["units_needed"]
+        if seen["gain_pct"] >= d["scan"]["cv"]["min_gain_pct"] and units is not None:
+            assert t["needed_half_cycles"] == units and t["needed"] == (
+                f"about {units} half-cycles would make it significant at this gain (80 % power)")
+        else:  # under the bar, or not lowering the error on average
+            assert t["needed_half_cycles"] is None and t["needed"].startswith("no length will"), t
+    assert {t["effect"] for t in nx["tests"] if t["gain_pct"] is None} >= {"coupling", "load:sheath_wrap_deg"}
+    # the excite command lines, as printed
+    assert nx["excite"][0] == ["endocal", "excite", str(tmp / "next.toml"), "--out", "next-fit", "--set",
+                               "sheath_wrap_deg=VALUE"]
+    for line in nx["excite_commands"]:
+        assert f"  {line}\n" in proc.stdout
+    assert nx["excite_commands"][1].endswith("--out next-val --seed 1 --set sheath_wrap_deg=VALUE")
+
+
+def test_the_api_designs_the_same_experiment(loop, tmp_path):
+    import endocal as ec
+
+    tmp, _ = loop
+    v = ec.validate(tmp / "m.json", tmp / "val", next=tmp_path / "next.toml")
+    cli = json.loads((tmp / "v.json").read_text())["next"]
+    ours = v.to_dict()["next"]
+    assert v.next.written and v.next.path == tmp_path / "next.toml" and ours["path"] == str(tmp_path / "next.toml")
+    proto = {k: v for k, v in read_protocol_file(tmp_path / "next.toml").to_dict().items() if k != "source"}
+    assert proto == {k: v for k, v in read_protocol_file(tmp / "next.toml").to_dict().items() if k != "source"}
+    def strip(d):
+        return {k: v for k, v in d.items() if k not in ("path", "excite", "excite_commands")}
+
+    assert strip(ours) == strip(cli)
+    assert [list(a[3:]) for a in v.next.excite] == [a[3:] for a in cli["excite"]]  # the same runs, another file
+    assert f"next: {tmp_path / 'next.toml'} written (" in repr(v) and "; .next.excite records it" in repr(v)
+    assert v.next.experiment.tests[0].needed  # the object, not only its dict
+
+
+def test_nothing_suspected_writes_nothing_and_says_so_in_the_json(loop, tmp_path, monkeypatch):
+    """When validate leaves nothing to settle, --next says so in one line, writes nothing, exits 2; the
+    validation is printed, and its JSON object says why no file was written."""
     import endocal.validation.next_experiment as nx
 
     tmp, _ = loop
     monkeypatch.setattr(nx, "_targets", lambda *a, **k: {})
-    proc = endocal("validate", tmp / "m.json", tmp / "val", "--next", tmp_path / "next.toml")
+    proc = endocal("validate", tmp / "m.json", tmp / "val", "--next", tmp_path / "next.toml", "--json-out",
+                   tmp_path / "v.json")
     one_line_exit_2(proc, "nothing is suspected", "no protocol written")
     assert not (tmp_path / "next.toml").exists() and "validation RMSE" in proc.stdout  # the validation was printed
+    d = json.loads((tmp_path / "v.json").read_text())
+    assert set(d) == JSON_KEYS | {"next"}
+    assert d["next"]["written"] is False and d["next"]["path"] is None and d["next"]["tests"] == []
+    assert d["next"]["nothing_suspected"].startswith("nothing is suspected")
+    assert d["next"]["excite_commands"] == []
+
+def test_the_summary_points_at_next_when_only_untested_effects_remain(loop, monkeypatch):
+    """No suggestion, but effects these records cannot test (coupling, load): the summary's next command
+    is this validation with --next, within the summary's 15 lines."""
+    import dataclasses
+
+    from endocal.cli.validate import SUMMARY_MAX_LINES
+    from endocal.validation import offline
+
+    tmp, _ = loop
+    real = offline.validate_offline
+
+    def no_suggestion(*args, **kwargs):  # the scan as it is, its suggestions withheld
+        r = real(*args, **kwargs)
+        return dataclasses.replace(r, scan=dataclasses.replace(r.scan, suspects=()))
+
+    monkeypatch.setattr(offline, "validate_offline", no_suggestion)
+    proc = endocal("validate", tmp / "m.json", tmp / "val")
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert len(lines) <= SUMMARY_MAX_LINES, proc.stdout
+    nexts = [ln for ln in lines if ln.startswith("next:")]
+    assert len(nexts) == 1 and "coupling" in nexts[0] and "load" in nexts[0], proc.stdout
+    assert nexts[0].endswith(f"endocal validate {tmp / 'm.json'} {tmp / 'val'} --next next.toml"), nexts[0]

@@ -51,6 +51,7 @@ from endocal.backends.base import StreamChunk, motor_columns
 from endocal.backends.dynamixel import DynamixelConfig, KnobServos, sdk_version
 from endocal.backends.limits import check_goals, probe_accel_limits
 from endocal.errors import ConfigError, HardwareError, LimitError, ProtocolError, StopSignal
+from endocal.files import read_text_document
 from endocal.probe import ROTATION, TRANSLATION, ProbeConfig
 
 TOP_KEYS = {"name", "dynamixel", "tracker", "stage", "safety"}
@@ -249,14 +250,7 @@ class HardwareConfig:
             Missing file, invalid TOML, unknown or malformed key (named with the file).
         """
         path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise ConfigError(f"hardware config {path} does not exist") from None
-        except OSError as exc:
-            raise ConfigError(f"hardware config {path} cannot be read: {exc.strerror or exc}") from None
-        except UnicodeDecodeError as exc:
-            raise ConfigError(f"hardware config {path} is not a text file (byte {exc.start} is no UTF-8)") from None
+        text = read_text_document(path, "hardware config", ConfigError)
         try:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:

@@ -193,13 +193,17 @@ SUMMARY_MAX_LINES = 15
 
 
 def render_summary(result, *, folded: bool = False, model_path: Path, data: list[Path],
-                   old_path: Path | None = None) -> None:
+                   old_path: Path | None = None, next_command: str | None = None) -> None:
     """Print the summary of a :class:`~endocal.validation.offline.ValidationResult`: at most
     :data:`SUMMARY_MAX_LINES` lines.
 
     How far off (the RMSE with its interval), where (the worst regime), what is missing (the first
     suggestion with its gain and p, or nothing), the untested suspects by name, one keyed line per
     warning and note, and the next command. :func:`render` (``--explain``) prints everything.
+
+    ``next_command`` (this validation with ``--next``): when nothing is suggested but suspects
+    are untested or effects untestable on these records, the next command is that one, which
+    writes the experiment that tests them.
     """
     m, scan, c = result.model, result.scan, result.compare
     n = sum(d["n_samples"] for d in result.data)
@@ -220,7 +224,7 @@ def render_summary(result, *, folded: bool = False, model_path: Path, data: list
         r = worst[0]
         head.append(f"worst regime: {r.group}: {r.name}: RMSE {r.metrics.rmse_deg:.3g} deg ({r.ratio:.2f}x "
                     f"overall), {100 * r.fraction:.0f} % of samples")
-    verdict, then = _verdict(result, folded, model_path, data, old_path)
+    verdict, then = _verdict(result, folded, model_path, data, old_path, next_command)
     head.append(verdict)
     if result.pointers:
         head.append("untested suspects: " + ", ".join(dict.fromkeys(p.effect for p in result.pointers)))
@@ -239,9 +243,13 @@ def render_summary(result, *, folded: bool = False, model_path: Path, data: list
         out.print(line, markup=False)
 
 
-def _verdict(result, folded: bool, model_path: Path, data: list[Path], old_path: Path | None) -> tuple[str, list[str]]:
+def _verdict(result, folded: bool, model_path: Path, data: list[Path], old_path: Path | None,
+             next_command: str | None = None) -> tuple[str, list[str]]:
     """What is missing, in one line, and the next command (lines)."""
     scan, what = result.scan, _scheme_word(result)
+    untested = list(dict.fromkeys([*(p.effect for p in result.pointers), *scan.untestable]))
+    design = ([f"next: write the experiment that tests {', '.join(untested)}: {next_command}"]
+              if next_command and untested else [])
     n = sum(d["n_samples"] for d in result.data)
     report = ("next: compare the models on these records, with figures: endocal report "
               + shlex.join([*(str(p) for p in (old_path, model_path) if p is not None),
@@ -264,18 +272,19 @@ def _verdict(result, folded: bool, model_path: Path, data: list[Path], old_path:
     if result.pointers:
         p = result.pointers[0]
         return ("missing: nothing the scan confirmed, but the data point at effects it could not settle",
-                [f"next: to test {p.effect}: {p.experiment}"])
+                design or [f"next: to test {p.effect}: {p.experiment}"])
+    then = design or [report]
     if result.unexplained:
         return (f"nothing missing from the catalog (no effect lowers the {what} RMSE by {scan.min_gain_pct:g} % or "
-                f"more), but {result.unexplained}", [report])
+                f"more), but {result.unexplained}", then)
     if scan.tested and scan.tested[0].gain_pct >= scan.min_gain_pct:
         best = scan.tested[0]
         return (f"nothing significant missing: the best candidate, {best.effect}, lowers the {what} RMSE by "
-                f"{best.gain_pct:.0f} % but not consistently (p = {best.p_value:.2g})", [report])
+                f"{best.gain_pct:.0f} % but not consistently (p = {best.p_value:.2g})", then)
     still = (f"; but {scan.still_blocks} of its {scan.folds} held-out blocks hold no motion of this axis"
              if scan.still_blocks else "")
     return (f"nothing missing: no catalog effect lowers the {what} RMSE by {scan.min_gain_pct:g} % or more{still}",
-            [report])
+            then)
 
 
 @cli_errors
@@ -304,7 +313,7 @@ def validate(
     force_model: Optional[Path] = typer.Option(None, "--force-model", help="With --protocol: force.json (endocal fit force); guard both playbacks every tick."),
     max_force_n: Optional[float] = typer.Option(None, "--max-force-n", help="With --force-model: stop bending into the load at this predicted tip force (N)."),
     explain: bool = typer.Option(False, "--explain", "-v", help=EXPLAIN_HELP + " Offline: the metrics table, the worst regimes, the residual tests, every candidate with its physics, the untested suspects with why and how to test them."),
-    next_path: Optional[Path] = typer.Option(None, "--next", help="Offline: write the protocol that would settle what this validation could not (suspects it could not confirm, effects the data cannot test) to this .toml, sized from the effects seen, for the probe the records were made on (else --probe); prints the excite commands that record it."),
+    next_path: Optional[Path] = typer.Option(None, "--next", help="Offline: write the protocol that would settle what this validation could not (suspects it could not confirm, effects the data cannot test) to this .toml, sized from the effects seen, for the probe the records were made on (else --probe); prints the excite commands that record it (with --json or --json-out: the object's `next`: the file, the suspects, each one's half-cycles needed at the gain seen, the excite commands)."),
 ) -> None:
     """Compare a model with measurements: how far off, where it fails, which physical effect is missing.
 
@@ -367,7 +376,7 @@ def validate(
 
     tables = [load_aligned(p) for p in data]
     if next_path is not None:
-        from endocal.cli.next_protocol import check_next
+        from endocal.validation.next_experiment import check_next
 
         check_next(model, tables, probe)  # a fitted range no motion fits in is refused before the validation
     plan = plan_estimation(model, tables, model_path=model_path, train_paths=train, cv=cv, planes_path=planes)
@@ -389,17 +398,39 @@ def validate(
     d = with_refit_commands(result.to_dict(), result.scan)
     if old_path is not None and d["compare"] is not None:
         d["compare"]["path"] = str(old_path)
+    outcome = None
+    if next_path is not None:
+        from endocal.cli.next_protocol import next_json
+        from endocal.validation.next_experiment import write_next
+
+        outcome = write_next(model, result, tables, plan.train, plan.planes, next_path, probe=probe,
+                             model_path=model_path)
+        d["next"] = next_json(outcome)
     if not emit_json(d, as_json, json_out):
         if explain:
             render(result, folded=bool(suffix))
             if old_path is not None and compare_path is None:
                 err.print(f"compared with {old_path} (the model this one was refitted from)")
         else:
-            render_summary(result, folded=bool(suffix), model_path=model_path, data=list(data), old_path=old_path)
-    if next_path is not None:
-        from endocal.cli.next_protocol import write_next
+            again = None if next_path is not None else _next_command(model_path, data, train, cv, planes, probe)
+            render_summary(result, folded=bool(suffix), model_path=model_path, data=list(data), old_path=old_path,
+                           next_command=again)
+    if outcome is not None:
+        from endocal.cli.next_protocol import render_next
+        from endocal.validation.next_experiment import NothingSuspectedError
 
-        write_next(next_path, model, result, tables, plan.train, plan.planes, model_path, probe, as_json)
+        render_next(outcome, as_json)
+        if not outcome.written:  # said in the JSON too; on the command line one line, exit code 2
+            raise NothingSuspectedError(outcome.reason)
+
+
+def _next_command(model_path: Path, data: list[Path], train: list[Path], cv: str, planes: Path | None,
+                  probe: str) -> str:
+    """This validation again with ``--next next.toml`` (the summary's pointer at the next experiment)."""
+    return shlex.join(["endocal", "validate", str(model_path), *(str(p) for p in data),
+                       *(a for p in train for a in ("--train", str(p))), *(["--cv", cv] if cv != "auto" else []),
+                       *(["--planes", str(planes)] if planes is not None else []),
+                       *(["--probe", probe] if probe != "tee" else []), "--next", "next.toml"])
 
 
 def _rmse_ci(metrics) -> str:

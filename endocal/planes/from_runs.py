@@ -21,8 +21,8 @@ def segment_runs(runs: list[Path], *, compensated: bool = False) -> tuple[Segmen
     ------
     RunFormatError
         A path that does not exist, a path that is not a run folder (a bare aligned table has
-        no tracker poses, and the plane fit needs the tip direction), or runs recorded on
-        different probes.
+        no tracker poses, and the plane fit needs the tip direction), a run whose drive is
+        linear (mm: the fit needs knob angles), or runs recorded on different probes.
     """
     total: Segmentation | None = None
     probe: ProbeConfig | None = None
@@ -34,6 +34,12 @@ def segment_runs(runs: list[Path], *, compensated: bool = False) -> tuple[Segmen
                 "not an aligned table; record one with `endocal excite planes --out RUN`"
             )
         data = load_aligned(run)
+        linear = [a for a in data.axes if data.drive_unit(a) != "deg"]
+        if linear:  # the plane fit reads the knobs' angles; a stage's travel turns no knob
+            a = linear[0]
+            raise RunFormatError(f"{run}: the {a} drive is linear (column {data.cmd_column(a)}, in "
+                                 f"{data.drive_unit(a)}): bending planes need knob drives commanded in deg; record "
+                                 "the planes protocol on a probe whose knobs turn")
         run_probe = ProbeConfig.from_dict(data.meta["probe"], where=str(run / RUN_JSON))
         if probe is not None and run_probe.bending_axes != probe.bending_axes:
             raise RunFormatError(f"{run}: recorded on probe '{run_probe.name}', the others on '{probe.name}'")

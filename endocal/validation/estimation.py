@@ -28,6 +28,7 @@ from pathlib import Path
 from endocal.errors import ModelError
 from endocal.runs.aligned import AlignedData, load_aligned
 from endocal.runs.format import sha256_of
+from endocal.runs.probes import check_one_probe
 
 CV_CHOICES = ("auto", "rolling", "split")
 
@@ -144,9 +145,14 @@ def plan_estimation(model, val: Sequence[AlignedData], *, model_path: str | Path
         Unknown ``cv``; ``--train`` with ``--cv rolling``; recorded training data that is
         missing or changed; ``--cv split`` without estimation data; recorded planes missing
         or changed.
+    RunFormatError
+        A validation run recorded on another probe than the one the model's provenance names
+        (:func:`~endocal.runs.probes.check_one_probe`): a model describes one probe's tendons.
     """
     if cv not in CV_CHOICES:
         raise ModelError(f"--cv must be one of {', '.join(CV_CHOICES)}, got {cv!r}")
+    check_one_probe(val, expected=(getattr(model, "provenance_", None) or {}).get("probe"), what="validation runs",
+                    expected_is="the model was fitted on runs of")
     mpath = Path(model_path) if model_path is not None else None
     planes, ppath = recorded_planes(model, mpath, planes_path)
     val_hashes = {a.sha256 for a in val}

@@ -55,10 +55,10 @@ from endocal.errors import LimitError, ModelError, ProtocolError
 from endocal.models import EFFECTS, HysteresisData
 from endocal.models.base import HysteresisModel
 from endocal.models.data import OTHER_CMD
-from endocal.probe import ProbeConfig
+from endocal.probe import ProbeConfig, load_probe
 from endocal.protocols import Protocol, SIGNALS
 from endocal.validation.data import is_constant, load_candidates
-from endocal.validation.power import POWER, units_for_power
+from endocal.validation.power import POWER, evidence_phrase, units_for_power
 from endocal.validation.regimes import turning_points
 from endocal.validation.identifiability import creep_reason
 from endocal.validation.predict import predict_errors
@@ -110,6 +110,15 @@ class PlannedTest:
         Half-cycles of this axis the test gets.
     sized : str
         How that length was chosen, in words with the numbers.
+    gain_pct : float or None
+        The validation RMSE gain ``validate`` saw for it (None: the records could not test it).
+    needed_half_cycles : int or None
+        Half-cycles with which the paired test reaches significance at that gain
+        (:class:`~endocal.validation.power.PowerEstimate`); None when no gain was seen or no
+        length will (``needed`` says which).
+    needed : str
+        The same in words: ``about 40 half-cycles would make it significant at this gain``,
+        ``no length will: ...``, or that no gain was seen.
     """
 
     effect: str
@@ -118,10 +127,14 @@ class PlannedTest:
     segment: int | None
     half_cycles: int
     sized: str
+    gain_pct: float | None = None
+    needed_half_cycles: int | None = None
+    needed: str = ""
 
     def to_dict(self) -> dict:
         return {"effect": self.effect, "status": self.status, "why": self.why, "segment": self.segment,
-                "half_cycles": self.half_cycles, "sized": self.sized}
+                "half_cycles": self.half_cycles, "sized": self.sized, "gain_pct": self.gain_pct,
+                "needed_half_cycles": self.needed_half_cycles, "needed": self.needed}
 
 
 @dataclass(frozen=True)
@@ -335,6 +348,24 @@ def _ladder_hz(plan: _Plan, f_lo: float, f_hi: float) -> list[float]:
     while len(up) < 3:  # several frequencies, however close the ends
         up = list(np.geomspace(f_lo, max(f_hi, 2.0 * f_lo), 3))
     return [round(f, 6) for f in up + up[-2::-1]]
+
+
+def _at_gain_seen(tested, scan) -> dict:
+    """``gain_pct``, ``needed_half_cycles`` and ``needed`` of a :class:`PlannedTest`: what the paired
+    test of the scan would need at the gain it saw for the effect (``tested``, a
+    :class:`~endocal.validation.suspects.Suspect`, None when it was not tested)."""
+    if tested is None:
+        return {"gain_pct": None, "needed_half_cycles": None,
+                "needed": "no gain seen: these records could not test it (its length is sized from the spread of "
+                          "the model's half-cycle errors)"}
+    gain = float(tested.gain_pct)
+    est = tested.power
+    if est is None:  # rolling origin: no per-half-cycle test to size
+        return {"gain_pct": gain, "needed_half_cycles": None,
+                "needed": "no estimate: the scan cross-validated on the validation data alone (rolling origin)"}
+    words = evidence_phrase(est, "half-cycle", gain, scan.min_gain_pct)
+    n = est.units_needed if words.startswith("about") else None
+    return {"gain_pct": gain, "needed_half_cycles": n, "needed": words}
 
 
 def _unit_errors(model: HysteresisModel, val: HysteresisData) -> tuple[np.ndarray, np.ndarray]:
@@ -600,6 +631,7 @@ def design_next(model: HysteresisModel, result, train: HysteresisData, val: Hyst
     if not plan.segments:
         raise NothingSuspectedError(
             "nothing the next experiment can test: " + "; ".join(notes) + "; no protocol written")
+    plan.tests = [dataclasses.replace(t, **_at_gain_seen(seen.get(t.effect), scan)) for t in plan.tests]
     return _finish(plan, name, conditions, model, model_path, probe, notes, alpha, power)
 
 
@@ -684,3 +716,117 @@ def _finish(plan: _Plan, name, conditions, model, model_path, probe, notes, alph
     proto = dataclasses.replace(proto, design={**design, "tests": [{k: v for k, v in t.to_dict().items()
                                                                     if v is not None} for t in tests]})
     return NextExperiment(proto, tests, plan.axis, plan.other, (plan.lo, plan.hi), probe.name, tuple(notes))
+
+
+# ---------------------------------------------------------------------------- validate --next
+def records_probe(tables: Sequence, fallback: str | Path | None = "tee") -> ProbeConfig:
+    """The probe the validation records were made on (their ``run.json``), else ``fallback``
+    (a preset name or a probe ``.toml``: ``--probe``)."""
+    for a in tables:
+        if isinstance(getattr(a, "meta", None), dict) and isinstance(a.meta.get("probe"), dict):
+            return ProbeConfig.from_dict(a.meta["probe"], where=f"{a.source} (run.json)")
+    return load_probe(fallback)
+
+
+def check_next(model: HysteresisModel, tables: Sequence, probe: str | Path | None = "tee") -> None:
+    """Refuse ``--next`` before the validation runs when no motion can stay inside the model's fitted
+    range on the records' probe (:func:`motion_range`; raises its ModelError)."""
+    motion_range(model, records_probe(tables, probe))
+
+
+@dataclass(frozen=True)
+class NextOutcome:
+    """What ``validate --next PATH`` did: the experiment it wrote, or why it wrote none.
+
+    Attributes
+    ----------
+    path : Path or None
+        The protocol file written (None: nothing is suspected, nothing written).
+    experiment : NextExperiment or None
+        The design: what it tests, each test's half-cycles and what the paired test needs at
+        the gain seen (:class:`PlannedTest`).
+    reason : str
+        Why nothing was written (empty when ``path`` is set).
+    excite : tuple of tuple of str
+        The two ``endocal excite`` command lines (argument lists) that record it: once to add
+        to the estimation data, once (another seed) to validate on; a condition only the
+        user can set is ``--set NAME=VALUE``.
+    """
+
+    path: Path | None
+    experiment: NextExperiment | None
+    reason: str = ""
+    excite: tuple[tuple[str, ...], ...] = ()
+
+    @property
+    def written(self) -> bool:
+        return self.path is not None
+
+    def to_dict(self) -> dict:
+        """``next`` of ``endocal validate --json --next``: the file, what it is for, each effect's
+        half-cycles (planned, and needed at the gain seen), the excite command lines; or
+        ``nothing_suspected`` with no file."""
+        if self.experiment is None:
+            return {"path": None, "written": False, "nothing_suspected": self.reason, "suspects": [], "tests": [],
+                    "excite": []}
+        nx = self.experiment
+        return {"path": str(self.path), "written": True, "nothing_suspected": None, "suspects": list(nx.suspects),
+                "tests": [t.to_dict() for t in nx.tests], "probe": nx.probe, "duration_s": nx.duration_s,
+                "axis": nx.axis, "range_deg": list(nx.range_deg), "conditions": nx.conditions, "notes": list(nx.notes),
+                "excite": [list(a) for a in self.excite]}
+
+
+def excite_args(path: str | Path, nx: NextExperiment) -> tuple[tuple[str, ...], ...]:
+    """The ``endocal excite`` argument lists that record ``nx`` written at ``path``: ``STEM-fit``
+    (estimation) and ``STEM-val`` (validation, seed 1)."""
+    path = Path(path)
+    args = ["endocal", "excite", str(path)] + (["--probe", nx.probe] if nx.probe != "tee" else [])
+    sets = [a for k in nx.conditions for a in ("--set", f"{k}=VALUE")]
+    return ((*args, "--out", f"{path.stem}-fit", *sets),
+            (*args, "--out", f"{path.stem}-val", "--seed", "1", *sets))
+
+
+def write_next(model: HysteresisModel, result, tables: Sequence, train_tables: Sequence | None, planes,
+               path: str | Path, *, probe: str | Path | None = "tee", model_path: str | Path | None = None) -> NextOutcome:
+    """Design the next experiment for a validation (:func:`design_next`) and write it to ``path``.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+    result : ValidationResult
+        Its validation on ``tables``.
+    tables, train_tables : sequence of AlignedData
+        The validation and estimation records (None: the scan had no estimation data; the
+        validation records stand in).
+    planes : PlanesCalibration or None
+        The planes the model was fitted through.
+    path : path
+        The protocol file to write (whole or not at all).
+    probe : str or path
+        The probe when the records name none (``--probe``).
+    model_path : path, optional
+        Recorded in the protocol's ``[design]``.
+
+    Returns
+    -------
+    NextOutcome
+        With ``path`` None and ``reason`` set when nothing is suspected (nothing written).
+
+    Raises
+    ------
+    ModelError
+        A fitted range no motion fits in (:func:`motion_range`).
+    """
+    from endocal.validation.data import axis_data
+
+    probe_cfg = records_probe(tables, probe)
+    val = axis_data(tables, result.axis, planes)
+    train = axis_data(train_tables, result.axis, planes) if train_tables else val
+    path = Path(path)
+    try:
+        nx = design_next(model, result, train, val, probe_cfg, name=path.stem,
+                         model_path=None if model_path is None else str(model_path))
+    except NothingSuspectedError as exc:
+        return NextOutcome(None, None, str(exc))
+    nx.write(path)
+    return NextOutcome(path, nx, "", excite_args(path, nx))

@@ -154,6 +154,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     Returns
     -------
     ScanResult
+        Scheme ``estimation/validation``: every candidate fitted on ``train``, scored on ``val``.
 
     Raises
     ------
@@ -293,16 +294,13 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
         gain is the first fold's. The decision uses training data only.
     data_paths, model_path : optional
         Where the data and model came from, for the suspects' refits.
-    planes_path : str, optional
-        The bending planes the model was fitted through, for the refits.
-    scheme_reason : str
-        Why this scheme runs, recorded in the result.
-    jobs : int, optional
-        Processes for the fits (:func:`endocal.validation.parallel.n_jobs`).
+    planes_path, scheme_reason, jobs : optional
+        As :func:`scan_split`.
 
     Returns
     -------
     ScanResult
+        Scheme ``rolling-origin``: every candidate refitted fold by fold on ``data``.
 
     Raises
     ------
