@@ -89,6 +89,10 @@ def test_refitted_model_shows_the_error_falling(drifting):
     assert any(ln.startswith("nothing missing: no catalog effect lowers") for ln in lines), res.stdout
     assert lines[-2] == (f"next: compare the models on these records, with figures: endocal report {tmp / 'm.json'} "
                          f"{tmp / 'm-drift.json'} --data {csv} --out report.html"), res.stdout
+    # what a fitted-on-itself record cannot test (rate, coupling, ...): the experiment that would, beside it
+    assert lines[-3].startswith("next: write the experiment that tests ") and lines[-3].endswith(
+        f"endocal validate {tmp / 'm-drift.json'} {csv} --next next.toml"), res.stdout
+    assert len(lines) <= 15
     full = _invoke(tmp / "m-drift.json", csv, "--explain")
     assert "Watch the error fall" in full.stdout and "bspline -> " not in full.stdout
     assert "bspline+drift" in full.stdout and "Which effect is missing: nothing" in full.stdout

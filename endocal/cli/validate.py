@@ -273,7 +273,8 @@ def _verdict(result, folded: bool, model_path: Path, data: list[Path], old_path:
         p = result.pointers[0]
         return ("missing: nothing the scan confirmed, but the data point at effects it could not settle",
                 design or [f"next: to test {p.effect}: {p.experiment}"])
-    then = design or [report]
+    # after a refit (a model to compare with) the report of the two stays a next step beside the design
+    then = [*design, report] if design and old_path is not None else design or [report]
     if result.unexplained:
         return (f"nothing missing from the catalog (no effect lowers the {what} RMSE by {scan.min_gain_pct:g} % or "
                 f"more), but {result.unexplained}", then)
