@@ -285,9 +285,10 @@ def _imported(bench, tmp_path) -> dict:
     return out
 
 
-def test_the_api_prints_a_linear_drives_commands_in_mm(bench, tmp_path):
+def test_the_api_prints_a_linear_drives_commands_in_mm_and_next_is_refused(bench, tmp_path):
     """The Validation repr of a model of a linear drive names the drive's unit, and every command
-    quantity it prints (the regimes' bounds and speeds) is in mm; the angle errors stay in deg."""
+    quantity it prints (the regimes' bounds and speeds) is in mm; the angle errors stay in deg.
+    `--next` (knob protocols in deg) is refused for it, by the CLI and the API alike."""
     import endocal as ec
 
     runs = _imported(bench, tmp_path)
@@ -299,6 +300,14 @@ def test_the_api_prints_a_linear_drives_commands_in_mm(bench, tmp_path):
     worst = next(ln for ln in text.splitlines() if "worst regime" in ln)
     assert re.search(r" mm(/s)?\)?: RMSE [\d.]+ deg", worst) and "deg/s" not in worst and " deg)" not in worst, worst
     assert "RMSE" in text and re.search(r"RMSE [\d.]+ deg \(95 % CI", text)  # the angle's error: deg
+
+    # --next designs knob protocols in deg, which no linear stage runs: refused before the validation,
+    # in one line, nothing written (the CLI and the API share the check)
+    one_line_exit_2(endocal("validate", tmp_path / "m.json", runs["chirp"], "--next", tmp_path / "next.toml"),
+                    "ap drive is commanded in mm (a linear drive)", "nothing written", "validate --explain")
+    with pytest.raises(ValueError, match="commanded in mm"):
+        ec.validate(model, runs["chirp"], next=tmp_path / "next.toml")
+    assert not (tmp_path / "next.toml").exists()
 
 
 def test_fit_planes_on_a_linear_drive_says_planes_need_knobs(tmp_path):

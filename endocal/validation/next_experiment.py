@@ -425,11 +425,18 @@ def motion_range(model: HysteresisModel, probe: ProbeConfig, axis: str | None = 
     Raises
     ------
     ModelError
-        The model's axis is not a knob of ``probe``; or the range does not hold the rest position
+        The model's drive is not a knob commanded in deg (a linear drive in mm: ``excite`` drives
+        knobs only); the model's axis is not a knob of ``probe``; or the range does not hold the rest position
         0 every protocol starts and ends at, or is too narrow for a sweep of
         :data:`MIN_AMPLITUDE_DEG` (the message names the range).
     """
     axis = axis or model.axis
+    unit = getattr(model, "drive_unit_", "deg")
+    if unit != "deg":
+        raise ModelError(f"the model's {axis} drive is commanded in {unit} (a linear drive), and --next designs "
+                         "protocols for a probe's knobs in deg, the only drives `excite` moves: nothing written; "
+                         "`validate --explain` names the experiment each untested effect needs, to record on "
+                         "your rig")
     if axis not in probe.bending_axes:
         raise ModelError(f"the model is of axis '{axis}', which probe '{probe.name}' does not have (its knobs: "
                          f"{', '.join(probe.bending_axes)}): give the probe the records were made on (--probe)")
