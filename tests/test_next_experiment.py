@@ -290,3 +290,20 @@ def test_the_summary_points_at_next_when_only_untested_effects_remain(loop, monk
     nexts = [ln for ln in lines if ln.startswith("next:")]
     assert len(nexts) == 1 and "coupling" in nexts[0] and "load" in nexts[0], proc.stdout
     assert nexts[0].endswith(f"endocal validate {tmp / 'm.json'} {tmp / 'val'} --next next.toml"), nexts[0]
+
+
+def test_the_summary_points_at_next_only_where_next_can_design(loop):
+    """The pointer is a command that works: for a model --next would refuse (an axis no knob of the
+    probe drives: the real piezo stack's), the summary says each experiment in words instead."""
+    from pathlib import Path
+
+    from endocal.cli.validate import _next_command
+    from endocal.validation.data import axis_data
+
+    tmp, _ = loop
+    knob = _next_command(load_model(tmp / "m.json"), [load_aligned(tmp / "val")], tmp / "m.json", [tmp / "val"], [],
+                         "auto", None, "tee")
+    assert knob is not None and knob.endswith("--next next.toml"), knob
+    piezo = load_aligned(ROOT / "data_samples" / "piezo" / "piezo_aligned.csv")
+    model = make_model("linear", axis="piezo").fit(axis_data([piezo], "piezo"))
+    assert _next_command(model, [piezo], Path("m.json"), [Path("check.csv")], [], "auto", None, "tee") is None

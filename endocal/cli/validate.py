@@ -23,7 +23,7 @@ from endocal.cli._common import (
 )
 from endocal.cli.messages import EXPLAIN_HELP, capped, key_of, keyed_lines
 from endocal.cli.refit import refit_command, with_refit_commands
-from endocal.errors import ModelError
+from endocal.errors import EndocalError, ModelError
 
 if TYPE_CHECKING:
     from rich.table import Table
@@ -413,7 +413,8 @@ def validate(
             if old_path is not None and compare_path is None:
                 err.print(f"compared with {old_path} (the model this one was refitted from)")
         else:
-            again = None if next_path is not None else _next_command(model_path, data, train, cv, planes, probe)
+            again = None if next_path is not None else _next_command(model, tables, model_path, data, train, cv,
+                                                                     planes, probe)
             render_summary(result, folded=bool(suffix), model_path=model_path, data=list(data), old_path=old_path,
                            next_command=again)
     if outcome is not None:
@@ -425,9 +426,17 @@ def validate(
             raise NothingSuspectedError(outcome.reason)
 
 
-def _next_command(model_path: Path, data: list[Path], train: list[Path], cv: str, planes: Path | None,
-                  probe: str) -> str:
-    """This validation again with ``--next next.toml`` (the summary's pointer at the next experiment)."""
+def _next_command(model, tables, model_path: Path, data: list[Path], train: list[Path], cv: str,
+                  planes: Path | None, probe: str) -> str | None:
+    """This validation again with ``--next next.toml`` (the summary's pointer at the next experiment);
+    None when ``--next`` would refuse this model (a linear drive, an axis the probe has no knob for, a
+    fitted range no motion fits in): the summary then says each experiment in words."""
+    from endocal.validation.next_experiment import check_next
+
+    try:
+        check_next(model, tables, probe)
+    except EndocalError:
+        return None
     return shlex.join(["endocal", "validate", str(model_path), *(str(p) for p in data),
                        *(a for p in train for a in ("--train", str(p))), *(["--cv", cv] if cv != "auto" else []),
                        *(["--planes", str(planes)] if planes is not None else []),
