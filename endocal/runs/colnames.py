@@ -1,9 +1,9 @@
 """What the words of a log's column names say: the vocabulary a map's draft guesses roles by
 (:mod:`endocal.runs.mapdraft`) and its import checks units against (:mod:`endocal.runs.csvchecks`).
 
-A name is split into lower-case words at underscores, spaces, dots and case changes
+A name is split into lower-case words at underscores, spaces, dots, brackets and case changes
 (``apPresentTicks``, ``ap_present_ticks`` and ``Tendon Disp.`` give ap, present, ticks and
-tendon, disp).
+tendon, disp); a unit written in mixed case stays one word (``current_mA``, ``torque_Nm``: ma, nm).
 """
 
 from __future__ import annotations
@@ -26,7 +26,9 @@ EFFORT_WORDS = {"current", "cur", "curr", "ma", "amp", "amps", "ampere", "ampere
 
 def words(name: str) -> list[str]:
     """A column name's words, lower case: ``apPresentTicks`` and ``ap_present_ticks`` give ap, present, ticks."""
-    spaced = re.sub(r"(?<=[a-z0-9])(?=[A-Z])", " ", str(name))
+    # a case change starts a word (apPresent, posX, motorRPM), but not within a unit such as mA or Nm:
+    # one lower-case letter alone before the capital is a unit's prefix, not a word
+    spaced = re.sub(r"(?<=[a-z0-9])(?=[A-Z][a-z])|(?<=[a-z0-9]{2})(?=[A-Z])", " ", str(name))
     return [w for w in re.split(r"[^A-Za-z0-9]+", spaced.lower()) if w]
 
 

@@ -66,7 +66,7 @@ from endocal.runs.csvchecks import (MAX_GAP_S, ReadingGaps, check_aligned_rows, 
                                     measured_angle_warnings, reading_gaps)
 from endocal.runs.format import atomic_write_bytes, check_parent, parquet_bytes, prepare_output, software_versions
 from endocal.runs.imported import tracker_stream, write_imported_run
-from endocal.runs.textable import read_csv_table, sniff_delimiter
+from endocal.runs.textable import comment_lines, read_csv_table, sniff_delimiter
 
 #: What a drafted map (:mod:`endocal.runs.mapdraft`) writes where it could not place a column.
 UNFILLED = "FILL IN"
@@ -403,7 +403,8 @@ def read_map(path: str | Path) -> CsvMap:
     ------
     RunFormatError
         Unreadable TOML, a missing or unknown key, an unknown unit or quaternion order, a
-        bending axis of the probe without a knob table, ticks without ``zero_ticks`` and
+        measured angle without a knob table (with poses: no bending axis with one; an axis without one
+        is not driven, its command 0), ticks without ``zero_ticks`` and
         ``ticks_per_rev`` (or those keys with another unit), a number that is not finite (or
         not positive: ``ticks_per_rev``, ``sample_rate_hz``), a time ``unit`` with ``sample_rate_hz``
         (it would be ignored), a column name that is not text,
@@ -472,9 +473,12 @@ def read_map(path: str | Path) -> CsvMap:
         per_rev = _number(k, "ticks_per_rev", w, 4096.0, "ticks per knob revolution, 4096 for an XM430", positive=True)
         knobs[dof] = _Knob(position, unit, goal, current, zero, per_rev, float(direction), CURRENT_UNITS[cur_unit])
     angles = _angles(d, probe, where)
-    missing = [a for a in (angles or probe.bending_axes) if a not in knobs]
+    # with poses, an axis without a knob table is not driven (a bench pulling one tendon): its command is 0
+    missing = [a for a in angles if a not in knobs] if angles else (
+        [] if set(knobs) & set(probe.bending_axes) else list(probe.bending_axes))
     if missing:
-        whose = "every measured angle" if angles else f"every bending axis of probe '{probe.name}'"
+        whose = ("every measured angle" if angles else
+                 f"the drive of a bending axis of probe '{probe.name}' (an axis without one is not driven)")
         raise RunFormatError(f"{where}: no [knobs.{missing[0]}] table: {whose} "
                              f"({', '.join(angles or probe.bending_axes)}) needs its knob column")
     tip, base = (None, None) if angles else (_pose(d, "tip", where), _pose(d, "base", where))
@@ -504,7 +508,25 @@ def _read_csv(raw: bytes, where: str) -> pd.DataFrame:
         raise RunFormatError(f"{where}: not a CSV table of a log (found {df.shape[1]} column(s), {len(df)} row(s))")
     # rows keep their line numbers in the file as the index, for messages (line 1 is the header)
     df.index = _line_numbers(raw, len(df), df.attrs.get("headerless", False))
+    _refuse_units_row(df, where)
     return df
+
+
+def _refuse_units_row(df: pd.DataFrame, where: str) -> None:
+    """Refuse a second header row (the units under the names, as LabVIEW and many data loggers
+    write them): text in most columns on the first row, numbers below it. One header row is read;
+    a unit belongs in its column's name (``Time (s)``), where the draft and the checks read it."""
+    if len(df) < 3:
+        return
+    first = df.iloc[0]
+    text = [c for c in df.columns if isinstance(first[c], str) and first[c].strip()
+            and pd.isna(pd.to_numeric(first[c], errors="coerce"))
+            and pd.to_numeric(df[c].iloc[1:], errors="coerce").notna().sum() >= 0.9 * df[c].iloc[1:].notna().sum() > 0]
+    if len(text) >= max(2, 0.5 * df.shape[1]):
+        cells = ", ".join(repr(first[c]) for c in text[:4])
+        raise RunFormatError(f"{where}: line {df.index[0]} under the header holds text over numbers ({cells}...): a "
+                             "units row? endocal reads one header row: delete that line and put each unit in its "
+                             "column's name (Time (s), stage_pos_mm)")
 
 
 def _line_numbers(raw: bytes, n: int, headerless: bool) -> np.ndarray:
@@ -515,7 +537,8 @@ def _line_numbers(raw: bytes, n: int, headerless: bool) -> np.ndarray:
     logger writes none).
     """
     blank = b" \r" if sniff_delimiter(raw) == "\t" else b" \t\r"
-    filled = np.array([i + 1 for i, text in enumerate(raw.split(b"\n")) if text.strip(blank)], dtype=int)
+    skip = comment_lines(raw)  # a logger's notes before the header
+    filled = np.array([i + 1 for i, text in enumerate(raw.split(b"\n")) if i >= skip and text.strip(blank)], dtype=int)
     rows = filled if headerless else filled[1:]
     # lines ended by a lone \r (old Mac files) are one line here: count the rows instead
     return rows[:n] if rows.size >= n else np.arange(n) + (1 if headerless else 2)

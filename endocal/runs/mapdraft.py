@@ -352,12 +352,17 @@ class _Drafter:
             found.append(axis)
         if not found:
             numbered = _numbered(self.cols, self.taken)
+            knobs = [n for n in numbered if "position" in numbered[n] or "goal" in numbered[n]]
             for axis, n in zip(axes, sorted(numbered)):
                 pos, goal = numbered[n].get("position"), numbered[n].get("goal")
+                cur = numbered[n].get("current")
+                if len(knobs) == 1 and pos:  # one numbered knob (Knob1): its goal and current need no number
+                    goal = goal or self._free_goal(pos)
+                    cur = cur or self._free_current(pos, goal)
                 if pos is None and goal is None:  # a motor that logged only its current is no knob
                     continue
                 self.w.table(f"knobs.{axis}")
-                self._knob(axis, pos or goal, goal if pos else None, numbered[n].get("current"),
+                self._knob(axis, pos or goal, goal if pos else None, cur,
                            "the knob's measured position (the command when there is no goal)",
                            check=f"motor {n} read as the {axis} knob (numbered motors in the order of the probe's "
                                  f"axes: {', '.join(axes)})")
@@ -367,9 +372,12 @@ class _Drafter:
         for axis in axes if poses else []:
             if axis not in found and f"[knobs.{axis}] position" not in self.unmatched:
                 self.w.table(f"knobs.{axis}")
-                self.w.key("position", FILL, "the knob's measured position: no column looked like it")
-                self.w.key("unit", FILL, "deg, rad or ticks: that column's unit")
-                self.unmatched.append(f"[knobs.{axis}] position")
+                # a bench pulling one tendon of a probe whose bend the poses measure in two: no knob
+                undriven = " (or delete this table: an axis without one is not driven, its command 0)" if found else ""
+                self.w.key("position", FILL, "the knob's measured position: no column looked like it" + undriven)
+                self.w.key("unit", FILL, "deg, rad, ticks or mm: that column's unit")
+                self.unmatched.append(f"[knobs.{axis}] position"
+                                      + (f" (or delete [knobs.{axis}] if that axis is not driven)" if found else ""))
         return found
 
     def _bench_knob(self) -> list[str]:
@@ -379,7 +387,7 @@ class _Drafter:
         CHECK unless one column names the driving side."""
         axes = list(self.probe.bending_axes)
         taken = self.taken | self.components
-        goal = _pick(self.cols, _GOAL, avoid=_CURRENT | EFFORT_WORDS | {"tip"}, taken=taken)
+        goal = self._free_goal()
         check = ""
         drive = _candidates(self.cols, _DRIVE, avoid=_NOT_KNOB, taken=taken)
         linear = _candidates(self.cols, _LINEAR, avoid=_NOT_KNOB, taken=taken)
@@ -410,10 +418,22 @@ class _Drafter:
             self.w.key("unit", FILL, "deg, rad, ticks or mm: that column's unit")
             self.unmatched.append(f"[knobs.{axes[0]}] position")
             return []
-        cur = _pick(self.cols, _CURRENT - {"effort"}, avoid=_GOAL | _POSE_WORDS, taken=taken | {pos})
+        cur = self._free_current(pos)
         self._knob(axes[0], pos, None if goal == pos else goal, cur,
                    "the driving knob, pulley or linear stage, as its encoder reads it", check=check)
         return [axes[0]]
+
+    def _free_goal(self, *also_taken: str | None) -> str | None:
+        """The first free column named like a goal sent to a motor (``setpoint``, ``cmd_pos``), never
+        a current, torque, force or load, nor a component of an x/y/z triple."""
+        return _pick(self.cols, _GOAL, avoid=_CURRENT | EFFORT_WORDS | {"tip"},
+                     taken=self.taken | self.components | {c for c in also_taken if c})
+
+    def _free_current(self, *also_taken: str | None) -> str | None:
+        """The first free column named like a motor current (``Motor Curr.``, ``current_mA``); a
+        numbered ``effort`` is a servo's, not a bench's."""
+        return _pick(self.cols, _CURRENT - {"effort"}, avoid=_GOAL | _POSE_WORDS,
+                     taken=self.taken | self.components | {c for c in also_taken if c})
 
     def _poses(self, sensors: dict) -> None:
         w = self.w
@@ -527,6 +547,8 @@ def _knob_unit(w: _Writer, df: pd.DataFrame, col: str, axis: str) -> str:
         unit, why = _linear_unit(df, col)
     else:
         unit, why = _angle_unit(df, col, ticks_ok=True)
+        if why and unit != "ticks":  # nothing in the name says angle or length
+            why += "; or mm, if the drive is a linear stage"
     w.key("unit", unit, "deg, rad, ticks, or mm for a linear drive", check=why, where=f"[knobs.{axis}] ")
     if unit == "ticks":
         w.key("zero_ticks", 2048, check="the tick count with the knob at 0 deg (probe straight)",

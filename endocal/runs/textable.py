@@ -5,7 +5,8 @@ data loggers write tabs, or columns lined up with spaces; hand-edited files put 
 each comma; loggers often write no header at all. Every CSV endocal reads (aligned tables,
 lab logs, waypoint lists) goes through :func:`read_csv_table`, so a table that opens correctly
 in a spreadsheet reads the same here, with its column names as written (stripped of spaces), or
-numbered ``1``, ``2``, ... when its first line is all numbers.
+numbered ``1``, ``2``, ... when its first line is all numbers. Lines starting with ``#`` before
+the header (a logger's notes: the rig, the operator, the firmware) are skipped.
 """
 
 from __future__ import annotations
@@ -21,8 +22,22 @@ DELIMITERS = (",", ";", "\t", "|")
 _DECIMAL_COMMA = re.compile(r"^\s*[-+]?\d+,\d+(?:[eE][-+]?\d+)?\s*$")
 
 
+def comment_lines(raw: bytes) -> int:
+    """How many lines before the header are comments (``#`` first) or blank: a logger's notes."""
+    n = 0
+    for line in raw.lstrip(b"\xef\xbb\xbf").split(b"\n"):
+        text = line.strip()
+        if text and not text.startswith(b"#"):
+            break
+        n += 1
+    return n
+
+
 def _first_line(raw: bytes) -> str:
-    return raw.lstrip(b"\xef\xbb\xbf").split(b"\n", 1)[0].decode("utf-8", errors="replace").strip()
+    """The header line (or the first line of data): the first line that is not a comment."""
+    lines = raw.lstrip(b"\xef\xbb\xbf").split(b"\n")
+    k = comment_lines(raw)
+    return lines[k].decode("utf-8", errors="replace").strip() if k < len(lines) else ""
 
 
 def sniff_delimiter(raw: bytes) -> str:
@@ -57,6 +72,7 @@ def read_csv_table(raw: bytes) -> pd.DataFrame:
     The delimiter is sniffed from the first line (:func:`sniff_delimiter`); column names are
     stripped of surrounding spaces; a first line of numbers only is data, not a header, and
     the columns are numbered ``"1"``, ``"2"``, ... (``df.attrs["headerless"]`` is then True);
+    comment lines before it are skipped (:func:`comment_lines`, ``df.attrs["comment_lines"]``);
     with a delimiter other than ``,``, a file with a text column that reads ``12,5``
     throughout is re-read with ``,`` as the decimal mark; empty rows at the end are dropped.
 
@@ -70,11 +86,13 @@ def read_csv_table(raw: bytes) -> pd.DataFrame:
     fields = first.split() if sep == r"\s+" else first.split(sep)
     headerless = bool(first) and all(_is_number(f, sep) for f in fields)
     header = None if headerless else "infer"
-    df = pd.read_csv(io.BytesIO(raw), sep=sep, skipinitialspace=sep != r"\s+", header=header)
+    skip = comment_lines(raw)
+    df = pd.read_csv(io.BytesIO(raw), sep=sep, skipinitialspace=sep != r"\s+", header=header, skiprows=skip)
     if sep not in (",", r"\s+"):
         text = [c for c in df.columns if df[c].dtype == object or pd.api.types.is_string_dtype(df[c])]
         if any(len(df[c].dropna()) and df[c].dropna().astype(str).str.match(_DECIMAL_COMMA).all() for c in text):
-            df = pd.read_csv(io.BytesIO(raw), sep=sep, skipinitialspace=True, decimal=",", header=header)
+            df = pd.read_csv(io.BytesIO(raw), sep=sep, skipinitialspace=True, decimal=",", header=header,
+                             skiprows=skip)
     if headerless:
         df.columns = [str(i + 1) for i in range(df.shape[1])]
     df.columns = [c.strip() if isinstance(c, str) else c for c in df.columns]
@@ -83,7 +101,8 @@ def read_csv_table(raw: bytes) -> pd.DataFrame:
     filled = np.flatnonzero(df.notna().any(axis=1).to_numpy())
     df = df.iloc[: filled[-1] + 1 if filled.size else 0]
     df.attrs["headerless"] = headerless
+    df.attrs["comment_lines"] = skip
     return df
 
 
-__all__ = ["DELIMITERS", "read_csv_table", "sniff_delimiter"]
+__all__ = ["DELIMITERS", "comment_lines", "read_csv_table", "sniff_delimiter"]
