@@ -23,6 +23,11 @@ DISPLACEMENT_WORDS = {"disp", "displ", "displacement", "stroke", "extension", "e
 EFFORT_WORDS = {"current", "cur", "curr", "ma", "amp", "amps", "ampere", "amperes", "effort", "torque", "trq",
                 "force", "load", "tension", "nm", "newton", "newtons"}
 
+#: words of what else a drive logs about itself: its speed, temperature, voltage or power (a column
+#: so named is never a position either)
+STATE_WORDS = {"vel", "velocity", "speed", "rpm", "rate", "temp", "temperature", "celsius", "degc", "volt", "volts",
+               "voltage", "pwm", "duty", "power", "watt", "watts"}
+
 
 def words(name: str) -> list[str]:
     """A column name's words, lower case: ``apPresentTicks`` and ``ap_present_ticks`` give ap, present, ticks."""
@@ -59,5 +64,5 @@ def named_length(name: str) -> str:
     return f"it is named like a displacement ({disp})" if disp else ""
 
 
-__all__ = ["ANGLE_UNIT_WORDS", "DISPLACEMENT_WORDS", "EFFORT_WORDS", "LENGTH_UNIT_WORDS", "named_length", "unit_named",
-           "words"]
+__all__ = ["ANGLE_UNIT_WORDS", "DISPLACEMENT_WORDS", "EFFORT_WORDS", "LENGTH_UNIT_WORDS", "STATE_WORDS", "named_length",
+           "unit_named", "words"]

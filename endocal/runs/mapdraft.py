@@ -46,7 +46,7 @@ import numpy as np
 import pandas as pd
 
 from endocal.probe import load_probe
-from endocal.runs.colnames import ANGLE_UNIT_WORDS, DISPLACEMENT_WORDS, EFFORT_WORDS, unit_named, words
+from endocal.runs.colnames import ANGLE_UNIT_WORDS, DISPLACEMENT_WORDS, EFFORT_WORDS, STATE_WORDS, unit_named, words
 from endocal.runs.csvlog import UNFILLED as FILL, read_log_table
 from endocal.runs.format import LOG_RATE_RANGE_HZ
 
@@ -74,7 +74,9 @@ _ROTATION = {"q", "quat", "quaternion", "orientation", "rotation", "rot"}
 _LENGTH_UNIT = {"mm": "mm", "m": "m"}
 #: words of an EM sensor's pose columns (``field.base.pose.position.x``): never a knob
 _POSE_WORDS = {"tip", "distal", "base", "proximal", "pose", "orientation", "quaternion", "quat", "quality"}
-_NOT_KNOB = _GOAL | _CURRENT | EFFORT_WORDS | (_MEASURED - {"angle"}) | _POSE_WORDS
+#: words of columns that are never a knob's position: a goal, what the drive exerts (current, torque,
+#: force, load) or logs about itself (speed, temperature, voltage), a measured bend, a pose
+_NOT_KNOB = _GOAL | _CURRENT | EFFORT_WORDS | STATE_WORDS | (_MEASURED - {"angle"}) | _POSE_WORDS
 #: words of columns that are no covariate: clocks, and counters such as a ROS header's seq
 _NOT_EXTRA = _TIME | {"seq", "sequence", "index", "idx", "counter", "header"}
 #: a word ending in a motor's number, as ROS writes the arrays of a JointState: position0, goal1
@@ -391,7 +393,9 @@ class _Drafter:
         check = ""
         drive = _candidates(self.cols, _DRIVE, avoid=_NOT_KNOB, taken=taken)
         linear = _candidates(self.cols, _LINEAR, avoid=_NOT_KNOB, taken=taken)
-        generic = _candidates(self.cols, _POSITION, avoid=_NOT_KNOB, taken=taken)
+        # an angle named by nothing else may be the bend measured: after a position, an encoder's reading
+        generic = sorted(_candidates(self.cols, _POSITION, avoid=_NOT_KNOB, taken=taken),
+                         key=lambda c: not set(words(c)) & (_POSITION - {"angle"}))
         if drive:
             pos = drive[0]
             if len(drive) > 1:
@@ -426,7 +430,7 @@ class _Drafter:
     def _free_goal(self, *also_taken: str | None) -> str | None:
         """The first free column named like a goal sent to a motor (``setpoint``, ``cmd_pos``), never
         a current, torque, force or load, nor a component of an x/y/z triple."""
-        return _pick(self.cols, _GOAL, avoid=_CURRENT | EFFORT_WORDS | {"tip"},
+        return _pick(self.cols, _GOAL, avoid=_CURRENT | EFFORT_WORDS | STATE_WORDS | {"tip"},
                      taken=self.taken | self.components | {c for c in also_taken if c})
 
     def _free_current(self, *also_taken: str | None) -> str | None:
