@@ -20,15 +20,18 @@ one, else by the numbers:
   mid-turn, 4096 per turn, as the XM430 the thesis uses), values within +-2 pi are radians, else
   degrees; a displacement is millimetres when its numbers plainly are (a travel of 0.2 to 200)
   and ``FILL IN`` otherwise; a column of an EM pose, a component of an x/y/z triple (``Pos x``) or a
-  column named like a current, torque, force or load (``Motor Curr.``) is never a knob position
-  (a bench's motor current becomes its knob's ``current``);
+  column named like a current, torque, force or load (``Motor Curr.``), or like a speed,
+  temperature, voltage or power (``motor_temp``, ``stage_vel_mm_s``), is never a knob position
+  (a bench's motor current becomes its knob's ``current``); a numbered knob alone (``Knob1``)
+  takes an unnumbered goal and current;
 - EM positions: below 2 in magnitude are metres, else millimetres;
 - a measured angle within +-pi is radians, else degrees; of several angle columns (``Angle x``,
   ``Angle y``, ``Angle z``) the one that follows the drive best, marked CHECK.
 
 Every line decided by the numbers, or by a default, is marked ``CHECK`` with the evidence,
-and every role the import needs that nothing matched (a knob per bending axis with poses) is
-left as ``"FILL IN"``, which the import refuses naming the role. The remaining numeric columns
+and every role the import needs that nothing matched (a knob per bending axis with poses: the
+user deletes the table of an axis the bench does not drive) is left as ``"FILL IN"``, which the
+import refuses naming the role. The remaining numeric columns
 that fill every row, but for clocks and counters (a ROS header's ``stamp`` and ``seq``) and the
 components of x/y/z triples (a tip's pose: what the model predicts, no covariate), become
 ``extras`` (covariates for ``load:COLUMN``).
