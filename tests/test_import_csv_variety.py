@@ -388,11 +388,32 @@ def test_a_lab_log_is_drafted_reviewed_imported_fitted_and_validated(i, tmp_path
     assert rmse < 1.3 * floor, (str(shape), rmse, floor)
 
 
-def test_a_units_row_under_the_header_is_one_line(tmp_path):
+@pytest.mark.parametrize("step, unit, other", [(1.0, "ms", "or s (1 Hz)?"), (0.01, "s", ""), (20.0, "ms", "")])
+def test_a_clock_named_without_its_unit_is_read_by_its_step(step, unit, other):
+    """A step of 1 is 1 Hz in seconds or 1 kHz in ms: the rate nearer a bench's 100 Hz is drafted,
+    the other named in the CHECK."""
+    from endocal.runs.mapdraft import draft_map
+
+    log = pd.DataFrame({"Time": np.arange(200) * step, "stage_pos_mm": np.sin(np.arange(200) / 10),
+                        "bend_deg": np.sin(np.arange(200) / 10)})
+    d = draft_map(log)
+    assert tomllib.loads(d.text)["time"]["unit"] == unit
+    check = next(c for c in d.checks if c.startswith("[time] unit"))
+    assert other in check and (other or "or " not in check), check
+
+
+@pytest.mark.parametrize("sep", SEPARATORS)
+def test_a_units_row_under_the_header_is_one_line(sep, tmp_path):
     """A units row (``s, mm, A, ...`` under the header, as LabVIEW writes it) is refused by the
-    draft and the import alike, in one line saying where it is and what to do."""
-    shape = Shape(("Time", "s"), ("Tendon Disp.", "mm"), ("Motor Curr.",), None, "bend_deg", ",", "units-row", 50.0)
+    draft and the import alike, in one line saying where it is and what to do; nothing is written."""
+    shape = Shape(("Time", "s"), ("Tendon Disp.", "mm"), ("Motor Curr.",), None, "bend_deg", sep, "units-row", 50.0)
     write_log(_bench(shape, 1, "damped"), shape, tmp_path / "u.csv")
     one_line_exit_2(endocal("import", "csv", tmp_path / "u.csv", "--draft-map", tmp_path / "d.toml"),
-                    "line 2", "units row")
+                    "line 2 under the header holds text over numbers ('s', 'mm'", "a units row?",
+                    "delete that line and put each unit in its column's name")
     assert not (tmp_path / "d.toml").exists()
+    (tmp_path / "map.toml").write_text('[time]\ncolumn = "Time"\n\n[knobs.ap]\nposition = "Tendon Disp."\nunit = "mm"\n\n'
+                                       '[angles.ap]\ncolumn = "bend_deg"\n')
+    one_line_exit_2(endocal("import", "csv", tmp_path / "u.csv", "--map", tmp_path / "map.toml", "--out",
+                            tmp_path / "u.parquet"), "line 2 under the header", "a units row?")
+    assert not (tmp_path / "u.parquet").exists()

@@ -519,9 +519,13 @@ def _refuse_units_row(df: pd.DataFrame, where: str) -> None:
     if len(df) < 3:
         return
     first = df.iloc[0]
+
+    def numbers(cells: pd.Series) -> pd.Series:  # a decimal comma too: the units row kept the column text
+        return pd.to_numeric(cells.astype(str).str.strip().str.replace(",", ".", regex=False), errors="coerce")
+
     text = [c for c in df.columns if isinstance(first[c], str) and first[c].strip()
-            and pd.isna(pd.to_numeric(first[c], errors="coerce"))
-            and pd.to_numeric(df[c].iloc[1:], errors="coerce").notna().sum() >= 0.9 * df[c].iloc[1:].notna().sum() > 0]
+            and pd.isna(numbers(df[c].iloc[:1]).iloc[0])
+            and numbers(df[c].iloc[1:].dropna()).notna().sum() >= 0.9 * df[c].iloc[1:].notna().sum() > 0]
     if len(text) >= max(2, 0.5 * df.shape[1]):
         cells = ", ".join(repr(first[c]) for c in text[:4])
         raise RunFormatError(f"{where}: line {df.index[0]} under the header holds text over numbers ({cells}...): a "

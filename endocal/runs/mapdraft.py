@@ -175,10 +175,14 @@ def _time_unit(df: pd.DataFrame, col: str) -> tuple[str, str]:
     steps = np.diff(v)
     step = float(np.median(steps[steps > 0])) if np.any(steps > 0) else 0.0
     lo_hz, hi_hz = LOG_RATE_RANGE_HZ
-    for unit, scale in (("s", 1.0), ("ms", 1e-3), ("us", 1e-6), ("ns", 1e-9)):
-        if step and 1 / hi_hz <= step * scale <= 1 / lo_hz:
-            return unit, f"median step {step:.3g} {unit} = {1.0 / (step * scale):.0f} Hz"
-    return "s", f"median step {step:.3g}: unit not recognised, seconds assumed"
+    fits = [(unit, 1.0 / (step * scale)) for unit, scale in (("s", 1.0), ("ms", 1e-3), ("us", 1e-6), ("ns", 1e-9))
+            if step and 1 / hi_hz <= step * scale <= 1 / lo_hz]
+    if not fits:
+        return "s", f"median step {step:.3g}: unit not recognised, seconds assumed"
+    # a step of 1 is 1 Hz in s or 1 kHz in ms: the rate nearer a bench's usual 100 Hz, the other named
+    unit, hz = min(fits, key=lambda f: abs(np.log10(f[1] / 100.0)))
+    other = "".join(f"; or {u} ({r:.0f} Hz)?" for u, r in fits if u != unit)
+    return unit, f"median step {step:.3g} {unit} = {hz:.0f} Hz{other}"
 
 
 def _angle_unit(df: pd.DataFrame, col: str, ticks_ok: bool) -> tuple[str, str]:
