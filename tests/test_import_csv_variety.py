@@ -3,7 +3,7 @@
 A generator writes the tendon bench of tests/test_linear_drive.py (slack, sheath friction, a
 bend of 11 deg per mm pulled, 0.08 deg of noise) as many labs would log it, each factor varied
 on its own: the clock's name and unit (seconds, ms, ROS-ish epoch stamps in ns or s), the drive's
-name and unit (a linear stage in mm or m, a pulley in deg, rad or servo ticks), distractor columns
+name and unit (a linear stage in mm, m or µm, a pulley in deg, rad or servo ticks), distractor columns
 that must never become the drive (currents, torques, forces, loads, a tension, a voltage, a
 temperature, the goal sent), the measured bend (an angle column, a camera's three angles, or tip
 and base EM poses in three spellings), the separator (``,``, ``;``, tab, ``;`` with decimal
@@ -37,13 +37,13 @@ from tests.test_linear_drive import GAIN_DEG_PER_MM, NOISE_DEG, SLACK_MM, tendon
 #: clock columns: name, and how it is written (s since start, ms, or epoch stamps in ns or s)
 TIMES = [("Time", "s"), ("time_s", "s"), ("t", "s"), ("Timestamp (ms)", "ms"), ("elapsed [s]", "s"), ("Time", "ms"),
          ("stamp", "epoch-ns"), ("stamp", "epoch-s"), ("timestamp", "epoch-ms")]
-#: drive columns: name and unit (linear stages in mm or m, pulleys in deg, rad or ticks)
+#: drive columns: name and unit (linear stages in mm, m or µm, pulleys in deg, rad or ticks)
 DRIVES = [("Tendon Disp.", "mm"), ("stage_pos_mm", "mm"), ("Displacement [mm]", "mm"), ("carriage position (m)", "m"),
-          ("actuator_x", "mm"), ("tendon_pull_m", "m"), ("motor_angle_deg", "deg"), ("Knob1 (rad)", "rad"),
-          ("enc_ticks", "ticks"), ("servo_pos", "deg"), ("pulley_angle", "deg")]
+          ("actuator_x", "mm"), ("tendon_pull_m", "m"), ("Stage Position [\u00b5m]", "um"), ("motor_angle_deg", "deg"),
+          ("Knob1 (rad)", "rad"), ("enc_ticks", "ticks"), ("servo_pos", "deg"), ("pulley_angle", "deg")]
 #: a pulley turns 10 deg per mm of tendon (a radius of 5.7 mm)
 DEG_PER_MM = 10.0
-#: columns that are never the drive: name -> (role the truth gives it, unit)
+#: columns that are never the drive (a motor current is its knob's `current`)
 DISTRACTORS = ["Motor Curr.", "current_mA", "motor_current_A", "torque_Nm", "Motor Torque (Nm)", "Force (N)",
                "actuator_force_N", "load_cell", "servo_load", "tension", "voltage", "motor_voltage", "temp_c",
                "motor_temp", "stage_temp_c", "motor_speed_rpm", "stage_vel_mm_s"]
@@ -129,13 +129,14 @@ def _bench(shape: Shape, seed: int, kind: str) -> Log:
     truth[("time", "unit")] = tunit.removeprefix("epoch-")
 
     dname, dunit = shape.drive
-    run_unit = "mm" if dunit in ("mm", "m") else "deg"
+    run_unit = "mm" if dunit in ("mm", "m", "um") else "deg"
     goal_mm = x_mm + rng.normal(0, GOAL_ERR_MM, n)
 
     def in_unit(mm):
         deg = DEG_PER_MM * mm
-        return {"mm": np.round(mm, 4), "m": np.round(mm / 1000, 7), "deg": np.round(deg, 3),
-                "rad": np.round(np.radians(deg), 5), "ticks": np.round(2048 + deg * 4096 / 360)}[dunit]
+        return {"mm": np.round(mm, 4), "m": np.round(mm / 1000, 7), "um": np.round(1000 * mm, 1),
+                "deg": np.round(deg, 3), "rad": np.round(np.radians(deg), 5),
+                "ticks": np.round(2048 + deg * 4096 / 360)}[dunit]
 
     cols[dname] = in_unit(x_mm)
     truth[("knobs.ap", "position")] = dname
@@ -154,7 +155,7 @@ def _bench(shape: Shape, seed: int, kind: str) -> Log:
         cmd_mm = x_mm
     # the command as written (rounded as the logger writes it), in the run's unit: mm or deg
     written = in_unit(cmd_mm)
-    cmd_run = {"mm": written, "m": 1000 * written, "deg": written, "rad": np.degrees(written),
+    cmd_run = {"mm": written, "m": 1000 * written, "um": written / 1000, "deg": written, "rad": np.degrees(written),
                "ticks": (written - 2048) * 360 / 4096}[dunit]
 
     amps = base["Motor Curr."].to_numpy()
@@ -347,7 +348,7 @@ def test_a_lab_log_is_drafted_reviewed_imported_fitted_and_validated(i, tmp_path
     for d in shape.distractors:
         assert d not in [k.get("position") for k in draft["knobs"].values()], (str(shape), text)
 
-    reviewed, marked, fixed, silent = review(text, est.truth)
+    reviewed, _marked, fixed, silent = review(text, est.truth)
     assert silent == [], (str(shape), silent, text)  # every unmarked line is right
     reviewed = _tick_keys(reviewed, est.truth[("knobs.ap", "unit")])
     (tmp_path / "map.toml").write_text(reviewed)
@@ -412,8 +413,8 @@ def test_a_units_row_under_the_header_is_one_line(sep, tmp_path):
                     "line 2 under the header holds text over numbers ('s', 'mm'", "a units row?",
                     "delete that line and put each unit in its column's name")
     assert not (tmp_path / "d.toml").exists()
-    (tmp_path / "map.toml").write_text('[time]\ncolumn = "Time"\n\n[knobs.ap]\nposition = "Tendon Disp."\nunit = "mm"\n\n'
-                                       '[angles.ap]\ncolumn = "bend_deg"\n')
+    (tmp_path / "map.toml").write_text('[time]\ncolumn = "Time"\n\n[knobs.ap]\nposition = "Tendon Disp."\n'
+                                       'unit = "mm"\n\n[angles.ap]\ncolumn = "bend_deg"\n')
     one_line_exit_2(endocal("import", "csv", tmp_path / "u.csv", "--map", tmp_path / "map.toml", "--out",
                             tmp_path / "u.parquet"), "line 2 under the header", "a units row?")
     assert not (tmp_path / "u.parquet").exists()

@@ -15,7 +15,9 @@ ANGLE_UNIT_WORDS = {"deg": "deg", "degree": "deg", "degrees": "deg", "rad": "rad
                     "tick": "ticks", "ticks": "ticks", "raw": "ticks", "counts": "ticks", "count": "ticks"}
 #: words naming a length's unit, and the unit they name (``m`` only as a name's last word: ``stage_pos_m``)
 LENGTH_UNIT_WORDS = {"mm": "mm", "millimetre": "mm", "millimetres": "mm", "millimeter": "mm", "millimeters": "mm",
-                     "m": "m", "metre": "m", "metres": "m", "meter": "m", "meters": "m"}
+                     "m": "m", "metre": "m", "metres": "m", "meter": "m", "meters": "m",
+                     "um": "um", "micron": "um", "microns": "um", "micrometre": "um", "micrometres": "um",
+                     "micrometer": "um", "micrometers": "um"}
 #: words of a linear drive's travel: a tendon pulled (or a stage moved) by so many mm
 DISPLACEMENT_WORDS = {"disp", "displ", "displacement", "stroke", "extension", "elongation", "travel"}
 #: words of what a drive exerts rather than where it is: a motor's current, a torque, a force or a load
@@ -33,7 +35,8 @@ def words(name: str) -> list[str]:
     """A column name's words, lower case: ``apPresentTicks`` and ``ap_present_ticks`` give ap, present, ticks."""
     # a case change starts a word (apPresent, posX, motorRPM), but not within a unit such as mA or Nm:
     # one lower-case letter alone before the capital is a unit's prefix, not a word
-    spaced = re.sub(r"(?<=[a-z0-9])(?=[A-Z][a-z])|(?<=[a-z0-9]{2})(?=[A-Z])", " ", str(name))
+    name = str(name).replace("\u00b5", "u").replace("\u03bc", "u")  # µm (micro sign or Greek mu): um
+    spaced = re.sub(r"(?<=[a-z0-9])(?=[A-Z][a-z])|(?<=[a-z0-9]{2})(?=[A-Z])", " ", name)
     return [w for w in re.split(r"[^A-Za-z0-9]+", spaced.lower()) if w]
 
 
@@ -42,7 +45,7 @@ _TICK_HINTS = {"raw", "count", "counts"}
 
 
 def unit_named(name: str) -> str | None:
-    """The unit a column's name says (its last unit word: ``deg``, ``rad``, ``ticks``, ``mm``, ``m``), or None.
+    """The unit a column's name says (its last unit word: ``deg``, ``rad``, ``ticks``, ``mm``, ``m``, ``um``), or None.
 
     ``raw`` and ``counts`` hint at ticks (a draft reads them so) but name no unit here."""
     ws = words(name)
@@ -59,7 +62,7 @@ def named_length(name: str) -> str:
     """Why a column's name says it holds a length (its length unit, else a displacement word), or ``""``."""
     unit = unit_named(name)
     if unit is not None:
-        return f"its name says {unit}" if unit in ("mm", "m") else ""
+        return f"its name says {unit}" if unit in LENGTH_UNIT_WORDS.values() else ""
     disp = next((w for w in words(name) if w in DISPLACEMENT_WORDS), None)
     return f"it is named like a displacement ({disp})" if disp else ""
 

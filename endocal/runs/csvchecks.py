@@ -125,7 +125,8 @@ def check_knobs(motor: dict, cmap: CsvMap, where: str, probe_limits: bool = True
     hints = {"deg": 'servo ticks need unit = "ticks" with zero_ticks and ticks_per_rev',
              "rad": 'degrees need unit = "deg", servo ticks unit = "ticks"',
              "ticks": "check zero_ticks and ticks_per_rev",
-             "m": 'millimetres need unit = "mm"', "mm": 'metres need unit = "m"'}
+             "m": 'millimetres need unit = "mm"', "mm": 'metres need unit = "m", micrometres unit = "um"',
+             "um": 'millimetres need unit = "mm"'}
     for dof, k in cmap.knobs.items():
         u = cmap.unit(dof)
         if u != probe.unit(dof):  # a bending axis driven by a linear stage: the probe's knob limits are angles
@@ -229,7 +230,8 @@ ANGLE_SPAN_MAX_DEG = 360.0
 
 _KNOB_HINTS = {"deg": 'radians need unit = "rad"',
                "rad": "check the column holds this knob's angle", "ticks": "check ticks_per_rev",
-               "mm": 'metres need unit = "m"', "m": "check the column holds this drive's travel"}
+               "mm": 'metres need unit = "m"', "m": "check the column holds this drive's travel",
+               "um": "check the column holds this drive's travel"}
 
 
 def _gain_max(unit: str) -> float:

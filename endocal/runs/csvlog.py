@@ -72,8 +72,9 @@ from endocal.runs.textable import comment_lines, read_csv_table, sniff_delimiter
 UNFILLED = "FILL IN"
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "datetime": None}  # s per unit; datetime: text stamps
 ANGLE_UNITS = ("deg", "rad", "ticks")
-_SCALE = {"deg": 1.0, "rad": 180.0 / np.pi, "mm": 1.0, "m": 1000.0}  # to the run's deg or mm
-LENGTH_UNITS = {"mm": 1.0, "m": 1000.0}
+_SCALE = {"deg": 1.0, "rad": 180.0 / np.pi, "mm": 1.0, "m": 1000.0, "um": 1e-3}  # to the run's deg or mm
+#: mm per unit of a length: a stage's travel or an EM position (``um``: micrometres, a piezo stage's)
+LENGTH_UNITS = {"mm": 1.0, "m": 1000.0, "um": 1e-3}
 #: Units of a bending axis' drive: a knob's angle (kept in deg), or a linear stage's tendon
 #: displacement (kept in mm).
 DRIVE_UNITS = (*ANGLE_UNITS, *LENGTH_UNITS)

@@ -74,7 +74,7 @@ _SENSORS = {"tip": {"tip", "distal", "sensor1", "s1"}, "base": {"base", "proxima
 _AXES = {"x", "y", "z", "px", "py", "pz"}
 _QUAT = {"qw": "w", "qx": "x", "qy": "y", "qz": "z", "q0": "w", "q1": "x", "q2": "y", "q3": "z"}
 _ROTATION = {"q", "quat", "quaternion", "orientation", "rotation", "rot"}
-_LENGTH_UNIT = {"mm": "mm", "m": "m"}
+_LENGTH_UNIT = {"mm": "mm", "m": "m", "um": "um"}
 #: words of an EM sensor's pose columns (``field.base.pose.position.x``): never a knob
 _POSE_WORDS = {"tip", "distal", "base", "proximal", "pose", "orientation", "quaternion", "quat", "quality"}
 #: words of columns that are never a knob's position: a goal, what the drive exerts (current, torque,
@@ -552,7 +552,7 @@ def _linear_unit(df: pd.DataFrame, col: str) -> tuple[str, str]:
 def _knob_unit(w: _Writer, df: pd.DataFrame, col: str, axis: str) -> str:
     """Write a knob's unit (and its tick keys, direction); return the unit written."""
     named = unit_named(col)
-    if named in ("mm", "m"):
+    if named in ("mm", "m", "um"):
         unit, why = named, ""
     elif named is None and set(words(col)) & _LINEAR:
         unit, why = _linear_unit(df, col)
@@ -560,7 +560,7 @@ def _knob_unit(w: _Writer, df: pd.DataFrame, col: str, axis: str) -> str:
         unit, why = _angle_unit(df, col, ticks_ok=True)
         if why and unit != "ticks":  # nothing in the name says angle or length
             why += "; or mm, if the drive is a linear stage"
-    w.key("unit", unit, "deg, rad, ticks, or mm for a linear drive", check=why, where=f"[knobs.{axis}] ")
+    w.key("unit", unit, "deg, rad, ticks, or mm (m, um) for a linear drive", check=why, where=f"[knobs.{axis}] ")
     if unit == "ticks":
         w.key("zero_ticks", 2048, check="the tick count with the knob at 0 deg (probe straight)",
               where=f"[knobs.{axis}] ")
