@@ -29,7 +29,7 @@ def import_csv_cmd(
     explain: bool = typer.Option(False, "--explain", "-v", help=EXPLAIN_HELP + " Adds which column became which."),
 ) -> None:
     """Convert a lab's CSV log into a run folder: knob positions (deg, rad or servo ticks) or a
-    linear stage's tendon displacement (mm or m, kept in mm), optional goals and currents, tip and
+    linear stage's tendon displacement (mm, m or um, kept in mm), optional goals and currents, tip and
     base EM poses (mm or m, quaternions xyzw or wxyz).
 
     Bending angles come from the poses by thesis eq. 1, as for endocal's own runs; every later

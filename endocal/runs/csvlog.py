@@ -3,7 +3,7 @@
 Labs log their rigs as plain CSV: a clock (or none), knob positions in whatever unit the
 servo reports, perhaps the goals sent and the motor currents, and the raw EM poses of the tip
 and base sensors. A bending axis may be driven by a linear stage pulling its tendon instead of
-a knob (``unit = "mm"`` or ``"m"``): its command stays in millimetres through the run
+a knob (``unit = "mm"``, ``"m"`` or ``"um"``): its command stays in millimetres through the run
 (``<axis>_goal_mm``, ``<axis>_cmd_mm``, ``drive_units`` in ``run.json``), and the models fitted
 on it record the unit (:mod:`endocal.runs.aligned`). A *map* (TOML, see
 ``configs/csv-map.example.toml``) says which column is what and in which unit; :func:`import_csv`
