@@ -418,3 +418,16 @@ def test_a_units_row_under_the_header_is_one_line(sep, tmp_path):
     one_line_exit_2(endocal("import", "csv", tmp_path / "u.csv", "--map", tmp_path / "map.toml", "--out",
                             tmp_path / "u.parquet"), "line 2 under the header", "a units row?")
     assert not (tmp_path / "u.parquet").exists()
+
+
+def test_two_columns_that_could_each_be_the_drive_are_a_marked_choice():
+    """A motor's encoder and the stage's travel of one drive (``Motor Pos``, ``Tendon Disp.``): the
+    draft takes the one named for the driving side, and marks the choice naming the other."""
+    from endocal.runs.mapdraft import draft_map
+
+    log = tendon_log(3, duration_s=10.0)
+    log.insert(2, "Motor Pos", DEG_PER_MM * log["Tendon Disp."])
+    d = draft_map(log)
+    assert tomllib.loads(d.text)["knobs"]["ap"]["position"] == "Motor Pos"
+    check = next(c for c in d.checks if c.startswith("[knobs.ap] position"))
+    assert "also: Tendon Disp." in check, check

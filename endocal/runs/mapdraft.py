@@ -405,8 +405,9 @@ class _Drafter:
                          key=lambda c: not set(words(c)) & (_POSITION - {"angle"}))
         if drive:
             pos = drive[0]
-            if len(drive) > 1:
-                check = f"of {', '.join(drive)}, the first named for the driving side is taken"
+            others = list(dict.fromkeys(c for c in drive + linear + generic if c != pos))
+            if others:  # a motor's encoder and a stage's travel, say: which one the fit is to take is the user's
+                check = f"the first named for the driving side is taken (also: {', '.join(others)})"
         elif linear:
             pos = linear[0]
             word = next((x for x in words(pos) if x in DISPLACEMENT_WORDS), None) or next(
