@@ -16,12 +16,13 @@ $(STAMP): pyproject.toml
 install: $(STAMP)
 
 # One worker per core (pytest-xdist); a test file stays on one worker, so its module fixtures run once.
+# Files in collection order, the longest first (tests/conftest.py, LONGEST_FIRST), not by test count.
 test: $(STAMP)
-	$(BIN)/python -m pytest -n auto --dist loadfile --durations=12
+	$(BIN)/python -m pytest -n auto --dist loadfile --no-loadscope-reorder --durations=12
 
 # The suites marked slow (minutes each: the closed loop of hidden effects), outside `make test`.
 test-slow: $(STAMP)
-	$(BIN)/python -m pytest -n auto --dist loadfile -m slow --durations=12
+	$(BIN)/python -m pytest -n auto --dist loadfile --no-loadscope-reorder -m slow --durations=12
 
 # The wheel a user installs: built (sdist, then wheel), installed into a fresh venv, and run outside
 # the source tree (`endocal --help`, the demo's first command); scripts/wheel_check.sh.

@@ -16,12 +16,18 @@ import pyarrow.dataset as ds
 import pytest
 
 from endocal.runs.aligned import load_aligned
+from tests._cli import endocal as in_process
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def endocal(*args, cwd=None, timeout=300):
-    """Run the installed command line exactly as a user would."""
+    """Run the installed command line exactly as a user would, in a child process.
+
+    The first run and the signal tests go through it; the other tests run the same root app
+    in this process (``in_process``, tests/_cli.py: the same parsing, errors and exit codes,
+    without a Python start-up and a numba cache load per command).
+    """
     return subprocess.run(
         [sys.executable, "-m", "endocal", *map(str, args)],
         capture_output=True,
@@ -67,7 +73,7 @@ def test_excite_on_the_simulator_writes_a_complete_run(tmp_path):
 
 def test_same_seed_same_run_other_seed_other_noise(tmp_path):
     for name, seed in (("a", 1), ("b", 1), ("c", 2)):
-        assert endocal("excite", "triangle", "--out", tmp_path / name, "--seed", seed, "--set", "cycles=1").returncode == 0
+        assert in_process("excite", "triangle", "--out", tmp_path / name, "--seed", seed, "--set", "cycles=1").returncode == 0
     a, b, c = (load_aligned(tmp_path / n).table for n in "abc")
     pd.testing.assert_frame_equal(a, b)
     assert not np.allclose(a["ap_meas_deg"], c["ap_meas_deg"])
@@ -103,18 +109,18 @@ def test_bad_input_gets_one_line_and_exit_2(tmp_path, args, fragments):
     pd.DataFrame({"t_s": [0.0, 0.1], "ap_deg": [1.0, 2.0]}).to_csv(tmp_path / "nocols.csv", index=False)
     pd.DataFrame({"t_s": [0.0, 0.1, 0.2], "ap_cmd_deg": [0, 1, 2], "ap_meas_deg": [0, 1, np.nan]}).to_csv(tmp_path / "nan.csv", index=False)
     pd.DataFrame({"t_s": [0.0, 0.2, 0.1], "ap_cmd_deg": [0, 1, 2], "ap_meas_deg": [0, 1, 2]}).to_csv(tmp_path / "backwards.csv", index=False)
-    proc = endocal(*[a.replace("{tmp}", str(tmp_path)) for a in args])
+    proc = in_process(*[a.replace("{tmp}", str(tmp_path)) for a in args])
     one_line_error(proc, *fragments)
     assert not (tmp_path / "r").exists()  # nothing half-written
 
 
 def test_existing_output_is_kept_unless_forced(tmp_path):
     run = tmp_path / "r"
-    assert endocal("excite", "triangle", "--out", run, "--set", "cycles=1").returncode == 0
+    assert in_process("excite", "triangle", "--out", run, "--set", "cycles=1").returncode == 0
     before = (run / "run.json").read_text()
-    one_line_error(endocal("excite", "triangle", "--out", run, "--set", "cycles=1"), "already exists", "--force")
+    one_line_error(in_process("excite", "triangle", "--out", run, "--set", "cycles=1"), "already exists", "--force")
     assert (run / "run.json").read_text() == before
-    assert endocal("excite", "triangle", "--out", run, "--set", "cycles=1", "--force").returncode == 0
+    assert in_process("excite", "triangle", "--out", run, "--set", "cycles=1", "--force").returncode == 0
 
 
 def test_kill_9_loses_at_most_two_seconds(tmp_path):
@@ -193,12 +199,13 @@ def test_out_of_range_on_excite_model_errors_by_default_and_clamps_on_request(tm
     # The sample triangle run spans +-45 deg of knob: a linear model fitted on it cannot reach
     # the protocol's larger desired angles without leaving that range.
     model = tmp_path / "lin.json"
-    fit = endocal("fit", "hysteresis", ROOT / "data_samples" / "sim-triangle", "--model", "linear", "--axis", "ap",
+    fit = in_process("fit", "hysteresis", ROOT / "data_samples" / "sim-triangle", "--model", "linear", "--axis", "ap",
                   "--out", model)
     assert fit.returncode == 0, fit.stderr
-    refused = endocal("excite", "triangle", "--model", model, "--axes", "ap", "--out", tmp_path / "r1")
+    refused = in_process("excite", "triangle", "--model", model, "--axes", "ap", "--out", tmp_path / "r1")
     one_line_error(refused, "outside the fitted command range", "--out-of-range clamp")
     assert not (tmp_path / "r1").exists()
+    # in a child process: its stderr holds every warning the run raised, not only those the command prints
     clamped = endocal("excite", "triangle", "--model", model, "--axes", "ap", "--out-of-range", "clamp",
                       "--out", tmp_path / "r2", "-q")
     assert clamped.returncode == 0, clamped.stderr
@@ -208,13 +215,13 @@ def test_out_of_range_on_excite_model_errors_by_default_and_clamps_on_request(tm
     assert meta["protocol"]["out_of_range"] == {"ap": "clamp"}
     cmd = load_aligned(tmp_path / "r2").table["ap_cmd_deg"].to_numpy()
     assert np.abs(cmd).max() <= 45.0 + 0.5  # clamped to the fitted range (0.5 deg: servo resolution and lag)
-    one_line_error(endocal("excite", "triangle", "--out-of-range", "clamp", "--out", tmp_path / "r3"), "--model")
-    one_line_error(endocal("excite", "triangle", "--model", model, "--out-of-range", "wrap", "--out", tmp_path / "r4"),
+    one_line_error(in_process("excite", "triangle", "--out-of-range", "clamp", "--out", tmp_path / "r3"), "--model")
+    one_line_error(in_process("excite", "triangle", "--model", model, "--out-of-range", "wrap", "--out", tmp_path / "r4"),
                    "--out-of-range must be one of")
     # a model of the axis the protocol holds still: nothing it moves would be compensated
     other = json.loads(model.read_text())
     other["axis"] = "ml"
     (tmp_path / "ml.json").write_text(json.dumps(other))
-    one_line_error(endocal("excite", "triangle", "--model", tmp_path / "ml.json", "--axes", "ap", "--out",
+    one_line_error(in_process("excite", "triangle", "--model", tmp_path / "ml.json", "--axes", "ap", "--out",
                            tmp_path / "r5"), "are for axis 'ml', but this protocol moves ap", "--axes ml")
     assert not (tmp_path / "r5").exists()

@@ -10,7 +10,8 @@ import pytest
 
 from endocal.models import load_model
 from endocal.runs.aligned import load_aligned
-from tests.test_cli_excite import endocal, one_line_error
+from tests._cli import endocal  # in-process: the same parsing, errors and exit codes, without a start-up per call
+from tests.test_cli_excite import one_line_error
 
 
 @pytest.fixture(scope="module")

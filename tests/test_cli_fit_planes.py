@@ -9,7 +9,8 @@ import pytest
 from endocal.planes import load_planes
 from endocal.runs.aligned import load_aligned
 from endocal.sim import SimConfig
-from tests.test_cli_excite import endocal, one_line_error
+from tests._cli import endocal  # in-process: the same parsing, errors and exit codes, without a start-up per call
+from tests.test_cli_excite import one_line_error
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,8 @@ from endocal.fitting import fit_hysteresis
 from endocal.probe import PRESETS
 from endocal.protocols import load_protocol
 from endocal.validation.playback import validate_on_backend
-from tests.test_cli_excite import endocal, one_line_error
+from tests._cli import endocal  # in-process: the same parsing, errors and exit codes, without a start-up per call
+from tests.test_cli_excite import one_line_error
 
 PROBE = PRESETS["tee"]
 

@@ -1,5 +1,6 @@
 """Real measured hysteresis nobody here generated: the piezo slice in data_samples/piezo."""
 
+import functools
 import json
 import re
 from pathlib import Path
@@ -39,6 +40,20 @@ def _cycle(data, k):
     part = data.table.iloc[200 * k: 200 * (k + 1)].copy()
     part["t_s"] -= part["t_s"].iloc[0]
     return AlignedData(part.reset_index(drop=True), ["piezo"], Path(f"cycle{k}.csv"), str(k) * 64, {})
+
+
+@functools.cache
+def _pi_from_cycle_0_on_cycle_4():
+    """`pi` fitted on cycle 0 (the recording's first, a step from the stack's rest) and validated on
+    cycle 4, estimation data cycle 0: (the model, the validation), shared by the tests that read it."""
+    from endocal.models import make_model
+    from endocal.validation.data import axis_data
+    from endocal.validation.offline import validate_offline
+
+    data = load_aligned(PIEZO)
+    train = [_cycle(data, 0)]
+    model = make_model("pi", axis="piezo").fit(axis_data(train, "piezo"))
+    return model, validate_offline(model, [_cycle(data, 4)], train=train, model_path="m.json")
 
 
 @pytest.mark.parametrize("est", [0, 7, 16])
@@ -135,15 +150,7 @@ def test_a_residual_that_follows_the_loop_is_never_called_nothing_missing():
     cycle 4 (0.59 from other cycles) and no candidate repairs it. Its residual stays correlated
     for 0.065 s, a fifth of the time between reversals (interpolated sensor noise: a few samples),
     so validate must not read "nothing is missing" off the scan alone."""
-    from endocal.models import make_model
-    from endocal.validation.data import axis_data
-    from endocal.validation.offline import validate_offline
-    from endocal.validation.predict import predict_extrapolated
-
-    data = load_aligned(PIEZO)
-    train = [_cycle(data, 0)]
-    model = make_model("pi", axis="piezo").fit(axis_data(train, "piezo"))
-    res = validate_offline(model, [_cycle(data, 4)], train=train, model_path="m.json")
+    res = _pi_from_cycle_0_on_cycle_4()[1]
     assert not res.suspects and not res.clean
     assert "the residual is not noise" in res.unexplained and "of a half-cycle" in res.unexplained
 
@@ -188,15 +195,8 @@ def test_a_start_neither_history_explains_is_still_said():
     nor a cut from the periodic drive gives (the estimated start leaves its first stretch far
     worse than the rest of it, so it is not taken). validate keeps the rest start and says the
     stretch before the first reversal measures the start."""
-    from endocal.models import make_model
-    from endocal.validation.data import axis_data
-    from endocal.validation.offline import validate_offline
-
-    data = load_aligned(PIEZO)
-    train = [_cycle(data, 0)]
-    model = make_model("pi", axis="piezo").fit(axis_data(train, "piezo"))
+    model, res = _pi_from_cycle_0_on_cycle_4()
     assert not model.fit_report_.estimated_starts
-    res = validate_offline(model, [_cycle(data, 4)], train=train, model_path="m.json")
     said = [n for n in res.notes if n.startswith("the estimation record starts")]
     assert len(said) == 1 and "No start tried predicts it" in said[0], res.notes
     before, after = (float(x) for x in re.findall(r"is ([\d.]+) deg RMS, [\d.]+x the ([\d.]+) deg", said[0])[0])

@@ -24,7 +24,7 @@ from endocal.runs.aligned import load_aligned
 from endocal.validation.data import axis_data
 from endocal.validation.metrics import error_metrics
 from endocal.validation.offline import validate_offline
-from tests.test_cli_excite import endocal
+from tests._cli import endocal  # in-process: the same parsing, errors and exit codes, without a start-up per call
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,8 @@ import pandas as pd
 import pytest
 
 from endocal.runs.aligned import load_aligned, read_stream
-from tests.test_cli_excite import endocal, one_line_error
+from tests._cli import endocal  # in-process: the same parsing, errors and exit codes, without a start-up per call
+from tests.test_cli_excite import one_line_error
 
 rosbags = pytest.importorskip("rosbags")
 from rosbags.rosbag2 import Writer  # noqa: E402

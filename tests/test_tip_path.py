@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import shlex
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -31,8 +32,8 @@ ROOT = Path(__file__).resolve().parents[1]
 TEE = PRESETS["tee"]
 
 
-def endocal(*args, ok=True, env=None):
-    proc = run_endocal(*args, env=env)
+def endocal(*args, ok=True):
+    proc = run_endocal(*args)
     if ok:
         assert proc.returncode == 0, (args, proc.stdout, proc.stderr)
     return proc
@@ -133,7 +134,7 @@ def calibrated(tmp_path_factory):
 
 
 @pytest.mark.parametrize("name", ["circle-1", "circle-2"])
-def test_circles_within_a_millimetre_with_the_loops_models(calibrated, name):
+def test_circles_within_a_millimetre_with_the_loops_models(calibrated, name, monkeypatch):
     tmp, models = calibrated
     (ap_lin, ap_best), (ml_lin, ml_best) = models["ap"], models["ml"]
     out = tmp / f"{name}.json"
@@ -155,7 +156,9 @@ def test_circles_within_a_millimetre_with_the_loops_models(calibrated, name):
     if name == "circle-1":  # without --planes the models' recorded planes are played: the same walk
         same, scratch = tmp / "same.json", tmp / "scratch"
         scratch.mkdir()
-        endocal("validate", ap_best, ml_best, "--trajectory", name, "--json-out", same, env={"TMPDIR": str(scratch)})
+        with monkeypatch.context() as mp:  # the temporary folder of this process, as TMPDIR sets a new one's
+            mp.setattr(tempfile, "tempdir", str(scratch))
+            endocal("validate", ap_best, ml_best, "--trajectory", name, "--json-out", same)
         assert json.loads(same.read_text())["metrics"] == best
         # without --runs-out the walk is logged to a temporary folder and nothing is left behind
         assert not list(scratch.glob("endocal-path-*")) and json.loads(same.read_text())["walks"][0]["run"] is None

@@ -30,6 +30,17 @@ from endocal.models.effects.base import Effect
 from endocal.models.params import Parameter, fmt_value
 
 
+def _design_matrix(x: np.ndarray, t: np.ndarray, k: int):
+    """:meth:`BSpline.design_matrix` (sparse, ``(n, len(t) - k - 1)``) at points ``x`` already clipped to the
+    base interval ``[t[k], t[-k - 1]]``.
+
+    There ``extrapolate=True`` finds the same knot intervals, so the matrix is the same to the bit;
+    it skips scipy's bounds check, whose Python ``min``/``max`` over the array took a tenth of a
+    B-spline fit's time (every evaluation of a model with a delay or a rate term builds the matrix).
+    """
+    return BSpline.design_matrix(x, t, k, extrapolate=True)
+
+
 def _lsq_spline(t: np.ndarray, k: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """A non-decreasing spline by bounded linear least squares, lightly regularised.
 
@@ -37,7 +48,7 @@ def _lsq_spline(t: np.ndarray, k: int, x: np.ndarray, y: np.ndarray) -> np.ndarr
     penalty on the increments' differences (the coefficients' second differences)
     settles empty knot spans.
     """
-    B = BSpline.design_matrix(np.clip(x, t[k], t[-k - 1]), t, k).toarray()
+    B = _design_matrix(np.clip(x, t[k], t[-k - 1]), t, k).toarray()
     m = B.shape[1]
     A = B @ np.tril(np.ones((m, m)))
     lam = 1e-8 * max(1.0, float(np.trace(B.T @ B)) / m)
@@ -172,7 +183,7 @@ class BSplineModel(DirectionalModel):
         # slopes in v: f' = Σ k (c_{i+1} - c_i)/(t_{i+k+1} - t_{i+1}) B_{i,k-1} (de Boor), at v
         # clipped to the base interval: beyond it the branches continue along their end tangents
         vc = np.clip(v, t[k], t[-k - 1])
-        B1 = BSpline.design_matrix(vc, t[1:-1], k - 1)
+        B1 = _design_matrix(vc, t[1:-1], k - 1)  # t[1:-1] has the same base interval
         scale = k / (t[k + 1:k + m] - t[1:m])
         d_up = B1 @ (scale * np.diff(c_up))
         d_dn = B1 @ (scale * np.diff(c_dn))
@@ -192,7 +203,7 @@ class BSplineModel(DirectionalModel):
             return cache[2], cache[3]
         a, b = t[k], t[-k - 1]
         vc = np.clip(v, a, b)
-        B = BSpline.design_matrix(vc, t, k).tocsr()
+        B = _design_matrix(vc, t, k).tocsr()
         m = len(t) - k - 1
         # end tangents: f'(a) = k (c1 - c0)/(t[k+1] - t[1]),  f'(b) = k (c[m-1] - c[m-2])/(t[m+k-1] - t[m-1])
         # built sparse from the samples beyond the interval (two entries each): a dense (n, m) array
