@@ -109,7 +109,7 @@ def geometry_backend(tee):
 LONGEST_FIRST = (
     "test_validation_hidden.py", "test_tip_path.py", "test_validation_user_style.py", "test_models_effects_catalog.py",
     "test_validate_split.py", "test_emulate_rig.py", "test_validate_thesis.py", "test_mutations.py",
-    "test_validate_split_conditions.py", "test_cli_excite.py", "test_real_data.py", "test_real_data_followed.py",
+    "test_validate_split_conditions.py", "test_import_csv_variety.py", "test_cli_excite.py", "test_real_data.py", "test_real_data_followed.py",
     "test_compensation.py", "test_api.py", "test_validate_dirty.py", "test_tutorial_notebook.py",
     "test_hardware_wire.py", "test_mutations_commands.py", "test_next_experiment.py", "test_validation_units.py",
 )
