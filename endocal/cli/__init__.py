@@ -36,8 +36,9 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
-    # help text is Markdown: paragraphs reflow to the terminal (with Rich markup a docstring's
-    # line breaks stay and wrap raggedly) and `[angles.AXIS]` prints as written
+    # help in Click's plain format: paragraphs reflow to the terminal and `[angles.AXIS]` prints as
+    # written; Typer's rich help imports rich's console, Markdown and traceback renderers, half of
+    # the start-up (tests/test_cli_startup.py, bench/bench_startup.py)
     rich_markup_mode=None,
 )
 

@@ -19,6 +19,7 @@ HARDWARE_EXIT_CODE = 3
 
 F = TypeVar("F", bound=Callable)
 
+
 class _Console:
     """A :class:`rich.console.Console` made on first use: importing rich's console costs a tenth
     of ``endocal --help``'s start-up, and help never prints through it."""
