@@ -46,6 +46,7 @@ being the function halfway through a session.
 from __future__ import annotations
 
 import json
+from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -76,11 +77,12 @@ def _refuse_existing(path: Path, force: bool) -> None:
         raise OutputExistsError(f"{path} already exists: choose another path or pass force=True")
 
 
-class _Result:
+class _Result(ABC):
     """What every result shares: `to_json`, its `to_dict` as strict JSON."""
 
+    @abstractmethod
     def to_dict(self) -> dict:
-        raise NotImplementedError
+        """The result as plain data: what the command's `--json` prints."""
 
     def to_json(self) -> str:
         """`to_dict` as strict JSON (NaN as null), indented: what the command's `--json` prints."""
@@ -92,8 +94,9 @@ class _Saved(_Result):
 
     path: Path | None = None
 
+    @abstractmethod
     def _write(self, path: Path) -> None:
-        raise NotImplementedError
+        """Write the file to `path` (refusing an existing one is `save`'s)."""
 
     def save(self, path: str | Path, *, force: bool = False) -> Path:
         """Write the file the command's `--out` writes (versioned JSON, whole or not at all).
