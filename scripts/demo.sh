@@ -44,8 +44,10 @@ for round in 1 2 3 4; do
   step "add the suspected effect: the exact command validate printed" "${argv[@]}" --force
   models+=("$model")
 done
+step "what these records cannot show (the other knob never moved, the sheath's wrap never changed): the protocol that would, for excite to record" \
+  $E validate "$model" "$OUT/test" "$OUT/check" --next "$OUT/next.toml"
 step "feedforward compensation on the simulator (desired vs reached angle)" \
   $E validate "$model" --protocol triangle --set amplitude_deg=40 --runs-out "$OUT/playback"
 step "report" \
   $E report "${models[@]}" --data "$OUT/check" --data "$OUT/test" --planes "$OUT/planes.json" --out "$OUT/report.html" --force
-printf '\nResults are in %s/: runs (run.json, motor/, tracker/, truth/, aligned.parquet), planes.json, model files, report.html\n' "$OUT"
+printf '\nResults are in %s/: runs (run.json, motor/, tracker/, truth/, aligned.parquet), planes.json, model files, next.toml, report.html\n' "$OUT"

@@ -16,6 +16,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -79,8 +80,9 @@ def test_validate_writes_a_protocol_for_what_the_records_cannot_show(loop):
     assert f"{n_min} half-cycles" in by_effect["coupling"]["sized"]
     # the validate output says what it tests and how to record it, twice
     assert "Next experiment written to" in proc.stdout and "coupling (untestable)" in proc.stdout
-    assert f"endocal excite {tmp / 'next.toml'} --out next-fit --set sheath_wrap_deg=VALUE" in proc.stdout
-    assert "--out next-val --seed 1 --set sheath_wrap_deg=VALUE" in proc.stdout
+    # (the run folders beside the protocol file)
+    assert f"endocal excite {tmp / 'next.toml'} --out {tmp / 'next-fit'} --set sheath_wrap_deg=VALUE" in proc.stdout
+    assert f"--out {tmp / 'next-val'} --seed 1 --set sheath_wrap_deg=VALUE" in proc.stdout
 
 
 def test_every_goal_stays_inside_the_fitted_range_and_the_probe_limits(loop):
@@ -224,11 +226,11 @@ def test_the_json_says_what_was_designed_and_how_to_record_it(loop):
             assert t["needed_half_cycles"] is None and t["needed"].startswith("no length will"), t
     assert {t["effect"] for t in nx["tests"] if t["gain_pct"] is None} >= {"coupling", "load:sheath_wrap_deg"}
     # the excite command lines, as printed
-    assert nx["excite"][0] == ["endocal", "excite", str(tmp / "next.toml"), "--out", "next-fit", "--set",
+    assert nx["excite"][0] == ["endocal", "excite", str(tmp / "next.toml"), "--out", str(tmp / "next-fit"), "--set",
                                "sheath_wrap_deg=VALUE"]
     for line in nx["excite_commands"]:
         assert f"  {line}\n" in proc.stdout
-    assert nx["excite_commands"][1].endswith("--out next-val --seed 1 --set sheath_wrap_deg=VALUE")
+    assert nx["excite_commands"][1].endswith(f"--out {tmp / 'next-val'} --seed 1 --set sheath_wrap_deg=VALUE")
 
 
 def test_the_api_designs_the_same_experiment(loop, tmp_path):
@@ -245,7 +247,11 @@ def test_the_api_designs_the_same_experiment(loop, tmp_path):
         return {k: v for k, v in d.items() if k not in ("path", "excite", "excite_commands")}
 
     assert strip(ours) == strip(cli)
-    assert [list(a[3:]) for a in v.next.excite] == [a[3:] for a in cli["excite"]]  # the same runs, another file
+    def beside(args, folder):  # the run folders, relative to the protocol file's folder
+        return [str(Path(x).relative_to(folder)) if prev == "--out" else x for prev, x in zip(["", *args], args)]
+
+    # the same runs, another file, the runs beside it
+    assert [beside(a[3:], tmp_path) for a in v.next.excite] == [beside(a[3:], tmp) for a in cli["excite"]]
     assert f"next: {tmp_path / 'next.toml'} written (" in repr(v) and "; .next.excite records it" in repr(v)
     assert v.next.experiment.tests[0].needed  # the object, not only its dict
 
@@ -295,8 +301,6 @@ def test_the_summary_points_at_next_when_only_untested_effects_remain(loop, monk
 def test_the_summary_points_at_next_only_where_next_can_design(loop):
     """The pointer is a command that works: for a model --next would refuse (an axis no knob of the
     probe drives: the real piezo stack's), the summary says each experiment in words instead."""
-    from pathlib import Path
-
     from endocal.cli.validate import _next_command
     from endocal.validation.data import axis_data
 

@@ -785,12 +785,12 @@ class NextOutcome:
 
 def excite_args(path: str | Path, nx: NextExperiment) -> tuple[tuple[str, ...], ...]:
     """The ``endocal excite`` argument lists that record ``nx`` written at ``path``: ``STEM-fit``
-    (estimation) and ``STEM-val`` (validation, seed 1)."""
+    (estimation) and ``STEM-val`` (validation, seed 1), run folders beside the protocol file."""
     path = Path(path)
     args = ["endocal", "excite", str(path)] + (["--probe", nx.probe] if nx.probe != "tee" else [])
     sets = [a for k in nx.conditions for a in ("--set", f"{k}=VALUE")]
-    return ((*args, "--out", f"{path.stem}-fit", *sets),
-            (*args, "--out", f"{path.stem}-val", "--seed", "1", *sets))
+    return ((*args, "--out", str(path.with_name(f"{path.stem}-fit")), *sets),
+            (*args, "--out", str(path.with_name(f"{path.stem}-val")), "--seed", "1", *sets))
 
 
 def write_next(model: HysteresisModel, result, tables: Sequence, train_tables: Sequence | None, planes,
