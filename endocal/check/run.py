@@ -20,7 +20,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from endocal.check.charts import BASELINE_CHECKS, ProbeCharts, probe_charts
-from endocal.check.store import History, HistoryError, check_probe_id, models_json
+from endocal.check.store import HistoryError, HistoryFolder, check_probe_id, models_json
 from endocal.errors import ModelError, RunFormatError
 
 #: Exit codes of ``endocal check`` by state (issue 34: 0 in control, 4 drifting or out of control).
@@ -78,7 +78,7 @@ class Prepared:
     """A check ready to score: its probe, models, run and what the history already holds."""
 
     probe_id: str
-    history: History
+    history: HistoryFolder
     models: ProbeModels
     past: object  # DataFrame: this probe's rows
     run_dir: Path | None = None
@@ -181,7 +181,7 @@ def prepare(probe_id: str, history: str | Path, models: ProbeModels, *, probe_ty
         calibration in this history.
     """
     check_probe_id(probe_id)
-    hist = History(history)
+    hist = HistoryFolder(history)
     read = hist.read(probe_id)
     if read.corrupt:
         raise HistoryError(f"{read.corrupt_line().split(': its checks')[0]}: no row appended (this probe's control "
@@ -199,7 +199,7 @@ def prepare(probe_id: str, history: str | Path, models: ProbeModels, *, probe_ty
     return Prepared(probe_id, hist, models, past)
 
 
-def _refuse_other_probes_model(hist: History, probe_id: str, models: ProbeModels, where) -> None:
+def _refuse_other_probes_model(hist: HistoryFolder, probe_id: str, models: ProbeModels, where) -> None:
     """A model file that is another probe's calibration in this history is refused: every probe's tendons differ."""
     import pyarrow.parquet as pq
 
@@ -306,25 +306,10 @@ def excite_check(prep: Prepared, *, backend: str = "sim", probe: str = "tee", se
 
 
 def score_prepared(prep: Prepared) -> dict:
-    """The check's figures (no I/O: a Dask task runs this)."""
-    from endocal.check.scoring import score_check
+    """The check's figures (:func:`endocal.check.scoring.check_figures`)."""
+    from endocal.check.scoring import check_figures
 
-    scores = score_check(prep.aligned, prep.models.models)
-    figures = {}
-    for s in scores.values():
-        figures.update(s.figures())
-    return figures
-
-
-def _since_calibration(past, calibration: str):
-    """This calibration's rows (oldest first): the trailing rows recorded against the same models."""
-    if not len(past):
-        return past
-    keys = past["calibration"].to_numpy()
-    k = len(keys)
-    while k > 0 and keys[k - 1] == calibration:
-        k -= 1
-    return past.iloc[k:]
+    return check_figures(prep.aligned, prep.models.models)
 
 
 def commit(prep: Prepared, figures: Mapping, *, probe_label: str | None = None) -> CheckResult:
@@ -337,6 +322,7 @@ def commit(prep: Prepared, figures: Mapping, *, probe_label: str | None = None) 
     """
     import pandas as pd
 
+    from endocal.check.summary import since_calibration
     from endocal.runs.probes import probe_of
 
     meta = getattr(prep.aligned, "meta", {}) or {}
@@ -351,7 +337,7 @@ def commit(prep: Prepared, figures: Mapping, *, probe_label: str | None = None) 
     with prep.history.locked():
         past = prep.history.read(prep.probe_id).rows  # again under the lock: another writer may have appended
         rows = pd.concat([past, pd.DataFrame([row])], ignore_index=True).sort_values("checked_utc", kind="stable")
-        cal = _since_calibration(rows.reset_index(drop=True), prep.models.calibration)
+        cal = since_calibration(rows.reset_index(drop=True), prep.models.calibration)
         charts = probe_charts(prep.probe_id, cal, list(figures))
         k = int((cal["check_id"] == prep.check_id).to_numpy().nonzero()[0][0])
         state = charts.state_at(k)
@@ -415,17 +401,18 @@ def check_probe(models: Sequence, probe_id: str, history: str | Path, *, run: st
     HistoryError, ModelError, RunFormatError, ProtocolError, LimitError, ConfigError, OutputPathError
         Nothing appended, nothing half-written.
     """
-    pm = load_probe_models(models)
     if run is not None:
-        prep = attach_run(prepare(probe_id, history, pm), run)
-    else:
-        from endocal.probe import load_probe
+        from endocal.check.batch import check_runs
 
-        prep = prepare(probe_id, history, pm, probe_type=load_probe(probe).name)
-        prep = excite_check(prep, backend=backend, probe=probe, seed=seed, sim_config=sim_config,
-                            hardware_config=hardware_config, realtime=realtime, progress=progress)
+        return check_runs([run], history, probe_id=probe_id, models=models)[0]
+    from endocal.probe import load_probe
+
+    pm = load_probe_models(models)
+    prep = prepare(probe_id, history, pm, probe_type=load_probe(probe).name)
+    prep = excite_check(prep, backend=backend, probe=probe, seed=seed, sim_config=sim_config,
+                        hardware_config=hardware_config, realtime=realtime, progress=progress)
     try:
         return commit(prep, score_prepared(prep))
     finally:
-        if prep.source == "check" and prep.run_dir is not None and prep.run_dir.name.endswith(".running"):
+        if prep.run_dir is not None and prep.run_dir.name.endswith(".running"):
             shutil.rmtree(prep.run_dir, ignore_errors=True)

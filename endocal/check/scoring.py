@@ -189,3 +189,11 @@ def score_check(aligned, models: Mapping) -> dict[str, AxisScore]:
                              "(endocal check records one)")
         scores[axis] = score_axis(model, d, axis)
     return scores
+
+
+def check_figures(aligned, models: Mapping) -> dict[str, float]:
+    """Every figure of a check as one flat mapping, ``{"ap_rmse_deg": ..., "ml_bend_neg_deg": ...}``."""
+    figures = {}
+    for s in score_check(aligned, models).values():
+        figures.update(s.figures())
+    return figures

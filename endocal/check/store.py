@@ -78,16 +78,21 @@ class HistoryRead:
 
     def corrupt_line(self) -> str | None:
         """One line naming the unreadable month file(s), or None."""
-        if not self.corrupt:
-            return None
-        path, why = self.corrupt[0]
-        more = f" (and {len(self.corrupt) - 1} more)" if len(self.corrupt) > 1 else ""
-        return (f"{path} is not a readable Parquet file ({why}){more}: its checks are left out; restore it from a "
-                "backup or move it out of the history folder")
+        return corrupt_line(self.corrupt)
 
 
-class History:
-    """A history folder (see the module docstring)."""
+def corrupt_line(corrupt: list) -> str | None:
+    """One line naming unreadable month files (``[(path, why)]``), or None when there are none."""
+    if not corrupt:
+        return None
+    path, why = corrupt[0]
+    more = f" (and {len(corrupt) - 1} more)" if len(corrupt) > 1 else ""
+    return (f"{path} is not a readable Parquet file ({why}){more}: its checks are left out; restore it from a "
+            "backup or move it out of the history folder")
+
+
+class HistoryFolder:
+    """A history folder (see the module docstring): validated, read and appended to."""
 
     def __init__(self, root: str | Path) -> None:
         self.root = Path(root)

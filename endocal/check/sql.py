@@ -1,0 +1,121 @@
+"""SQL over a fleet's history with DuckDB (embedded, no server), read-only.
+
+The whole dataset is the view ``checks`` (every stored column, plus ``probe`` and ``month``
+from the partition paths), so a fleet's questions are one query::
+
+    SELECT probe, max(ap_dead_band_deg) / min(ap_dead_band_deg) - 1 AS growth
+    FROM checks WHERE checked_utc >= '2026-10-29' GROUP BY probe HAVING growth > 0.2
+
+Only a single ``SELECT`` (or ``WITH ... SELECT``) statement runs; anything that could write
+(``COPY``, ``INSERT``, ``CREATE``, ``ATTACH``, ``EXPORT``, ``SET`` ...) is refused before DuckDB
+executes it, so the history is never changed by a query.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from endocal.check.extras import require
+from endocal.check.store import HistoryError, HistoryFolder, corrupt_line
+
+
+class QueryError(HistoryError):
+    """A ``--sql`` query that would write, or that DuckDB cannot run."""
+
+
+@dataclass
+class QueryResult:
+    """A query's rows, and the month files left out because they could not be read."""
+
+    rows: object  # pandas.DataFrame
+    corrupt: list = field(default_factory=list)
+
+    def corrupt_line(self) -> str | None:
+        """One line naming the unreadable month file(s), or None."""
+        return corrupt_line(self.corrupt)
+
+
+def _refuse_writes(duckdb, query: str) -> None:
+    try:
+        statements = duckdb.extract_statements(query)
+    except duckdb.Error as exc:
+        raise QueryError(f"--sql: {_one_line(exc)}") from None
+    if len(statements) != 1:
+        raise QueryError(f"--sql: {len(statements)} statements; give one SELECT over the view checks")
+    kind = statements[0].type
+    if kind != duckdb.StatementType.SELECT:
+        raise QueryError(f"--sql: a {kind.name} statement; the history is read-only: give one SELECT over the view checks")
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split())
+
+
+def _view(con, files: list[Path]) -> None:
+    if files:
+        listing = ", ".join("'" + str(f).replace("'", "''") + "'" for f in files)
+        con.execute(f"CREATE VIEW checks AS SELECT * FROM read_parquet([{listing}], hive_partitioning = true, "
+                    "hive_types = {'probe': VARCHAR, 'month': VARCHAR}, union_by_name = true)")
+    else:
+        con.execute("CREATE VIEW checks AS SELECT NULL::VARCHAR AS probe, NULL::VARCHAR AS month, "
+                    "NULL::VARCHAR AS check_id, NULL::VARCHAR AS checked_utc, NULL::VARCHAR AS state WHERE false")
+
+
+def query(history: str | Path, sql: str) -> QueryResult:
+    """Run one read-only SELECT over the view ``checks`` of a history folder.
+
+    Parameters
+    ----------
+    history : path
+        The history folder.
+    sql : str
+        One ``SELECT`` statement.
+
+    Returns
+    -------
+    QueryResult
+        An unreadable month file is left out and named in ``corrupt`` (the rest is still read).
+
+    Raises
+    ------
+    QueryError
+        A statement that is not one SELECT, or one DuckDB cannot run (its message, one line).
+    HistoryError
+        Foreign files in the history.
+    ExtraMissingError
+        DuckDB is not installed.
+    """
+    duckdb = require("duckdb", "endocal history --sql")
+    _refuse_writes(duckdb, sql)
+    folder = HistoryFolder(history)
+    files = folder.validate()
+    corrupt = []
+    for attempt in range(2):
+        con = duckdb.connect(":memory:")
+        try:
+            _view(con, files)
+            return QueryResult(con.execute(sql).fetchdf(), corrupt)
+        except duckdb.Error as exc:
+            if attempt == 0 and isinstance(exc, (duckdb.IOException, duckdb.InvalidInputException)):
+                bad = _unreadable(files)  # only on a failure: the fast path opens no footer twice
+                if bad:
+                    corrupt = bad
+                    files = [f for f in files if f not in {b for b, _ in bad}]
+                    continue
+            raise QueryError(f"--sql: {_one_line(exc)}") from None
+        finally:
+            con.close()
+    raise AssertionError("unreachable")
+
+
+def _unreadable(files: list[Path]) -> list[tuple[Path, str]]:
+    import pyarrow.parquet as pq
+
+    bad = []
+    for f in files:
+        try:
+            pq.read_table(f)
+        except Exception as exc:  # noqa: BLE001
+            bad.append((f, _one_line(exc)))
+    return bad
