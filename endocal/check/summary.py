@@ -104,3 +104,48 @@ def read_history(root: str | Path) -> FleetHistory:
         raise HistoryError(f"no history folder {root}: give the --history folder of endocal check")
     read = HistoryFolder(root).read()
     return FleetHistory(root, read.rows, read.corrupt)
+
+
+def probes_checked_against(fleet: FleetHistory, sha256s) -> list[str]:
+    """The probes whose latest calibration's checks were scored against any of these model files (by SHA-256)."""
+    import json
+
+    wanted = {s for s in sha256s if s}
+    found = []
+    for pid in fleet.probes:
+        rows = since_calibration(fleet.probe_rows(pid))
+        used = {rec.get("sha256") for text in set(rows["models"]) for rec in json.loads(text).values()}
+        if used & wanted:
+            found.append(pid)
+    return found
+
+
+def report_pages(history: str | Path, sha256s, probe_id: str | None = None):
+    """What ``endocal report --history DIR`` adds: each probe's control charts, ready to draw.
+
+    Parameters
+    ----------
+    history : path
+    sha256s : iterable of str
+        The report's model files: the probes checked against them get a page.
+    probe_id : str, optional
+        The probe to show instead.
+
+    Returns
+    -------
+    pages : list of (probe_id, ProbeCharts)
+    notes : list of str
+        An unreadable month file, named.
+
+    Raises
+    ------
+    HistoryError
+        No probe of the history was checked against these models (and none was named).
+    """
+    fleet = read_history(history)
+    probes = [probe_id] if probe_id is not None else probes_checked_against(fleet, sha256s)
+    if not probes:
+        raise HistoryError(f"no probe in {history} was checked against these models ({', '.join(fleet.probes) or 'no probes'}"
+                           " there): give the probe with --probe ID")
+    notes = [line] if (line := fleet.corrupt_line()) else []
+    return [(p, fleet.charts(p)) for p in probes], notes
