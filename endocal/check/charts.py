@@ -17,20 +17,27 @@ Two departures from the textbook, both to hold the false-alarm bar (issue 34: 50
 unchanged probe raise at most one false alarm) with a baseline of only ten checks:
 
 - **The baseline mean is an estimate.** Its error, ``sigma / sqrt(m)``, is as large as the
-  EWMA's own spread (``sigma sqrt(lambda / (2 - lambda)) = 0.33 sigma`` for ``m = 10``), and it
-  does not average out: with the textbook limits one figure of an unchanged probe flags 3.4 of 50
-  checks on average (Monte Carlo, 3000 baselines). The limits here are those of the deviation from
-  the *estimated* centre, exactly: ``Var(x_i - mu_hat) = sigma^2 (1 + 1/m)`` for the individuals,
+  EWMA's own spread (``sigma sqrt(lambda / (2 - lambda)) = 0.33 sigma``, against ``0.32 sigma``
+  for ``m = 10``), and it does not average out: every later EWMA point carries it. The limits
+  here are those of the deviation from the *estimated* centre, exactly:
+  ``Var(x_i - mu_hat) = sigma^2 (1 + 1/m)`` for the individuals and
   ``Var(z_i - mu_hat) = sigma^2 [lambda / (2 - lambda) (1 - (1 - lambda)^(2 i)) + (1 - (1 - lambda)^i)^2 / m]``
-  for the EWMA started at ``mu_hat`` (the second term is the baseline mean's error carried with
-  weight ``1 - (1 - lambda)^i``). This halves the false alarms (1.6 of 50 for one figure).
-- **Sigma is never below the figure's resolution** (:data:`RESOLUTION`): a check figure that
-  repeats to 0.01 deg on the simulator would otherwise flag a 0.05 deg change no tracker
-  resolves and no clinician would act on.
+  for the EWMA started at ``mu_hat`` (the baseline mean's error carried with weight
+  ``1 - (1 - lambda)^i``).
+- **Sigma is never below the figure's resolution** (:data:`RESOLUTION`): a figure that repeats
+  to 0.01 deg on the simulator would otherwise flag a 0.05 deg change no tracker resolves and no
+  clinician would act on. Where a figure's noise is at or below its resolution (every figure on
+  the simulator), the limits rest on the resolution and the bar holds (tests/test_check_charts.py:
+  99 of 100 simulated probes); where it is above, sigma comes from nine moving ranges, is
+  underestimated often enough to flag 1.8 of 50 checks of one such figure on average, and ten such
+  figures cannot meet the bar with a ten-check baseline.
 
-``L = 3`` rather than 2.7: at ``lambda = 0.2`` an EWMA with ``L = 3`` has an in-control ARL of
-about 500 checks against 370 for the individuals chart, while ``L = 2.7`` has about 150, i.e.
-one false drift every five months of daily checks per figure; a probe has ten figures.
+``L = 3`` rather than 2.7: with sigma known, an EWMA (``lambda = 0.2``, exact limits) of an
+unchanged figure first crosses ``L = 3`` after 555 checks on average, ``L = 2.7`` after 232
+(Monte Carlo, 20,000 runs, 2026-11-28); the individuals chart's 3 sigma after 370. With ten
+figures per check, ``L = 2.7`` alone would spend the bar's one false alarm in 50 checks on the
+EWMAs (``10 * 50 / 232 = 2.2``); ``L = 3`` spends 0.9 of it, and a worn probe still moves its
+figures by many sigmas (tests/test_check_wear.py).
 """
 
 from __future__ import annotations
@@ -51,12 +58,14 @@ I_SIGMAS = 3.0
 D2 = 1.128
 D4 = 3.267
 #: Smallest sigma (in the figure's unit) by figure suffix: the resolution of what a check measures.
-#: Bend-derived figures (deg of bend): 0.1 deg, the repeatability of an EM tracker's orientation
-#: over one check's thousands of samples and a tenth of the smallest bend loss worn endoscopes
-#: show (Rozeboom et al. 2016); the dead band (deg of knob): one motor tick of the check's knob
-#: (4 * 45 deg / 14 s at 100 Hz = 0.13 deg), the step the dead band is read in.
+#: Bend-derived figures (deg of bend): 0.1 deg, the orientation noise of one EM-tracker frame (the
+#: simulated Aurora's, configs/sim-default.toml); the bend reached is read at the loop's ends, a
+#: few frames, and a tenth of a degree is a tenth of the smallest bend loss worn endoscopes show
+#: (Rozeboom et al. 2016). The dead band (deg of knob): the knob's travel between two tracker
+#: frames at the check's speed (4 * 45 deg / 14 s = 12.9 deg/s at 40 Hz: 0.32 deg): when the tip
+#: starts to move is known to one frame, however many checks agree more closely.
 RESOLUTION = {"rmse_deg": 0.1, "loop_width_deg": 0.1, "bend_pos_deg": 0.1, "bend_neg_deg": 0.1,
-              "dead_band_deg": 0.13}
+              "dead_band_deg": 0.32}
 
 STATES = ("baseline", "in control", "drifting", "out of control")
 
@@ -123,15 +132,23 @@ class Chart:
         with np.errstate(invalid="ignore"):
             return self.mr > self.mr_ucl
 
+    def states(self) -> list[str]:
+        """The state of every check by this figure alone, oldest first (computed once)."""
+        cached = self.__dict__.get("_states")
+        if cached is None or len(cached) != self.x.size:
+            n = self.x.size
+            if not self.ready:
+                cached = ["baseline"] * n
+            else:
+                out, drift = self.beyond_i, self.beyond_ewma
+                cached = ["baseline" if k < BASELINE_CHECKS else "out of control" if out[k] else
+                          "drifting" if drift[k] else "in control" for k in range(n)]
+            self.__dict__["_states"] = cached
+        return cached
+
     def state_at(self, k: int) -> str:
         """State of check ``k`` (0-based) by this figure alone."""
-        if not self.ready or k < BASELINE_CHECKS:
-            return "baseline"
-        if self.beyond_i[k]:
-            return "out of control"
-        if self.beyond_ewma[k]:
-            return "drifting"
-        return "in control"
+        return self.states()[k]
 
 
 def chart(figure: str, x, *, baseline: int = BASELINE_CHECKS, lam: float = EWMA_LAMBDA, L: float = EWMA_L,
