@@ -27,10 +27,17 @@ def charts_figure(pc: ProbeCharts, title: str | None = None):
         Points beyond the individuals limits in red, EWMA points beyond its limits in orange;
         the shaded checks set the limits.
     """
-    from endocal.report.figures import _new  # the report's figure: Agg canvas, its DPI, constrained layout
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from endocal.report.figures import DPI, NotebookFigure
 
     names = list(pc.charts)
-    fig = _new(12, 1.9 * max(1, len(names)) + 0.6)
+    height_in = 1.9 * max(1, len(names)) + 0.9
+    # a fixed layout: the constrained one costs seconds on 30 axes
+    fig = NotebookFigure(figsize=(12, height_in), dpi=DPI)
+    FigureCanvasAgg(fig)
+    fig.subplots_adjust(left=0.09, right=0.985, top=1 - 0.85 / height_in, bottom=0.5 / height_in, hspace=0.3,
+                        wspace=0.22)
     axes = fig.subplots(max(1, len(names)), 3, squeeze=False, sharex=True)
     for row, name in zip(axes, names):
         c = pc.charts[name]
@@ -61,5 +68,6 @@ def charts_figure(pc: ProbeCharts, title: str | None = None):
     axes[0][2].set_title("EWMA (lambda 0.2, exact limits)", fontsize=9)
     for ax in axes[-1]:
         ax.set_xlabel("check since calibration")
-    fig.suptitle(title or f"probe {pc.probe_id}: {pc.state}, {pc.n_checks} checks since calibration", fontsize=11)
+    fig.suptitle(title or f"probe {pc.probe_id}: {pc.state}, {pc.n_checks} checks since calibration", fontsize=11,
+                 y=1 - 0.2 / height_in)
     return fig
