@@ -255,3 +255,16 @@ def test_a_batch_is_refused_whole_before_anything_is_appended(fleet, tmp_path):
     (plain / "run.json").write_text(json.dumps(meta))
     _refused(h, "check", "--run", plain, "--run", fleet["later"]["B"], "--history", h,
              fragments=("names no probe ID",))
+
+
+def test_a_month_file_changed_by_hand_is_read_not_the_probes_stale_copy(fleet, tmp_path):
+    import pyarrow.parquet as pq
+
+    h = _copy(fleet, tmp_path)
+    assert (h / "probe=A" / "_checks.parquet").is_file()  # every append keeps it
+    f = next((h / "probe=A").glob("month=*/checks.parquet"))
+    pq.write_table(pq.read_table(f).slice(0, 1), f)  # a backup restored: one check of A
+    res = endocal("history", h, "--sql", "SELECT probe, count(*) AS n FROM checks GROUP BY probe ORDER BY probe")
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.split()[2:] == ["A", "1", "B", "2"]
+    assert endocal("history", h).stdout.splitlines()[1].split()[3:5] == ["1", "1"]

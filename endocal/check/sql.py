@@ -52,14 +52,23 @@ def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split())
 
 
-def _view(con, files: list[Path]) -> None:
-    if files:
-        listing = ", ".join("'" + str(f).replace("'", "''") + "'" for f in files)
-        con.execute(f"CREATE VIEW checks AS SELECT * FROM read_parquet([{listing}], hive_partitioning = true, "
-                    "hive_types = {'probe': VARCHAR, 'month': VARCHAR}, union_by_name = true)")
-    else:
-        con.execute("CREATE VIEW checks AS SELECT NULL::VARCHAR AS probe, NULL::VARCHAR AS month, "
-                    "NULL::VARCHAR AS check_id, NULL::VARCHAR AS checked_utc, NULL::VARCHAR AS state WHERE false")
+def _listing(files) -> str:
+    return "[" + ", ".join("'" + str(f).replace("'", "''") + "'" for f in files) + "]"
+
+
+def _view(con, copies: list[Path], months: list[Path]) -> None:
+    """The view ``checks``: each probe's one-file copy where it is current, its month files elsewhere."""
+    parts = []
+    if copies:
+        parts.append(f"SELECT * FROM read_parquet({_listing(copies)}, hive_partitioning = true, "
+                     "hive_types = {'probe': VARCHAR}, union_by_name = true)")
+    if months:
+        parts.append(f"SELECT * FROM read_parquet({_listing(months)}, hive_partitioning = true, "
+                     "hive_types = {'probe': VARCHAR, 'month': VARCHAR}, union_by_name = true)")
+    if not parts:
+        parts.append("SELECT NULL::VARCHAR AS probe, NULL::VARCHAR AS month, NULL::VARCHAR AS check_id, "
+                     "NULL::VARCHAR AS checked_utc, NULL::VARCHAR AS state WHERE false")
+    con.execute("CREATE VIEW checks AS " + " UNION ALL BY NAME ".join(parts))
 
 
 def query(history: str | Path, sql: str) -> QueryResult:
@@ -89,19 +98,24 @@ def query(history: str | Path, sql: str) -> QueryResult:
     duckdb = require("duckdb", "endocal history --sql")
     _refuse_writes(duckdb, sql)
     folder = HistoryFolder(history)
-    files = folder.validate()
+    sources = folder.sources(folder.validate())
+    copies = [c for c, _ in sources.values() if c is not None]
+    months = [f for c, ms in sources.values() if c is None for f in ms]
     corrupt = []
     for attempt in range(2):
         con = duckdb.connect(":memory:")
         try:
-            _view(con, files)
+            _view(con, copies, months)
             return QueryResult(con.execute(sql).fetchdf(), corrupt)
         except duckdb.Error as exc:
             if attempt == 0 and isinstance(exc, (duckdb.IOException, duckdb.InvalidInputException)):
-                bad = _unreadable(files)  # only on a failure: the fast path opens no footer twice
-                if bad:
-                    corrupt = bad
-                    files = [f for f in files if f not in {b for b, _ in bad}]
+                # only on a failure: find what cannot be read; a bad copy gives way to its month files
+                bad_copies = {c for c, _ in _unreadable(copies)}
+                copies = [c for c in copies if c not in bad_copies]
+                months += [f for c, ms in sources.values() if c in bad_copies for f in ms]
+                corrupt = _unreadable(months)
+                if corrupt or bad_copies:
+                    months = [f for f in months if f not in {b for b, _ in corrupt}]
                     continue
             raise QueryError(f"--sql: {_one_line(exc)}") from None
         finally:

@@ -7,6 +7,7 @@
         month=2026-11/
           checks.parquet          one row per check of that probe in that month (UTC)
           _runs/CHECK_ID/         the check's run folder, kept beside its row
+        _checks.parquet           every row of the probe in one file: a copy the readers here use
       probe=TEE-0043/...
 
 Any engine reads it as one dataset (``pyarrow.dataset.dataset(DIR, partitioning="hive")``,
@@ -16,7 +17,11 @@ Folders starting with ``_`` and hidden files are skipped by those readers, so ru
 temporary files never enter the table.
 
 One file per probe and month keeps a fleet's two years of daily checks at some 2,400 files, not
-70,000. An append rewrites that month's file (at most 31 rows) to a hidden temporary name and
+70,000. Opening 2,400 files is still most of a query's time (DuckDB: seconds), so each probe
+also keeps its rows in one file, ``_checks.parquet`` (with a ``month`` column), rewritten with
+every append; it records the size and modification time of every month file it copies, and a
+reader uses it only while they all match, else it reads that probe's month files (a month file
+restored or edited by hand is never shadowed by a stale copy). Other engines skip it (``_``). An append rewrites that month's file (at most 31 rows) to a hidden temporary name and
 renames it into place, under a lock on the folder: a reader sees the old file or the new one,
 and a crash leaves no half-written row. The run folder is moved into ``_runs`` before the row
 is written; if the row cannot be written, it is removed again.
@@ -36,6 +41,9 @@ from endocal.errors import OutputPathError, RunFormatError
 
 ROWS_FILE = "checks.parquet"
 RUNS = "_runs"
+#: A probe's rows in one file, kept in step with its month files (see the module docstring).
+PROBE_FILE = "_checks.parquet"
+_MANIFEST_KEY = b"endocal_history_manifest"
 LOCK = ".lock"
 _PROBE_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
 _MONTH_RE = re.compile(r"^\d{4}-(0[1-9]|1[0-2])$")
@@ -129,10 +137,10 @@ class HistoryFolder:
             if not (p.is_dir() and p.name.startswith("probe=") and _PROBE_RE.match(name)):
                 foreign(p, "probe=ID folders")
             for q in sorted(p.iterdir()):
-                if q.name.startswith("."):
+                if q.name.startswith(".") or (q.name == PROBE_FILE and q.is_file()):
                     continue
                 if not (q.is_dir() and q.name.startswith("month=") and _MONTH_RE.match(q.name.removeprefix("month="))):
-                    foreign(q, "month=YYYY-MM folders")
+                    foreign(q, f"month=YYYY-MM folders and {PROBE_FILE}")
                 for r in sorted(q.iterdir()):
                     if r.name.startswith("."):
                         continue
@@ -160,20 +168,73 @@ class HistoryFolder:
         if probe_id is not None:
             files = [f for f in files if f.parent.parent.name == f"probe={probe_id}"]
         frames, corrupt, good = [], [], []
-        for f in files:
-            try:
-                df = pq.read_table(f).to_pandas()
-            except Exception as exc:  # noqa: BLE001  any unreadable file is named, the rest still read
-                corrupt.append((f, _first_line(exc)))
+        for probe_dir, (copy, months) in self.sources(files).items():
+            if copy is not None:
+                df = pq.read_table(copy).to_pandas()
+                df.insert(0, "probe", probe_dir.name.removeprefix("probe="))
+                frames.append(df)
+                good.extend(months)
                 continue
-            df.insert(0, "month", f.parent.name.removeprefix("month="))
-            df.insert(0, "probe", f.parent.parent.name.removeprefix("probe="))
-            frames.append(df)
-            good.append(f)
+            for f in months:
+                try:
+                    df = pq.read_table(f).to_pandas()
+                except Exception as exc:  # noqa: BLE001  any unreadable file is named, the rest still read
+                    corrupt.append((f, _first_line(exc)))
+                    continue
+                df.insert(0, "month", f.parent.name.removeprefix("month="))
+                df.insert(0, "probe", probe_dir.name.removeprefix("probe="))
+                frames.append(df)
+                good.append(f)
         rows = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=["probe", "month", "checked_utc"])
         if len(rows):
             rows = rows.sort_values(["probe", "checked_utc"], kind="stable", ignore_index=True)
         return HistoryRead(rows, corrupt, good)
+
+    def sources(self, files: list[Path]) -> dict[Path, tuple[Path | None, list[Path]]]:
+        """Per probe folder: its one-file copy when it matches every month file (else None), and its month files."""
+        import pyarrow.parquet as pq
+
+        by_probe: dict[Path, list[Path]] = {}
+        for f in files:
+            by_probe.setdefault(f.parent.parent, []).append(f)
+        out = {}
+        for probe_dir, months in by_probe.items():
+            copy = probe_dir / PROBE_FILE
+            fresh = None
+            if copy.is_file():
+                try:
+                    meta = pq.read_schema(copy).metadata or {}
+                    fresh = copy if json.loads(meta.get(_MANIFEST_KEY, b"{}")) == _manifest(months) else None
+                except Exception:  # noqa: BLE001  an unreadable copy is not used; the month files are
+                    fresh = None
+            out[probe_dir] = (fresh, months)
+        return out
+
+    def refresh_probe_file(self, probe_dir: Path) -> None:
+        """Rewrite a probe's one-file copy from its month files (under the lock; best effort: a copy that
+        cannot be written is removed, and readers use the month files)."""
+        import pandas as pd
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        from endocal.runs.format import atomic_write_bytes
+
+        copy = probe_dir / PROBE_FILE
+        try:
+            months = sorted(probe_dir.glob(f"month=*/{ROWS_FILE}"))
+            frames = []
+            for f in months:
+                df = pq.read_table(f).to_pandas()
+                df.insert(0, "month", f.parent.name.removeprefix("month="))
+                frames.append(df)
+            table = pa.Table.from_pandas(pd.concat(frames, ignore_index=True), preserve_index=False)
+            table = table.replace_schema_metadata({**(table.schema.metadata or {}),
+                                                   _MANIFEST_KEY: json.dumps(_manifest(months)).encode()})
+            sink = pa.BufferOutputStream()
+            pq.write_table(table, sink)
+            atomic_write_bytes(copy, sink.getvalue().to_pybytes())
+        except Exception:  # noqa: BLE001  a stale copy must not stay: readers fall back to the month files
+            copy.unlink(missing_ok=True)
 
     # ------------------------------------------------------------------ writing
     @contextlib.contextmanager
@@ -252,7 +313,17 @@ class HistoryFolder:
             if isinstance(exc, OSError) and not isinstance(exc, OutputPathError):
                 raise OutputPathError(f"cannot write the history {self.root}: {exc.strerror or exc}") from None
             raise
+        self.refresh_probe_file(part.parent)
         return target
+
+
+def _manifest(months: list[Path]) -> dict:
+    """``{"month=YYYY-MM": [size, mtime_ns]}`` of a probe's month files: what its one-file copy was made from."""
+    out = {}
+    for f in months:
+        st = f.stat()
+        out[f.parent.name] = [st.st_size, st.st_mtime_ns]
+    return dict(sorted(out.items()))
 
 
 def _first_line(exc: BaseException) -> str:
