@@ -1216,7 +1216,7 @@ class Check(_Result):
         -------
         matplotlib.figure.Figure
         """
-        from endocal.check.plot import charts_figure
+        from endocal.report.checks import charts_figure
 
         return charts_figure(self.result.charts)
 
@@ -1326,7 +1326,7 @@ class History(_Result):
         -------
         matplotlib.figure.Figure
         """
-        from endocal.check.plot import charts_figure
+        from endocal.report.checks import charts_figure
 
         if probe_id is None:
             if len(self.charts) != 1:

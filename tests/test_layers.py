@@ -26,6 +26,8 @@ FORBIDDEN = {
     "report": ("endocal.cli",),
     "protocols": ("endocal.backends", "endocal.cli", "endocal.sim"),
     "force": ("endocal.cli",),
+    # probe checks sit beside validate: the report draws their charts (report --history), not the reverse
+    "check": ("endocal.cli", "endocal.report"),
     "backends": ("endocal.cli",),
 }
 

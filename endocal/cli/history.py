@@ -55,7 +55,7 @@ def history(
             if plot.exists() and not force:
                 raise OutputExistsError(f"{plot} already exists: choose another path or pass --force")
             refuse_input_as_output("--plot", plot, [folder])
-            from endocal.check.plot import charts_figure
+            from endocal.report.checks import charts_figure
             from endocal.report.figures import to_png
             from endocal.runs.format import atomic_write_bytes
 

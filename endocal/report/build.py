@@ -362,7 +362,7 @@ def build_report(
                      lambda: F.tip_paths(paths, "Tip trajectories in the base frame")))
 
     for pid, pc in check_pages:
-        from endocal.check.plot import charts_figure
+        from endocal.report.checks import charts_figure
 
         jobs.append((ReportFigure(f"checks-{_slug(pid)}", "checks", f"Probe {pid}: {pc.state}, {pc.n_checks} checks "
                                   "since calibration",

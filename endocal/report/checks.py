@@ -1,4 +1,4 @@
-"""A probe's control charts as one figure: per figure, the individuals, moving-range and EWMA charts."""
+"""A probe's control charts (endocal check) as one figure: per figure, the individuals, moving-range and EWMA charts."""
 
 from __future__ import annotations
 
