@@ -268,3 +268,14 @@ def test_a_month_file_changed_by_hand_is_read_not_the_probes_stale_copy(fleet, t
     assert res.returncode == 0, res.stderr
     assert res.stdout.split()[2:] == ["A", "1", "B", "2"]
     assert endocal("history", h).stdout.splitlines()[1].split()[3:5] == ["1", "1"]
+
+
+def test_without_the_fleet_extra_the_command_says_how_to_install_it(fleet, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "duckdb", None)  # as if not installed
+    one_line_exit_2(endocal("history", fleet["history"], "--sql", "SELECT 1"),
+                    "needs duckdb, which is not installed", "pip install 'endocal-toolkit[fleet]'")
+    monkeypatch.setitem(sys.modules, "dask", None)
+    one_line_exit_2(endocal("check", "--run", fleet["later"]["A"], "--run", fleet["later"]["B"], "--history",
+                            fleet["history"]), "needs dask", "[fleet]")
