@@ -279,3 +279,14 @@ def test_without_the_fleet_extra_the_command_says_how_to_install_it(fleet, monke
     monkeypatch.setitem(sys.modules, "dask", None)
     one_line_exit_2(endocal("check", "--run", fleet["later"]["A"], "--run", fleet["later"]["B"], "--history",
                             fleet["history"]), "needs dask", "[fleet]")
+
+
+def test_report_with_the_history_adds_the_probes_chart_page(fleet, tmp_path):
+    import endocal as ec
+
+    rep = ec.make_report(fleet["models"]["A"][0], fleet["later"]["A"], history=fleet["history"], bootstrap=20,
+                         out=tmp_path / "report.html")
+    ids = [f.id for f in rep.figures if f.section == "checks"]
+    assert ids == ["checks-A"]
+    html = (tmp_path / "report.html").read_text()
+    assert '<h2 id="checks">Probe checks</h2>' in html and 'id="checks-A"' in html
