@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from endocal.check.extras import require
-from endocal.check.store import HistoryError, HistoryFolder, corrupt_line
+from endocal.check.store import MANIFEST_KEY, HistoryError, HistoryFolder, corrupt_line
 
 
 class QueryError(HistoryError):
@@ -26,9 +26,17 @@ class QueryError(HistoryError):
 
 @dataclass
 class QueryResult:
-    """A query's rows, and the month files left out because they could not be read."""
+    """A query's rows, and the month files left out because they could not be read.
 
-    rows: object  # pandas.DataFrame
+    Attributes
+    ----------
+    rows : pandas.DataFrame, or list of tuples with ``as_frame=False``
+    columns : list of str
+    corrupt : list of (Path, str)
+    """
+
+    rows: object
+    columns: list = field(default_factory=list)
     corrupt: list = field(default_factory=list)
 
     def corrupt_line(self) -> str | None:
@@ -71,7 +79,7 @@ def _view(con, copies: list[Path], months: list[Path]) -> None:
     con.execute("CREATE VIEW checks AS " + " UNION ALL BY NAME ".join(parts))
 
 
-def query(history: str | Path, sql: str) -> QueryResult:
+def query(history: str | Path, sql: str, *, as_frame: bool = True) -> QueryResult:
     """Run one read-only SELECT over the view ``checks`` of a history folder.
 
     Parameters
@@ -80,6 +88,9 @@ def query(history: str | Path, sql: str) -> QueryResult:
         The history folder.
     sql : str
         One ``SELECT`` statement.
+    as_frame : bool
+        Rows as a pandas DataFrame; False: a list of tuples, and no pandas or pyarrow imported
+        (the command line's start stays short).
 
     Returns
     -------
@@ -98,7 +109,19 @@ def query(history: str | Path, sql: str) -> QueryResult:
     duckdb = require("duckdb", "endocal history --sql")
     _refuse_writes(duckdb, sql)
     folder = HistoryFolder(history)
-    sources = folder.sources(folder.validate())
+
+    def manifests(copies):  # read by DuckDB from the copies' footers, in one query
+        con = duckdb.connect(":memory:")
+        try:
+            found = con.execute("SELECT file_name, decode(value) FROM parquet_kv_metadata($1) WHERE decode(key) = $2",
+                                [[str(c) for c in copies], MANIFEST_KEY]).fetchall()
+        except duckdb.Error:
+            found = []  # a copy DuckDB cannot read: every probe's month files are read instead
+        finally:
+            con.close()
+        return {Path(f): text for f, text in found}
+
+    sources = folder.sources(folder.validate(), manifests)
     copies = [c for c, _ in sources.values() if c is not None]
     months = [f for c, ms in sources.values() if c is None for f in ms]
     corrupt = []
@@ -106,7 +129,12 @@ def query(history: str | Path, sql: str) -> QueryResult:
         con = duckdb.connect(":memory:")
         try:
             _view(con, copies, months)
-            return QueryResult(con.execute(sql).fetchdf(), corrupt)
+            cur = con.execute(sql)
+            if as_frame:
+                df = cur.fetchdf()
+                return QueryResult(df, list(df.columns), corrupt)
+            rows = cur.fetchall()
+            return QueryResult(rows, [d[0] for d in cur.description], corrupt)
         except duckdb.Error as exc:
             if attempt == 0 and isinstance(exc, (duckdb.IOException, duckdb.InvalidInputException)):
                 # only on a failure: find what cannot be read; a bad copy gives way to its month files
@@ -124,12 +152,18 @@ def query(history: str | Path, sql: str) -> QueryResult:
 
 
 def _unreadable(files: list[Path]) -> list[tuple[Path, str]]:
-    import pyarrow.parquet as pq
+    """The files DuckDB cannot read whole, with why (only after a query failed: one file at a time)."""
+    import duckdb
 
     bad = []
-    for f in files:
-        try:
-            pq.read_table(f)
-        except Exception as exc:  # noqa: BLE001
-            bad.append((f, _one_line(exc)))
+    con = duckdb.connect(":memory:")
+    try:
+        for f in files:
+            try:
+                con.execute("SELECT count(*) FROM read_parquet($1)", [str(f)]).fetchall()
+                con.execute("SELECT * FROM read_parquet($1)", [str(f)]).fetchall()
+            except duckdb.Error as exc:
+                bad.append((f, _one_line(exc)))
+    finally:
+        con.close()
     return bad

@@ -43,7 +43,8 @@ ROWS_FILE = "checks.parquet"
 RUNS = "_runs"
 #: A probe's rows in one file, kept in step with its month files (see the module docstring).
 PROBE_FILE = "_checks.parquet"
-_MANIFEST_KEY = b"endocal_history_manifest"
+#: Key of the copy's Parquet metadata that lists the month files it copies (``_manifest``).
+MANIFEST_KEY = "endocal_history_manifest"
 LOCK = ".lock"
 _PROBE_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
 _MONTH_RE = re.compile(r"^\d{4}-(0[1-9]|1[0-2])$")
@@ -190,24 +191,30 @@ class HistoryFolder:
             rows = rows.sort_values(["probe", "checked_utc"], kind="stable", ignore_index=True)
         return HistoryRead(rows, corrupt, good)
 
-    def sources(self, files: list[Path]) -> dict[Path, tuple[Path | None, list[Path]]]:
-        """Per probe folder: its one-file copy when it matches every month file (else None), and its month files."""
-        import pyarrow.parquet as pq
+    def sources(self, files: list[Path], manifests=None) -> dict[Path, tuple[Path | None, list[Path]]]:
+        """Per probe folder: its one-file copy when it matches every month file (else None), and its month files.
 
+        Parameters
+        ----------
+        files : list of Path
+            Month files (:meth:`validate`).
+        manifests : callable, optional
+            ``manifests(copies) -> {copy: manifest JSON text or None}``; default: read with pyarrow.
+        """
         by_probe: dict[Path, list[Path]] = {}
         for f in files:
             by_probe.setdefault(f.parent.parent, []).append(f)
+        copies = [d / PROBE_FILE for d in by_probe if (d / PROBE_FILE).is_file()]
+        recorded = (manifests or _manifests_pyarrow)(copies) if copies else {}
         out = {}
         for probe_dir, months in by_probe.items():
             copy = probe_dir / PROBE_FILE
-            fresh = None
-            if copy.is_file():
-                try:
-                    meta = pq.read_schema(copy).metadata or {}
-                    fresh = copy if json.loads(meta.get(_MANIFEST_KEY, b"{}")) == _manifest(months) else None
-                except Exception:  # noqa: BLE001  an unreadable copy is not used; the month files are
-                    fresh = None
-            out[probe_dir] = (fresh, months)
+            text = recorded.get(copy)
+            try:
+                fresh = text is not None and json.loads(text) == _manifest(months)
+            except ValueError:
+                fresh = False
+            out[probe_dir] = (copy if fresh else None, months)
         return out
 
     def refresh_probe_file(self, probe_dir: Path) -> None:
@@ -229,7 +236,7 @@ class HistoryFolder:
                 frames.append(df)
             table = pa.Table.from_pandas(pd.concat(frames, ignore_index=True), preserve_index=False)
             table = table.replace_schema_metadata({**(table.schema.metadata or {}),
-                                                   _MANIFEST_KEY: json.dumps(_manifest(months)).encode()})
+                                                   MANIFEST_KEY.encode(): json.dumps(_manifest(months)).encode()})
             sink = pa.BufferOutputStream()
             pq.write_table(table, sink)
             atomic_write_bytes(copy, sink.getvalue().to_pybytes())
@@ -315,6 +322,19 @@ class HistoryFolder:
             raise
         self.refresh_probe_file(part.parent)
         return target
+
+
+def _manifests_pyarrow(copies: list[Path]) -> dict:
+    """``{copy: manifest text}`` read from each copy's Parquet footer (None where unreadable)."""
+    import pyarrow.parquet as pq
+
+    out = {}
+    for c in copies:
+        try:
+            out[c] = ((pq.read_schema(c).metadata or {}).get(MANIFEST_KEY.encode()) or b"").decode() or None
+        except Exception:  # noqa: BLE001  an unreadable copy is not used; the month files are
+            out[c] = None
+    return out
 
 
 def _manifest(months: list[Path]) -> dict:

@@ -34,8 +34,8 @@ def history(
     if sql is not None:
         from endocal.check.sql import query
 
-        res = query(folder, sql)
-        _print_frame(res.rows, as_json)
+        res = query(folder, sql, as_frame=False)
+        _print_rows(res.columns, res.rows, as_json)
         _corrupt(res.corrupt_line())
         return
     from endocal.check.summary import read_history
@@ -77,16 +77,36 @@ def _chart_table(pc):
 
 
 def _print_frame(df, as_json: bool) -> None:
-    if as_json:
-        out.print(df.to_json(orient="records", double_precision=6), markup=False, soft_wrap=True)
-        return
-    if not len(df):
-        return
-    import pandas as pd
+    _print_rows(list(df.columns), list(df.itertuples(index=False, name=None)), as_json)
 
-    with pd.option_context("display.width", 250, "display.max_columns", 50, "display.max_colwidth", 60,
-                           "display.float_format", "{:.4g}".format):
-        out.print(df.to_string(index=False), markup=False)
+
+def _cell(v) -> str:
+    if v is None:
+        return "NULL"
+    if isinstance(v, float):
+        return "nan" if v != v else f"{v:.4g}"
+    if hasattr(v, "item") and not isinstance(v, (str, bytes)):  # a numpy scalar
+        return _cell(v.item())
+    return str(v)
+
+
+def _print_rows(columns: list, rows: list, as_json: bool) -> None:
+    """Rows as a table, right-aligned as a terminal reads numbers (no pandas: `--sql` starts quickly)."""
+    if as_json:
+        import json
+
+        from endocal.cli._common import finite
+
+        records = [{c: (v.item() if hasattr(v, "item") else v) for c, v in zip(columns, r)} for r in rows]
+        out.print(json.dumps(finite(records), default=str), markup=False, soft_wrap=True)
+        return
+    if not rows:
+        return
+    cells = [[_cell(v) for v in r] for r in rows]
+    widths = [max([len(str(c))] + [len(r[k]) for r in cells]) for k, c in enumerate(columns)]
+    out.print(" ".join(str(c).rjust(w) for c, w in zip(columns, widths)), markup=False)
+    for r in cells:
+        out.print(" ".join(v.rjust(w) for v, w in zip(r, widths)), markup=False)
 
 
 def _corrupt(line: str | None) -> None:
