@@ -131,26 +131,30 @@ class HistoryFolder:
             raise HistoryError(f"history {self.root} holds {p}, which is not part of a check history (expected "
                                f"{expected}): give a folder only endocal check writes to, or move that out")
 
-        for p in sorted(self.root.iterdir()):
+        def entries(folder):  # os.scandir: the entries' types come with the listing, no stat per entry
+            with os.scandir(folder) as it:
+                return sorted(it, key=lambda e: e.name)
+
+        for p in entries(self.root):
             if p.name.startswith("."):
                 continue
             name = p.name.removeprefix("probe=")
             if not (p.is_dir() and p.name.startswith("probe=") and _PROBE_RE.match(name)):
-                foreign(p, "probe=ID folders")
-            for q in sorted(p.iterdir()):
+                foreign(Path(p.path), "probe=ID folders")
+            for q in entries(p.path):
                 if q.name.startswith(".") or (q.name == PROBE_FILE and q.is_file()):
                     continue
                 if not (q.is_dir() and q.name.startswith("month=") and _MONTH_RE.match(q.name.removeprefix("month="))):
-                    foreign(q, f"month=YYYY-MM folders and {PROBE_FILE}")
-                for r in sorted(q.iterdir()):
+                    foreign(Path(q.path), f"month=YYYY-MM folders and {PROBE_FILE}")
+                for r in entries(q.path):
                     if r.name.startswith("."):
                         continue
                     if r.name == ROWS_FILE and r.is_file():
-                        files.append(r)
+                        files.append(Path(r.path))
                     elif r.name == RUNS and r.is_dir():
                         continue
                     else:
-                        foreign(r, f"{ROWS_FILE} and {RUNS}/")
+                        foreign(Path(r.path), f"{ROWS_FILE} and {RUNS}/")
         return files
 
     # ------------------------------------------------------------------ reading
