@@ -118,8 +118,12 @@ def score_all(preps: Sequence[Prepared], scheduler: str | None = None) -> list[d
     if scheduler is None:
         import os
 
+        import logging
+
+        # silence_logs: the cluster's own start and stop messages (a worker killed at shutdown) are not the user's
         with distributed.LocalCluster(n_workers=max(1, min(4, os.cpu_count() or 1, len(tasks))), threads_per_worker=1,
-                                      processes=True, dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+                                      processes=True, dashboard_address=None, silence_logs=logging.CRITICAL) as cluster, \
+                distributed.Client(cluster) as client:
             return list(client.gather(client.compute(tasks)))
     try:
         client = distributed.Client(scheduler, timeout="10s")
