@@ -290,3 +290,16 @@ def test_report_with_the_history_adds_the_probes_chart_page(fleet, tmp_path):
     assert ids == ["checks-A"]
     html = (tmp_path / "report.html").read_text()
     assert '<h2 id="checks">Probe checks</h2>' in html and 'id="checks-A"' in html
+
+
+def test_check_probe_in_python_is_the_command(fleet, tmp_path):
+    import endocal as ec
+
+    h = _copy(fleet, tmp_path)
+    c = ec.check_probe([str(p) for p in fleet["models"]["B"]], "B", h, seed=9)
+    assert repr(c) == "B: baseline, 3 of 10 checks since calibration (the control limits come from the first 10)"
+    assert c.state == "baseline" and c.to_dict()["exit_code"] == 0 and len(c.figures) == 10
+    unsaved = ec.load_model(fleet["models"]["B"][0])
+    unsaved.path = None
+    with pytest.raises(ValueError, match="is not saved"):
+        ec.check_probe(unsaved, "B", h)
