@@ -204,16 +204,18 @@ def _refuse_other_probes_model(hist: HistoryFolder, probe_id: str, models: Probe
     import pyarrow.parquet as pq
 
     ours = {v["sha256"]: k for k, v in models.files.items()}
-    for f in hist.validate():
-        other = f.parent.parent.name.removeprefix("probe=")
+    for probe_dir, (copy, months) in hist.sources(hist.validate()).items():  # a probe's one file where it is current
+        other = probe_dir.name.removeprefix("probe=")
         if other == probe_id:
             continue
-        try:
-            col = pq.read_table(f, columns=["models"]).column("models").to_pylist()
-        except Exception:  # noqa: BLE001  another probe's unreadable file is that probe's problem
-            continue
-        for text in set(col):
-            for axis, rec in json.loads(text).items():
+        texts = set()
+        for f in [copy] if copy is not None else months:
+            try:
+                texts.update(pq.read_table(f, columns=["models"]).column("models").to_pylist())
+            except Exception:  # noqa: BLE001  another probe's unreadable file is that probe's problem
+                continue
+        for text in texts:
+            for rec in json.loads(text).values():
                 if rec.get("sha256") in ours:
                     raise ModelError(f"{models.files[ours[rec['sha256']]]['path']} is probe {other}'s model (its checks "
                                      f"in {where} are scored against it), not {probe_id}'s: give {probe_id}'s own model")
@@ -312,7 +314,7 @@ def score_prepared(prep: Prepared) -> dict:
     return check_figures(prep.aligned, prep.models.models)
 
 
-def commit(prep: Prepared, figures: Mapping, *, probe_label: str | None = None) -> CheckResult:
+def commit(prep: Prepared, figures: Mapping) -> CheckResult:
     """Append the row (run folder beside it) and chart the probe's state.
 
     Raises
