@@ -63,6 +63,8 @@ def write_fleet(root: Path, n_probes: int, days: int) -> int:
             for f in FIGURES:
                 df[f"{a}_{f}"] = base[f] + 0.05 * rng.standard_normal(days)
             df[f"{a}_dead_band_deg"] += wear * np.arange(days)
+        if p % 37 == 5:  # three probes whose tendons slackened last month: the query must find them
+            df["ap_dead_band_deg"] += np.clip(np.arange(days) - (days - 30), 0, None) * 0.1
         df["state"] = "in control"
         month = df["checked_utc"].str[:7]
         for m, part in df.groupby(month):

@@ -118,6 +118,14 @@ def test_a_check_run_of_another_probe_is_refused(fleet, tmp_path):
              "--history", h, fragments=("is a check of probe A, not B",))
 
 
+def test_a_run_of_another_protocol_is_refused(fleet, tmp_path):
+    h = _copy(fleet, tmp_path)
+    m = fleet["models"]["A"]
+    triangle = Path(__file__).parents[1] / "data_samples" / "sim-triangle"
+    _refused(h, "check", "--run", triangle, "--model", m[0], "--model", m[1], "--probe-id", "A", "--history", h,
+             fragments=("played protocol 'triangle' at 45 deg, not the check at 45 deg",))
+
+
 def test_a_model_of_another_probe_is_refused(fleet, tmp_path):
     h = _copy(fleet, tmp_path)
     m = fleet["models"]["A"]

@@ -256,6 +256,14 @@ def attach_run(prep: Prepared, run: str | Path) -> Prepared:
     proto = meta.get("protocol") or {}
     prep.protocol_sha256 = proto.get("sha256")
     prep.amplitude_deg = (proto.get("params") or {}).get("amplitude_deg")
+    if proto.get("name") is not None:  # an imported run records no protocol: its motion is the user's word
+        from endocal.check.protocol import PROTOCOL_NAME, check_amplitude_deg
+
+        expected = check_amplitude_deg(prep.models.models)
+        if proto.get("name") != PROTOCOL_NAME or prep.amplitude_deg != expected:
+            played = f"protocol '{proto.get('name')}'" + (f" at {prep.amplitude_deg:g} deg" if prep.amplitude_deg else "")
+            raise RunFormatError(f"{run} played {played}, not the check at {expected:g} deg these models give: "
+                                 "checks compare only as the same motion; record one with endocal check")
     if len(prep.past) and "check_id" in prep.past and (prep.past["run_sha256"] == a.sha256).any():
         raise RunFormatError(f"{run} is already in {prep.probe_id}'s history (the same run's streams): a check is "
                              "appended once")
