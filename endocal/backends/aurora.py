@@ -423,7 +423,6 @@ class AuroraTracker:
         self._last_reply = 0.0  # monotonic time of the last frame the tracker answered with
         self._asked_at: float | None = None  # monotonic time of the frame request in flight, if any
         self._driver_error = ""  # the last communication error of a frame request, in words
-        self._closer: threading.Thread | None = None
         self.info: dict = {}
         #: What closing could not do (a unit that did not answer), in words; also logged
         self.close_notes: list[str] = []
@@ -600,7 +599,6 @@ class AuroraTracker:
         started = time.monotonic()
         closer.start()
         closer.join(CLOSE_TIMEOUT_S)
-        self._closer = closer
         if closer.is_alive():
             failures.append(f"no answer within {CLOSE_TIMEOUT_S:g} s of closing (stopping tracking, then the "
                             f"port {self.config.serial_port}): left to the driver's timeouts in the background")
