@@ -101,6 +101,8 @@ class CCompensator:
     dt_s: float | None
     cmd_range: tuple[float, float]
     drive_unit: str
+    #: the header and source written by :meth:`write` (None before)
+    files: tuple[Path, Path] | None = None
 
     def __repr__(self) -> str:
         period = f", loop period {self.dt_s:g} s" if self.dt_s else ""
@@ -140,6 +142,7 @@ class CCompensator:
                 raise
         except OSError as exc:
             raise OutputPathError(f"cannot write the C compensator into {out_dir}: {exc.strerror or exc}") from None
+        self.files = (h_path, c_path)
         return h_path, c_path
 
 
@@ -732,6 +735,11 @@ def generate_c(model, *, name: str | None = None, real: str = "double", dt_s: fl
     if real not in REALS:
         raise ModelError(f"real must be one of {REALS}, got {real!r}")
     name = _check_name(name if name is not None else default_name(model))
+    model._require_fitted()
+    for e in model.effects_:
+        if not e.streamable:
+            raise ModelError(f"effect '{e.label}' cannot be compensated one sample at a time (it needs future samples "
+                             "or logged columns), so it has no C compensator: refit the model without it to export one")
     try:
         comp = StreamingCompensator(model, dt_s=dt_s)
     except ModelError as exc:
@@ -911,6 +919,48 @@ void {name}_init({name}_state *s)
     return v;
 }}
 """
+
+
+def export_c(model_path, out_dir, *, real: str = "double", loop_hz: float | None = None, name: str | None = None,
+             force: bool = False) -> CCompensator:
+    """Read a model file and write its C99 compensator into ``out_dir`` (``endocal export c``).
+
+    Parameters
+    ----------
+    model_path : path
+        A model file (``endocal fit hysteresis --out``).
+    out_dir : path
+        Folder for ``NAME.h`` and ``NAME.c`` (created if missing).
+    real : {"double", "float"}
+    loop_hz : float, optional
+        The control loop's rate (Hz); required when the model has a time-based effect (``rate``, ``creep``).
+    name : str, optional
+        C identifier prefix and file stem (default ``endocal_<axis>``).
+    force : bool
+        Overwrite existing files.
+
+    Returns
+    -------
+    CCompensator
+        With ``files`` set to the two paths written.
+
+    Raises
+    ------
+    ModelError
+        Unreadable model, an effect that cannot stream (named), a missing or bad ``loop_hz``; nothing is written.
+    OutputExistsError, OutputPathError
+    """
+    from endocal.models import load_model
+
+    dt_s = None
+    if loop_hz is not None:
+        if not (isinstance(loop_hz, (int, float)) and math.isfinite(loop_hz) and loop_hz > 0):
+            raise ModelError(f"--loop-hz must be a positive rate in Hz, got {loop_hz!r}")
+        dt_s = 1.0 / float(loop_hz)
+    model = load_model(model_path)
+    comp = generate_c(model, name=name, real=real, dt_s=dt_s, source=str(model_path))
+    comp.write(out_dir, force=force)
+    return comp
 
 
 # ---------------------------------------------------------------------------------------------- compile and run
