@@ -9,6 +9,7 @@ from typing import Optional
 import typer
 
 from endocal.cli._common import cli_errors, err, fail, out, refuse_input_as_output
+from endocal.cli.messages import keyed
 
 app = typer.Typer(help="Take endocal's results where robotics people use them: a model's compensator as C99 "
                        "source (`export c`), a run as an MCAP file for Foxglove and PlotJuggler (`export mcap`).",
@@ -42,6 +43,8 @@ def export_c_cmd(
     comp = export_c(model_path, out_dir, real="float" if use_float else "double", loop_hz=loop_hz, name=name,
                     force=force)
     h_path, c_path = comp.files
+    for key, text in comp.warnings:
+        err.print(keyed(text, "warning", key), markup=False)
     period = f", loop period {comp.dt_s:g} s" if comp.dt_s else ""
     out.print(f"wrote {h_path} and {c_path}: {comp.name}_step in {comp.real}, {' -> '.join(comp.chain)}{period}; "
               f"commands clamped to [{comp.cmd_range[0]:g}, {comp.cmd_range[1]:g}] {comp.drive_unit}", markup=False)
@@ -74,7 +77,7 @@ def export_mcap_cmd(
     out.print(f"wrote {res.path}: {res.messages} messages on {len(res.channels)} channels ({span}): "
               + ", ".join(f"{topic} {n}" for topic, n in res.channels.items()), markup=False)
     for note in res.notes:
-        err.print(f"note: {note}", markup=False)
+        out.print(f"note: {note}", markup=False)
     if res.incomplete:
         fail(f"{res.incomplete}; {res.path} holds the run as far as it is readable ({span}), and its metadata "
              "(endocal.export) says so")

@@ -93,6 +93,10 @@ KEYS: dict[str, str] = {
                      "planes were fitted on).",
     "no-tip-path": "A record has no tracker stream, so the report draws no task-space tip trajectory for it.",
     "force-stop": "The contact-force guard stopped a playback: the predicted tip force reached its threshold.",
+    # ---- export c
+    "float-holds": "The float compensator of a model with a decaying effect (rate, creep) and another play (deadzone, "
+                   "tension, rate) can leave the double one by up to a play's width after holds, where the desired "
+                   "angle settles in steps below float's resolution. Generate double (the default) for it.",
     # ---- anything else
     "other": "A message without a key of its own; `--explain` prints it in full.",
 }

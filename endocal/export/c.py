@@ -101,6 +101,8 @@ class CCompensator:
     dt_s: float | None
     cmd_range: tuple[float, float]
     drive_unit: str
+    #: ``(key, text)`` of what the user should know (``float-holds``), empty when nothing
+    warnings: list[tuple[str, str]] = field(default_factory=list)
     #: the header and source written by :meth:`write` (None before)
     files: tuple[Path, Path] | None = None
 
@@ -781,7 +783,26 @@ def generate_c(model, *, name: str | None = None, real: str = "double", dt_s: fl
                      model.drive_unit_, dt_used, model.out_of_range)
     src = _source(name, real, parts, __version__)
     return CCompensator(name=name, real=real, header=header, source=src, chain=chain, dt_s=dt_used,
-                        cmd_range=(lo, hi), drive_unit=model.drive_unit_)
+                        cmd_range=(lo, hi), drive_unit=model.drive_unit_, warnings=_float_warnings(model, real))
+
+
+def _float_warnings(model, real: str) -> list[tuple[str, str]]:
+    """Where float cannot follow double: a decaying effect (its tail settles in steps below float's resolution)
+    feeding another play, whose exact inverse turns the knob by its width on any step it sees.
+
+    Measured on the sample runs' goals through the paper's PI (tests/test_export_c.py): tension + creep 6.8 deg,
+    rate + creep 12.6 deg, deadzone + tension + rate 18 deg off double; each effect alone, and deadzone + creep,
+    within 3e-4 deg.
+    """
+    if real != "float":
+        return []
+    stateful = [e.label for e in model.effects_ if getattr(e, "stateful", False)]
+    decaying = [e.label for e in model.effects_ if getattr(e, "needs_period", False)]
+    if not decaying or len(stateful) < 2 or sorted(stateful) == ["creep", "deadzone"]:
+        return []
+    return [("float-holds", f"in float, {' and '.join(stateful)} together can leave the double compensator by up to "
+                            "a play's width after holds (steps below float's resolution); generate double for this "
+                            "model unless the target has no double-precision FPU")]
 
 
 def _emit(emitters: dict, e, p: dict, state, real: str) -> _Part:
@@ -836,8 +857,8 @@ extern "C" {{
 typedef {real} {name}_real;
 
 {chr(10).join(defines)}
-#define {NAME}_CMD_MIN {lo_s}  /* the fitted command range ({unit}); INFINITY is <math.h>'s */
-#define {NAME}_CMD_MAX {hi_s}
+#define {NAME}_CMD_MIN ({lo_s})  /* the fitted command range ({unit}); INFINITY is <math.h>'s */
+#define {NAME}_CMD_MAX ({hi_s})
 #define {NAME}_DRIVE_UNIT "{unit}"
 {f"#define {NAME}_DT_S {_lit(dt_s, 'double')}  /* the loop period the code was generated for (s) */" if dt_s else ""}
 #define {NAME}_OK 0         /* the command is the model's inverse */
