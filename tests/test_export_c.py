@@ -173,8 +173,10 @@ def test_cli_writes_header_and_source_once(tmp_path):
     assert "float" in (tmp_path / "c" / "endocal_ap.h").read_text()  # untouched
 
 
-def test_float_warns_where_it_cannot_follow_double():
+def test_float_warns_where_it_cannot_follow_double(fitted):
     m = _effect_model(["tension", "creep"])
     assert [k for k, _ in generate_c(m, real="float", dt_s=DT_S).warnings] == ["float-holds"]
     assert generate_c(m, real="double", dt_s=DT_S).warnings == []
-    assert generate_c(_effect_model(["deadzone", "creep"]), real="float", dt_s=DT_S).warnings == []
+    # the inverse PI's plays and the creep filter are continuous: nothing to warn of
+    assert generate_c(_effect_model(["creep"]), real="float", dt_s=DT_S).warnings == []
+    assert "linear base's backlash" in generate_c(fitted["linear"], real="float").warnings[0][1]

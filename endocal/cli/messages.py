@@ -94,9 +94,10 @@ KEYS: dict[str, str] = {
     "no-tip-path": "A record has no tracker stream, so the report draws no task-space tip trajectory for it.",
     "force-stop": "The contact-force guard stopped a playback: the predicted tip force reached its threshold.",
     # ---- export c
-    "float-holds": "The float compensator of a model with a decaying effect (rate, creep) and another play (deadzone, "
-                   "tension, rate) can leave the double one by up to a play's width after holds, where the desired "
-                   "angle settles in steps below float's resolution. Generate double (the default) for it.",
+    "float-holds": "A float compensator whose inverse jumps (a play: deadzone, tension, rate; a linear or B-spline "
+                   "base's backlash) decides on the sign of each step of the desired angle, and float cannot see a "
+                   "step below its resolution: there it can turn the knob by a play's width a tick later than double, "
+                   "or stay apart after holds. Generate double (the default) where the target has a double FPU.",
     # ---- anything else
     "other": "A message without a key of its own; `--explain` prints it in full.",
 }

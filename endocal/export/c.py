@@ -787,22 +787,28 @@ def generate_c(model, *, name: str | None = None, real: str = "double", dt_s: fl
 
 
 def _float_warnings(model, real: str) -> list[tuple[str, str]]:
-    """Where float cannot follow double: a decaying effect (its tail settles in steps below float's resolution)
-    feeding another play, whose exact inverse turns the knob by its width on any step it sees.
+    """Where float cannot follow double: an inverse that jumps (a play's: deadzone, tension, rate; the backlash
+    band of a linear or B-spline base) decides on the sign of the desired angle's step, and float cannot see a
+    step below its resolution.
 
-    Measured on the sample runs' goals through the paper's PI (tests/test_export_c.py): tension + creep 6.8 deg,
-    rate + creep 12.6 deg, deadzone + tension + rate 18 deg off double; each effect alone, and deadzone + creep,
-    within 3e-4 deg.
+    Measured (tests/test_export_c.py, bench/bench_export_c.py): at a turning point whose first step back is
+    ~5e-7 deg the float deadzone winds its slack in one tick after double (8 deg at that tick); after holds, where
+    a decaying effect (rate, creep) settles in ever smaller steps, two plays can stay apart (tension + creep
+    6.8 deg, rate + creep 12.6 deg); elsewhere float is within 3e-4 deg.
     """
     if real != "float":
         return []
-    stateful = [e.label for e in model.effects_ if getattr(e, "stateful", False)]
-    decaying = [e.label for e in model.effects_ if getattr(e, "needs_period", False)]
-    if not decaying or len(stateful) < 2 or sorted(stateful) == ["creep", "deadzone"]:
+    from endocal.models.effects.base import InputEffect
+
+    jumps = [e.label for e in model.effects_ if isinstance(e, InputEffect) and getattr(e, "stateful", False)]
+    if getattr(model, "base_name", "") in ("linear", "bspline"):
+        jumps.append(f"the {model.base_name} base's backlash")
+    if not jumps:
         return []
-    return [("float-holds", f"in float, {' and '.join(stateful)} together can leave the double compensator by up to "
-                            "a play's width after holds (steps below float's resolution); generate double for this "
-                            "model unless the target has no double-precision FPU")]
+    return [("float-holds", f"in float, {', '.join(jumps)} can turn the knob by a play's width a tick later than "
+                            "double where the desired angle turns back by less than float's resolution (~1e-5 deg), "
+                            "and stay apart after holds; generate double unless the target has no double-precision "
+                            "FPU")]
 
 
 def _emit(emitters: dict, e, p: dict, state, real: str) -> _Part:
