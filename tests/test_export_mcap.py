@@ -41,11 +41,11 @@ def exported(tmp_path_factory):
     save_model(model, tmp / "ap.json")
     proc = endocal("export", "mcap", RUN, "--out", tmp / "run.mcap", "--model", tmp / "ap.json")
     assert proc.returncode == 0, proc.stderr
-    return proc, _read(tmp / "run.mcap")
+    return proc, _read(tmp / "run.mcap"), tmp / "run.mcap"
 
 
 def test_every_stream_is_there_with_its_schema_and_count(exported):
-    proc, (summary, messages, metadata) = exported
+    proc, (summary, messages, metadata), _ = exported
     meta = json.loads((RUN / "run.json").read_text())
     motor = pd.read_parquet(RUN / "motor")
     tracker = pd.read_parquet(RUN / "tracker")
@@ -79,7 +79,7 @@ def test_every_stream_is_there_with_its_schema_and_count(exported):
 
 
 def test_time_stamps_are_the_run_s_clock_from_its_start(exported):
-    _, (summary, messages, _) = exported
+    _, (summary, messages, _), _ = exported
     meta = json.loads((RUN / "run.json").read_text())
     start = pd.Timestamp(meta["started_utc"]).value  # ns since the epoch
     motor_t = pd.read_parquet(RUN / "motor")["t_s"].to_numpy()
@@ -98,8 +98,31 @@ def test_time_stamps_are_the_run_s_clock_from_its_start(exported):
     assert all(a <= b for a, b in zip([m[2] for m in messages], [m[2] for m in messages][1:]))
 
 
+def test_a_reader_written_from_the_spec_reads_it_and_every_message_fits_its_schema(exported):
+    """Not the mcap package: tests/_mcap_spec.py, from the specification; each channel's messages checked
+    against its JSON Schema, as Foxglove reads them."""
+    jsonschema = pytest.importorskip("jsonschema")
+    from tests._mcap_spec import read_spec
+
+    _, (summary, _, metadata), path = exported
+    spec = read_spec(path.read_bytes())
+    assert spec.library.startswith("endocal ") and spec.chunks >= 1
+    by_topic: dict[str, list] = {}
+    for cid, _, _, data in spec.messages:
+        by_topic.setdefault(spec.channels[cid][1], []).append(data)
+    counts = {summary.channels[k].topic: n for k, n in summary.statistics.channel_message_counts.items()}
+    assert {t: len(v) for t, v in by_topic.items()} == counts
+    assert spec.metadata == metadata
+    for cid, (sid, topic, enc) in spec.channels.items():
+        name, schema_enc, schema = spec.schemas[sid]
+        assert (enc, schema_enc) == ("json", "jsonschema")
+        check = jsonschema.Draft7Validator(json.loads(schema))
+        for data in by_topic[topic][:: max(1, len(by_topic[topic]) // 40)]:  # 40 of each channel, spread
+            check.validate(json.loads(data))
+
+
 def test_the_model_s_prediction_and_error(exported):
-    _, (_, messages, _) = exported
+    _, (_, messages, _), _ = exported
     aligned = pd.read_parquet(RUN / "aligned.parquet")
     rows = [m for t, _, _, m in messages if t == "/model/ap"]
     err = np.array([r["error_deg"] for r in rows])
