@@ -152,10 +152,13 @@ class CCompensator:
 def _lit(x: float, real: str) -> str:
     """A C literal of ``x`` that reads back as the same double (shortest repr), ``f``-suffixed in float."""
     x = float(x)
-    if math.isinf(x):
-        return f"({'-' if x < 0 else ''}(real_t)INFINITY)"
     if math.isnan(x):
         raise ModelError("the model holds a NaN parameter: it cannot be exported")
+    if real == "float":
+        with np.errstate(over="ignore", under="ignore"):
+            x = float(np.float32(x))  # the float it becomes (beyond float's range: INFINITY, not a compiler warning)
+    if math.isinf(x):
+        return f"({'-' if x < 0 else ''}(real_t)INFINITY)"
     s = repr(x)
     if "e" not in s and "." not in s:
         s += ".0"
