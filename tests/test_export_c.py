@@ -4,8 +4,9 @@ The generated code is compiled with the system C compiler (strict C99, every war
 and run through ctypes on recorded desired trajectories: the measured bend of the sample runs
 (data_samples/, 100 Hz). Tolerances:
 
-- double: 1e-9 deg. The code does the Python compensator's operations in its order, so the
-  only differences are libm's last bits in the rate effect's exp/expm1/log; the issue's bar.
+- double: 1e-9 deg. The code does the Python compensator's operations in its order (fused
+  multiply-adds off), so the only differences are libm's last bits in the rate effect's
+  exp/expm1/log; the issue's bar.
 - float: 1e-3 deg, the issue's bar. Float resolves ~6e-6 deg at 50 deg; the plays clamp (errors
   do not accumulate), so a few ulps of command per tick are expected (measured: <= 2e-4 deg).
 """
@@ -118,6 +119,15 @@ def test_fitted_bases_agree_with_python(tmp_path, fitted, desired, base, real):
     # the damped sine goes beyond the triangle's range: those ticks are clamped, as Python clamps them
     lo, hi = m.cmd_range_deg_
     assert np.array_equal(status == 1, (ref == lo) | (ref == hi)) if real == "double" else (status == 1).any()
+
+
+@needs_cc
+def test_fused_multiply_adds_stay_off_whatever_the_flags(tmp_path, fitted, desired):
+    """The fitted free PI's inverse weights reach 1e9 (w_0 ~ 1e-9): a fused multiply-add in its sum moved the
+    command 4e-6 deg from Python's (measured with -march=native -ffp-contract=fast, no pragma)."""
+    m = fitted["pi"]
+    lib = compile_c(generate_c(m), tmp_path, flags=("-O3", "-march=native", "-ffp-contract=fast"))
+    assert np.max(np.abs(lib.run(desired)[0] - _python(m, desired))) <= TOL_DEG["double"]
 
 
 @needs_cc
