@@ -13,6 +13,7 @@ and run through ctypes on recorded desired trajectories: the measured bend of th
 
 from __future__ import annotations
 
+import json
 import warnings
 
 import numpy as np
@@ -181,6 +182,10 @@ def test_cli_writes_header_and_source_once(tmp_path):
     again = endocal("export", "c", path, "--out", tmp_path / "c", "--loop-hz", "1000")
     one_line_exit_2(again, "already exist", "--force")
     assert "float" in (tmp_path / "c" / "endocal_ap.h").read_text()  # untouched
+    res = json.loads(endocal("export", "c", path, "--out", tmp_path / "c", "--loop-hz", "1000", "--force",
+                             "--json").stdout)
+    assert res["real"] == "double" and res["dt_s"] == 0.001 and res["chain"] == ["creep", "pi20 inverse (eqs. 9-11)",
+                                                                                 "envelope"]
 
 
 def test_float_warns_where_it_cannot_follow_double(fitted):

@@ -147,8 +147,9 @@ def test_an_interrupted_run_is_exported_as_far_as_readable_and_said_so(tmp_path)
     for i, idx in enumerate(parts):
         motor.iloc[idx].to_parquet(run / "motor" / f"part-{i:06d}.parquet")
     (run / "motor" / "part-000002.parquet").write_bytes(b"PAR1 cut short")  # the last part, torn
-    proc = endocal("export", "mcap", run, "--out", tmp_path / "run.mcap")
+    proc = endocal("export", "mcap", run, "--out", tmp_path / "run.mcap", "--json")
     one_line_exit_2(proc, "did not complete", "interrupted", "part-000002.parquet", "as far as it is readable")
+    assert "part-000002.parquet" in json.loads(proc.stdout)["incomplete"]
     summary, messages, metadata = _read(tmp_path / "run.mcap")
     counts = {summary.channels[k].topic: n for k, n in summary.statistics.channel_message_counts.items()}
     readable = len(parts[0]) + len(parts[1])

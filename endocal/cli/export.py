@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shlex
 from pathlib import Path
 from typing import Optional
@@ -29,6 +30,8 @@ def export_c_cmd(
     name: Optional[str] = typer.Option(None, "--name", help="C identifier prefix and file stem (default "
                                        "endocal_<axis>): NAME_state, NAME_init, NAME_step."),
     force: bool = typer.Option(False, "--force", help="Overwrite NAME.h and NAME.c."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object (name, real, chain, dt_s, cmd_range, "
+                                 "warnings, files)."),
 ) -> None:
     """Write the model's streaming compensator as C99: a header and a source with a state struct,
     NAME_init and NAME_step(desired_deg) -> knob command, one call per control tick.
@@ -43,6 +46,9 @@ def export_c_cmd(
     comp = export_c(model_path, out_dir, real="float" if use_float else "double", loop_hz=loop_hz, name=name,
                     force=force)
     h_path, c_path = comp.files
+    if as_json:
+        out.print_json(json.dumps(comp.to_dict()))
+        return
     for key, text in comp.warnings:
         err.print(keyed(text, "warning", key), markup=False)
     period = f", loop period {comp.dt_s:g} s" if comp.dt_s else ""
@@ -60,6 +66,8 @@ def export_mcap_cmd(
     models: list[Path] = typer.Option([], "--model", help="Model file; adds its prediction on the run and the error "
                                       "as /model/<axis>. Repeat for each bending axis."),
     force: bool = typer.Option(False, "--force", help="Replace --out."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object (path, channels, t_range_s, start_ns, "
+                                 "incomplete, notes)."),
 ) -> None:
     """Write a run as one MCAP file that Foxglove and PlotJuggler open without ROS (JSON Schema
     channels): motor streams per degree of freedom, tracker poses as foxglove.PoseInFrame and
@@ -74,10 +82,17 @@ def export_mcap_cmd(
     refuse_input_as_output("--out", out_path, [run, *models, run / "run.json", run / "aligned.parquet"])
     res = export_mcap(run, out_path, models=models, force=force)
     span = f"t_s {res.t_range_s[0]:.2f}..{res.t_range_s[1]:.2f}"
+    if as_json:
+        out.print_json(json.dumps(res.to_dict()))
+    else:
+        _print_mcap(res, span)
+    if res.incomplete:
+        fail(f"{res.incomplete}; {res.path} holds the run as far as it is readable ({span}), and its metadata "
+             "(endocal.export) says so")
+
+
+def _print_mcap(res, span: str) -> None:
     out.print(f"wrote {res.path}: {res.messages} messages on {len(res.channels)} channels ({span}): "
               + ", ".join(f"{topic} {n}" for topic, n in res.channels.items()), markup=False)
     for note in res.notes:
         out.print(f"note: {note}", markup=False)
-    if res.incomplete:
-        fail(f"{res.incomplete}; {res.path} holds the run as far as it is readable ({span}), and its metadata "
-             "(endocal.export) says so")

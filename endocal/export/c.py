@@ -111,6 +111,13 @@ class CCompensator:
         return (f"CCompensator({self.name}.h/.c, {self.real}: {' -> '.join(self.chain)}{period}; "
                 f"commands clamped to [{self.cmd_range[0]:g}, {self.cmd_range[1]:g}] {self.drive_unit})")
 
+    def to_dict(self) -> dict:
+        """Everything but the code: name, arithmetic, chain, loop period, range, warnings, files written."""
+        return {"name": self.name, "real": self.real, "chain": list(self.chain), "dt_s": self.dt_s,
+                "cmd_range": list(self.cmd_range), "drive_unit": self.drive_unit,
+                "warnings": [{"key": k, "text": t} for k, t in self.warnings],
+                "files": [str(p) for p in self.files] if self.files else None}
+
     def paths(self, out_dir) -> tuple[Path, Path]:
         """``(OUT_DIR/PREFIX.h, OUT_DIR/PREFIX.c)``."""
         out_dir = Path(out_dir)
