@@ -171,15 +171,18 @@ def _read_readable(run: Path, name: str, problems: list[str]):
     try:
         return read_stream(run, name)
     except RunFormatError as whole_failed:
-        frames = []
+        frames, torn = [], None
         for part in sorted(folder.glob("part-*.parquet")):
             try:
                 frames.append(read_parquet(part))
             except RunFormatError:
-                problems.append(f"{part} cannot be read: {name} exported up to the part before it")
+                torn = part
                 break
-        if not frames or "t_s" not in frames[0].columns:
+        # only a torn part is cut off; a stream that is readable but wrong (a column missing, text for numbers)
+        # is refused as the run format refuses it
+        if torn is None or not frames or "t_s" not in frames[0].columns:
             raise whole_failed from None
+        problems.append(f"{torn} cannot be read: {name} exported up to the part before it")
         return pd.concat(frames, ignore_index=True).sort_values("t_s", kind="stable").reset_index(drop=True)
 
 
