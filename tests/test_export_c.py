@@ -79,7 +79,8 @@ EFFECT_PARAMS = {"deadzone": ("deadzone_slack_deg", "deadzone_band_deg", "deadzo
 
 def _effect_model(effects):
     values = {**PAPER_TABLE1, **{k: ALL_STREAMABLE[k] for e in effects for k in EFFECT_PARAMS[e]}}
-    return make_model("pi", ["envelope", *effects], out_of_range="clamp").set_parameters(values, cmd_range_deg=(-90, 90))
+    model = make_model("pi", ["envelope", *effects], out_of_range="clamp")
+    return model.set_parameters(values, cmd_range_deg=(-90, 90))
 
 
 def _desired_of_goals(model) -> np.ndarray:
@@ -95,7 +96,8 @@ def _desired_of_goals(model) -> np.ndarray:
 @needs_cc
 @pytest.mark.parametrize("effects,real", [
     (["deadzone", "tension", "rate", "creep"], "double"),
-    (["deadzone"], "float"), (["tension"], "float"), (["rate"], "float"), (["creep"], "float"), (["deadzone", "creep"], "float"),
+    (["deadzone"], "float"), (["tension"], "float"), (["rate"], "float"), (["creep"], "float"),
+    (["deadzone", "creep"], "float"),
 ])
 def test_every_streamable_effect_agrees_with_python(tmp_path, effects, real):
     m = _effect_model(effects)
