@@ -372,7 +372,7 @@ def recalibrate_commands(prep: Prepared) -> list[str]:
         lo, hi = m.cmd_range_deg_
         amp = int(min(-lo, hi))
         run = f"recal-{prep.probe_id}-{day}-{axis}"
-        old = Path(prep.models.files[axis]["path"])
+        old = _shown(Path(prep.models.files[axis]["path"]))
         out = str(old.with_name(f"{old.stem}-{day}.json"))
         effects = ",".join(e.label for e in m.effects_)
         cmds.append(f"endocal excite damped-sine --axes {axis} --amplitude {amp} --probe {ptype} --out {shlex.quote(run)}")
@@ -382,6 +382,14 @@ def recalibrate_commands(prep: Prepared) -> list[str]:
     cmds.append("endocal check " + " ".join(f"--model {shlex.quote(p)}" for p in new)
                 + f" --probe-id {prep.probe_id} --history {shlex.quote(str(prep.history.root))}")
     return cmds
+
+
+def _shown(path: Path) -> Path:
+    """A path as a command line shows it: relative to the working folder when inside it."""
+    try:
+        return path.relative_to(Path.cwd())
+    except ValueError:
+        return path
 
 
 def check_probe(models: Sequence, probe_id: str, history: str | Path, *, run: str | Path | None = None,

@@ -102,11 +102,18 @@ def _print_rows(columns: list, rows: list, as_json: bool) -> None:
         return
     if not rows:
         return
+    import numbers
+
     cells = [[_cell(v) for v in r] for r in rows]
     widths = [max([len(str(c))] + [len(r[k]) for r in cells]) for k, c in enumerate(columns)]
-    out.print(" ".join(str(c).rjust(w) for c, w in zip(columns, widths)), markup=False)
+    numeric = [all(v is None or isinstance(v, numbers.Number) for v in col) for col in zip(*rows)]
+
+    def line(values):
+        return "  ".join(v.rjust(w) if num else v.ljust(w) for v, w, num in zip(values, widths, numeric)).rstrip()
+
+    out.print(line([str(c) for c in columns]), markup=False)
     for r in cells:
-        out.print(" ".join(v.rjust(w) for v, w in zip(r, widths)), markup=False)
+        out.print(line(r), markup=False)
 
 
 def _corrupt(line: str | None) -> None:
