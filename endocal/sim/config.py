@@ -13,7 +13,8 @@ Layout
 ``[tendon]``, ``[bending]``, ``[motor]``, ``[tracker]``
     the always-on physics.
 ``[rate]``, ``[deadzone]``, ``[envelope]``, ``[coupling]``, ``[delay]``, ``[drift]``, ``[creep]``, ``[load]``
-    the effect catalog later issues diagnose (:data:`EFFECTS`); each has ``enabled``.
+    the effects of the catalogue the simulator produces (:data:`EFFECTS`: the effects whose class
+    names its section, ``Effect.sim_section``); each has ``enabled``.
 ``[contact]``
     an optional obstacle at the tip (ground truth for the contact-force issue).
 """
@@ -30,9 +31,6 @@ from pathlib import Path
 from typing import Any
 
 from endocal.errors import ConfigError
-
-#: The effect catalog, in the order later issues list it.
-EFFECTS = ("rate", "deadzone", "envelope", "coupling", "delay", "drift", "creep", "load")
 
 #: Conditions of the rig the simulator models and logs (a protocol's ``[conditions]``, set per run with
 #: ``--set NAME=VALUE``): condition column -> (section, key) of the sim config it sets. The wrap of the
@@ -210,6 +208,19 @@ _SECTIONS: dict[str, type] = {
     "load": LoadConfig,
     "contact": ContactConfig,
 }
+
+
+def simulated_effects() -> tuple[str, ...]:
+    """The catalogue's effects this simulator produces: those whose class names one of its sections
+    (``Effect.sim_section``), in the order of the sections."""
+    from endocal.models.effects import EFFECTS as CATALOGUE
+
+    simulated = {cls.sim_section for cls in CATALOGUE.values() if cls.sim_section}
+    return tuple(name for name in _SECTIONS if name in simulated)
+
+
+#: The effects the simulator switches (each section has ``enabled``), asked of the catalogue.
+EFFECTS = simulated_effects()
 
 
 def _coerce(value: Any, f: dataclasses.Field, key: str, where: str) -> Any:

@@ -12,19 +12,14 @@ from endocal.models import EFFECTS
 from endocal.validation.paired import paired_test
 from endocal.validation.suspects import Suspect
 
-#: Pairs of effects that can explain the same residual, and the experiment that tells them apart.
-TELL_APART = {
-    frozenset({"delay", "rate"}): (
-        "a delay shifts the whole response in time at every speed, while speed-dependent friction widens "
-        "the loop only when the knob moves fast: run `chirp` (or `sine-set`) and compare the loop at low and "
-        "high frequency, or `staircase`: a delay shows as the same lag at the start of every step"),
-    frozenset({"creep", "drift"}): (
-        "creep relaxes after each motion and stops, drift keeps going at a constant rate: run `staircase` "
-        "(creep restarts at every step) and `hold` (drift keeps going with the knob still)"),
-    frozenset({"deadzone", "envelope"}): (
-        "a dead zone appears after every reversal, wherever it happens, while the envelope depends on the "
-        "knob position only: run `sine` with an offset (reversals away from neutral)"),
-}
+def tell_apart(a: str, b: str) -> str | None:
+    """The records that separate effects ``a`` and ``b`` as either declares them (``Effect.lookalikes``);
+    None when neither names the other."""
+    for x, y in ((a, b), (b, a)):
+        cls = EFFECTS.get(x)
+        if cls is not None and y in cls.lookalikes:
+            return cls.lookalikes[y]
+    return None
 
 
 def demoted(suspects: list[Suspect]) -> list[str]:
@@ -53,7 +48,7 @@ def ambiguities(suspects: list[Suspect], errs: dict, alpha: float, close_pct: fl
         if p < alpha and rel >= close_pct:
             continue
         a, b = top.effect.partition(":")[0], other.effect.partition(":")[0]
-        how = TELL_APART.get(frozenset({a, b}))
+        how = tell_apart(a, b)
         if how is None:
             how = (f"{top.effect} is revealed by {EFFECTS[a].protocol}; "
                    f"{other.effect} by {EFFECTS[b].protocol}")

@@ -34,7 +34,7 @@ from endocal.models.base import HysteresisModel
 from endocal.validation.ambiguity import ambiguities, demoted
 from endocal.validation.candidates import candidate_effects
 from endocal.validation.folds import check_cv_data, fold_bounds, fold_errors, fold_split, still_blocks
-from endocal.validation.identifiability import creep_reason
+from endocal.validation.identifiability import unheld_cautions
 from endocal.validation.paired import holm, min_units_for, paired_test, unit_test
 from endocal.validation.parallel import map_jobs, one_blas_thread
 from endocal.validation.power import estimate_power, evidence_phrase
@@ -88,13 +88,8 @@ def _split_candidate(model: HysteresisModel, effects: Sequence[str], train: Hyst
     cautions = [w for w in m.fit_report_.warnings if prefixes and w.startswith(prefixes)
                 and (b := _AT_BOUND.search(w)) and float(b.group(1)) != 0.0]
     cautions += [c for e in new if (c := e.implausible(m.effect_params(e), train))]
-    if any(e.name == "creep" for e in new) and creep_reason(train) and creep_reason(val):
-        # creep shows itself where the knob rests after a move; fitted and scored on motion alone
-        # its slow memory takes up smoother reversals, a lag or how the records start, and its
-        # refits failed on other records of the same plant (red-team runs, README known gaps)
-        cautions.append("no record holds the knob still after a move, where creep shows itself (the tip still "
-                        "moving after the knob stops): fitted on motion alone it may stand for smoother reversals, a "
-                        "lag or how the records start; record a `staircase` to confirm it")
+    # an effect fitted on records that lack what shows it (creep without a hold) may stand for something else
+    cautions += [c for e in new for c in unheld_cautions(e, train, val)]
     return predict_errors(m, val), cautions
 
 
