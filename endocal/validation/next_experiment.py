@@ -500,6 +500,9 @@ def _targets(model: HysteresisModel, result, train: HysteresisData, val: Hystere
         if not s.significant and s.gain_pct >= scan.min_gain_pct:
             put(s.effect, "not significant", f"-{s.gain_pct:.0f} % validation RMSE, {s.evidence}")
     suggested = {sp.effect for sp in result.suspects}
+    for x in getattr(scan, "lookalikes", ()):  # a suggestion its look-alike is not told from: separate them
+        if not x.settled:
+            put(x.lookalike, "look-alike", x.words())
     for name, cls in EFFECTS.items():  # what --next considers whatever validate said (rate, delay: the speeds)
         if cls.at_stake is not None and name not in suggested:
             put(name, *cls.at_stake)
