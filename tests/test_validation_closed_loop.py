@@ -269,3 +269,23 @@ def test_a_foreign_plant_is_named_by_its_family(case):
     loop = run_loop(case)
     assert loop.added <= MAX_ADDED
     assert _named(family(case), loop), (case, loop.start, loop.named, loop.added, loop.history_deg, loop.next_said)
+
+
+def test_a_foreign_rate_plant_is_named_rate_not_delay():
+    """Issue 31 part 4: friction thresholds x (1 + 0.012 |v|) (v in deg/s), no servo or tracker lag, recorded as a
+    user records; the start model (a B-spline) lacks both look-alikes. A lag and speed-dependent friction both
+    widen the loop with speed, so the scan may rank `delay` first; the chirp in the estimation records spans
+    speeds, so validate settles the pair: it scores `rate` in `delay`'s place and after it, and the records
+    prefer `rate`, which is suggested first."""
+    from tests.test_validation_hidden import NO_LAG
+
+    cfg = SimConfig.default().replace(**NO_SLACK).replace(**NO_LAG).replace(**FOREIGN["rate-linear"][1])
+    est = [simulate(cfg, "damped-sine", {}, seed=0)[0], simulate(cfg, "chirp", {"amplitude_deg": 50.0}, seed=0)[0]]
+    val = [simulate(cfg, "random", {"amplitude_deg": 60.0}, seed=0)[0]]
+    model = make_model("bspline", axis="ap").fit(axis_data(est, "ap"))
+    res = validate_offline(model, val, train=est, model_path="m.json", max_scan_samples=SCAN_SAMPLES)
+    ranked = [(s.effect, round(s.gain_pct, 1)) for s in res.scan.tested]
+    assert res.suspects and res.suspects[0].effect == "rate", (ranked, res.scan.notes)
+    pair = [x for x in res.scan.lookalikes if {x.suggested, x.lookalike} == {"rate", "delay"}]
+    if pair:  # delay ranked first by its gain: the settlement named rate, with p
+        assert pair[0].separated and pair[0].preferred == "rate" and pair[0].p_value < 0.05, pair[0]

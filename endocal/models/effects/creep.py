@@ -24,8 +24,8 @@ from numba import njit
 
 from endocal.errors import ModelError
 from endocal.models.data import HysteresisData
-from endocal.models.effects.requirements import TIME_STAMPS, holds_after_moves
 from endocal.models.effects.base import OutputFilter
+from endocal.models.effects.requirements import TIME_STAMPS, holds_after_moves
 from endocal.models.params import Parameter
 
 _MAX_FRACTION = 0.95

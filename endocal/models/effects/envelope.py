@@ -19,8 +19,8 @@ import numpy as np
 
 from endocal.errors import ModelError
 from endocal.models.data import HysteresisData
-from endocal.models.effects.requirements import full_amplitude
 from endocal.models.effects.base import InputEffect
+from endocal.models.effects.requirements import full_amplitude
 from endocal.models.params import Parameter
 
 _K_MIN = 1e-12
