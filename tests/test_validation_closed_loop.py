@@ -18,9 +18,14 @@ One recipe for every case; nothing is picked per case:
   `validate --next` finds something to test, write that protocol, record it twice on the simulator
   through `excite`'s own code (`prepare_backend`, `run_excitation`; a condition it asks for set to
   2/3 of the value the records hold), add the first recording to the estimation data, refit the
-  model's structure, and validate on the second, a fresh recording of the same plan; at most two
-  added recordings; the loop ends when --next finds nothing to test or two recordings were added
-  and nothing is suggested.
+  model's structure, and validate on the second, a fresh recording of the same plan; when the plan
+  asks for a condition, the first recording is also made at the value the records hold (--next's
+  third excite command: the same motion at two values of the condition, issue 32) and added to the
+  estimation data; at most two added recordings; the loop ends when --next finds nothing to test or
+  two recordings were added and nothing is suggested.
+- foreign plants (issue 31 part 4, ``FOREIGN``): the same recipe on plants whose law is not the
+  catalogue's (friction thresholds growing linearly with knob speed, a creep with two time
+  constants, a dead band off neutral); the loop must name the effect's family.
 
 The bars (issue 27, "How good"): the hidden effect named, by a suggestion refitted in the loop, in 8
 of 8; the validation RMSE halved from the loop's start in at least 7 of 8; the control ends with
