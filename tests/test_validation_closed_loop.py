@@ -236,6 +236,13 @@ def run_loop(case: str | None) -> LoopResult:
     return out
 
 
+def _say(case, loop: LoopResult) -> None:
+    """The loop's numbers, for the docstring's table (shown with ``pytest -s``)."""
+    print(f"\nLOOP {case}: start {loop.start}, named {loop.named}, added {loop.added}, history "
+          f"{[round(h, 3) for h in loop.history_deg]}, start -> end {loop.start_deg:.3g} -> {loop.end_deg:.3g} deg, "
+          f"own share {loop.without_hidden_deg}, clean {loop.clean}")
+
+
 def _named(hidden: str, loop: LoopResult) -> bool:
     return hidden in [e.partition(":")[0] for e in loop.named]
 
@@ -243,6 +250,7 @@ def _named(hidden: str, loop: LoopResult) -> bool:
 @pytest.mark.parametrize("hidden", list(HIDDEN))
 def test_the_hidden_effect_is_named_by_a_refitted_suggestion(hidden):
     loop = run_loop(hidden)
+    _say(hidden, loop)
     assert loop.added <= MAX_ADDED
     assert _named(hidden, loop), (loop.start, loop.named, loop.added, loop.history_deg, loop.next_said)
 
@@ -264,6 +272,7 @@ def test_the_bars_of_the_issue():
 
 def test_the_control_ends_with_nothing_missing():
     loop = run_loop(None)
+    _say(None, loop)
     assert loop.added <= MAX_ADDED
     assert loop.clean, (loop.named, loop.history_deg)
 
@@ -272,6 +281,7 @@ def test_the_control_ends_with_nothing_missing():
 def test_a_foreign_plant_is_named_by_its_family(case):
     """Issue 31 part 4: a plant whose law is not the catalogue's; the loop names the effect's family."""
     loop = run_loop(case)
+    _say(case, loop)
     assert loop.added <= MAX_ADDED
     assert _named(family(case), loop), (case, loop.start, loop.named, loop.added, loop.history_deg, loop.next_said)
 
