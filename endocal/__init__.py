@@ -17,7 +17,7 @@ from endocal._version import __version__  # one source for the package and pypro
 _API = (
     "ForceModel", "Model", "Planes", "Report", "Run", "Suggestion", "Validation",
     "fit", "fit_force", "fit_planes", "load_model", "load_planes", "load_run", "make_report", "run_protocol",
-    "validate",
+    "use_effects", "validate",
 )
 
 __all__ = ["__version__", *_API]

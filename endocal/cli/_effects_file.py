@@ -34,14 +34,16 @@ def use_effects_files(paths: list[Path]) -> None:
     from endocal.models.userfile import EffectFileWarning, load_effects_files
 
     previous = warnings.showwarning
+    if not getattr(previous, "endocal_effects_file", False):  # once per process, however many commands run
 
-    def show(message, category, filename, lineno, file=None, line=None):
-        if issubclass(category, EffectFileWarning):
-            err.print(f"warning: {message}", markup=False)
-        else:
-            previous(message, category, filename, lineno, file, line)
+        def show(message, category, filename, lineno, file=None, line=None):
+            if issubclass(category, EffectFileWarning):
+                err.print(f"warning: {message}", markup=False)
+            else:
+                previous(message, category, filename, lineno, file, line)
 
-    warnings.showwarning = show
+        show.endocal_effects_file = True
+        warnings.showwarning = show
     load_effects_files(paths)
 
 

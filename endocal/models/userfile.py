@@ -406,7 +406,7 @@ def _check_base_class(cls: type, where: str, table: dict, seen: dict) -> None:
             back = np.asarray(model.inverse(HysteresisData(cmd_deg=want, t_s=t)), dtype=float)
             again = np.asarray(model.predict(HysteresisData(cmd_deg=back, t_s=t)), dtype=float)
     except Exception as exc:
-        raise EffectFileError(f"{where}: base '{name}': its inverse fails on a sweep ({type(exc).__name__}: "
+        raise EffectFileError(f"{where}: base '{name}': its inverse does not converge on a sweep ({type(exc).__name__}: "
                               f"{_first_line(exc)}); fix it, or declare has_inverse = False (compensation is then "
                               "refused)") from None
     err = float(np.max(np.abs(again - want))) if again.shape == want.shape else math.inf
