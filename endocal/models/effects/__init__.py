@@ -69,18 +69,13 @@ class EffectInfo:
         return asdict(self)
 
 
-_USAGE = {"load": "load:COLUMN", "coupling": "coupling[:COLUMN]"}
-_NEEDS = {"rate": ["t_s"], "delay": ["t_s"], "drift": ["t_s"], "creep": ["t_s"],
-          "coupling": ["other_cmd_deg (or the named column)"], "load": ["the named column, not constant"]}
-
-
 def catalog() -> list[EffectInfo]:
     """Every effect of :data:`EFFECTS`, in catalog order, with its documentation."""
     out = []
     for name, cls in EFFECTS.items():
         out.append(EffectInfo(
-            name=name, usage=_USAGE.get(name, name), kind=cls.kind, cause=cls.cause, signature=cls.signature,
-            protocol=cls.protocol, parameters=list(cls.units), needs=list(_NEEDS.get(name, [])),
+            name=name, usage=cls.usage, kind=cls.kind, cause=cls.cause, signature=cls.signature,
+            protocol=cls.protocol, parameters=list(cls.units), needs=list(cls.needs),
             streamable=bool(cls.streamable),
         ))
     return out

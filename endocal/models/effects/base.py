@@ -69,6 +69,9 @@ class Effect(ABC):
     #: an input effect that is a static, monotone map of the knob position (the base's input range
     #: is its image of the command range: the numerical inverse searches there)
     position_map: ClassVar[bool] = False
+    #: ``(status, why)`` when ``--next`` considers it whatever ``validate`` said (its segment then decides
+    #: whether the records at stake can tell it from a look-alike); None: only when something points at it
+    at_stake: ClassVar[tuple[str, str] | None] = None
     #: ``--next`` plans segments in ascending ``segment_order`` (those that reuse the others'
     #: motions, e.g. the full amplitude or a condition for the whole run, come last)
     segment_order: ClassVar[int] = 50
