@@ -13,7 +13,8 @@ Layout
 ``[tendon]``, ``[bending]``, ``[motor]``, ``[tracker]``
     the always-on physics.
 ``[rate]``, ``[deadzone]``, ``[envelope]``, ``[coupling]``, ``[delay]``, ``[drift]``, ``[creep]``, ``[load]``
-    the effect catalog later issues diagnose (:data:`EFFECTS`); each has ``enabled``.
+    the effects of the catalogue the simulator produces (:data:`EFFECTS`: the effects whose class
+    names its section, ``Effect.sim_section``); each has ``enabled``.
 ``[contact]``
     an optional obstacle at the tip (ground truth for the contact-force issue).
 ``[user_effects.NAME]``
@@ -35,9 +36,6 @@ from pathlib import Path
 from typing import Any
 
 from endocal.errors import ConfigError
-
-#: The effect catalog, in the order later issues list it.
-EFFECTS = ("rate", "deadzone", "envelope", "coupling", "delay", "drift", "creep", "load")
 
 #: Conditions of the rig the simulator models and logs (a protocol's ``[conditions]``, set per run with
 #: ``--set NAME=VALUE``): condition column -> (section, key) of the sim config it sets. The wrap of the
@@ -115,10 +113,13 @@ class TrackerConfig:
 
 @dataclass(frozen=True)
 class RateConfig:
-    """Friction growing with sliding speed: mu_eff = mu * (1 + gain * |knob speed|)."""
+    """Friction growing with sliding speed: mu_eff = mu * (1 + gain * |knob speed|) (law 'capstan'), or
+    the slip thresholds times (1 + gain * |knob speed|) (law 'linear', a plant unlike the catalogue's law)."""
 
     enabled: bool = _p(False, "switch the effect on")
     gain_s_per_deg: float = _p(0.006, "relative friction increase per deg/s of knob speed (s/deg)", 0.0, 1.0)
+    law: str = _p("capstan", "'capstan' (the friction coefficient grows with speed) or 'linear' (the slip "
+                  "thresholds grow linearly with speed)", choices=("capstan", "linear"))
 
 
 @dataclass(frozen=True)
@@ -127,6 +128,8 @@ class DeadzoneConfig:
 
     enabled: bool = _p(True, "switch the effect on")
     slack_mm: float = _p(1.5, "extra free length of each tendon at the neutral knob (mm)", 0.0, 50.0)
+    center_deg: float = _p(0.0, "knob angle at which both tendons are equally slack (deg): a band not centred "
+                           "at 0 (the agonist has pulley_radius * center less slack)", -90.0, 90.0)
 
 
 @dataclass(frozen=True)
@@ -169,6 +172,9 @@ class CreepConfig:
     enabled: bool = _p(False, "switch the effect on")
     fraction: float = _p(0.25, "share a of the bend that relaxes slowly (0..1)", 0.0, 1.0)
     time_constant_s: float = _p(2.0, "relaxation time constant tau (s)", 0.0, 3600.0, lo_open=True)
+    fraction2: float = _p(0.0, "share of the bend that relaxes with the second time constant (0 = one relaxation)",
+                          0.0, 1.0)
+    time_constant2_s: float = _p(20.0, "second relaxation time constant (s)", 0.0, 3600.0, lo_open=True)
 
 
 @dataclass(frozen=True)
@@ -215,6 +221,19 @@ _SECTIONS: dict[str, type] = {
     "load": LoadConfig,
     "contact": ContactConfig,
 }
+
+
+def simulated_effects() -> tuple[str, ...]:
+    """The catalogue's effects this simulator produces: those whose class names one of its sections
+    (``Effect.sim_section``), in the order of the sections."""
+    from endocal.models.effects import EFFECTS as CATALOGUE
+
+    simulated = {cls.sim_section for cls in CATALOGUE.values() if cls.sim_section}
+    return tuple(name for name in _SECTIONS if name in simulated)
+
+
+#: The effects the simulator switches (each section has ``enabled``), asked of the catalogue.
+EFFECTS = simulated_effects()
 
 
 def _coerce(value: Any, f: dataclasses.Field, key: str, where: str) -> Any:
@@ -390,6 +409,9 @@ class SimConfig:
         return SimConfig.from_dict(data, where="sim config (replace)")
 
     def _check_consistency(self, where: str) -> None:
+        if self.creep.fraction + self.creep.fraction2 > 1.0:
+            raise ConfigError(f"{where}: creep.fraction + creep.fraction2 ({self.creep.fraction} + "
+                              f"{self.creep.fraction2}) exceeds 1: more of the bend cannot relax than there is")
         if self.load.enabled and self.load.amplitude_deg > self.tendon.wrap_deg:
             raise ConfigError(
                 f"{where}: load.amplitude_deg ({self.load.amplitude_deg}) exceeds tendon.wrap_deg "

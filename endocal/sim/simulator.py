@@ -94,6 +94,7 @@ class Simulator:
         self._d_mm = np.zeros(2)
         self._beta_qs = np.zeros(2)
         self._creep_slow = np.zeros(2)
+        self._creep_slow2 = np.zeros(2)
         self._t_last: float | None = None
         self._next_frame: int | None = None
         self._hist_t = np.empty(0)
@@ -234,7 +235,13 @@ class Simulator:
         else:
             force_pred_n = self._guarded_ticks(t, dt, g, goal_int, wrap_rad, outs, noise_ma, guard)
         cr = self.config.creep
-        beta = tendon.creep_filter(out_beta, dt, cr.fraction, cr.time_constant_s, self._creep_slow) if cr.enabled else out_beta
+        beta = out_beta
+        if cr.enabled and cr.fraction2 > 0.0:  # two relaxations in parallel, each its own slow state
+            slow1 = tendon.creep_filter(out_beta, dt, 1.0, cr.time_constant_s, self._creep_slow)
+            slow2 = tendon.creep_filter(out_beta, dt, 1.0, cr.time_constant2_s, self._creep_slow2)
+            beta = (1.0 - cr.fraction - cr.fraction2) * out_beta + cr.fraction * slow1 + cr.fraction2 * slow2
+        elif cr.enabled:
+            beta = tendon.creep_filter(out_beta, dt, cr.fraction, cr.time_constant_s, self._creep_slow)
         if self._hidden is not None:  # a user's effects on the bend ([user_effects], endocal.sim.user_effects)
             beta = self._hidden.bend(t, beta)
         contact_force_n = np.zeros(n)
@@ -280,7 +287,8 @@ class Simulator:
             self.config.bending.stiffness_nmm_per_rad, self._inv_bs2, self.config.bending.friction_nmm,
             self._wall_axis, self._wall_rad, self._wall_sign, self._k_wall, self._w_force,
             self._held_goal, self._pos, self._vel, self._prof, self._d_mm, self._beta_qs,
-            *outs,
+            *outs, self.config.rate.enabled and self.config.rate.law == "linear",
+            math.radians(self.config.deadzone.center_deg) if self.config.deadzone.enabled else 0.0,
         )
 
     def _guarded_ticks(self, t, dt, g, goal_int, wrap_rad, outs, noise_ma, guard) -> np.ndarray:

@@ -31,10 +31,10 @@ import numpy as np
 from endocal.errors import ModelError
 from endocal.models import EFFECTS, HysteresisData
 from endocal.models.base import HysteresisModel
-from endocal.validation.ambiguity import ambiguities, demoted
+from endocal.validation.ambiguity import ambiguities, demoted, settle_lookalikes
 from endocal.validation.candidates import candidate_effects
 from endocal.validation.folds import check_cv_data, fold_bounds, fold_errors, fold_split, still_blocks
-from endocal.validation.identifiability import creep_reason
+from endocal.validation.identifiability import unheld_cautions
 from endocal.validation.paired import holm, min_units_for, paired_test, unit_test
 from endocal.validation.parallel import map_jobs, one_blas_thread
 from endocal.validation.power import estimate_power, evidence_phrase
@@ -88,13 +88,8 @@ def _split_candidate(model: HysteresisModel, effects: Sequence[str], train: Hyst
     cautions = [w for w in m.fit_report_.warnings if prefixes and w.startswith(prefixes)
                 and (b := _AT_BOUND.search(w)) and float(b.group(1)) != 0.0]
     cautions += [c for e in new if (c := e.implausible(m.effect_params(e), train))]
-    if any(e.name == "creep" for e in new) and creep_reason(train) and creep_reason(val):
-        # creep shows itself where the knob rests after a move; fitted and scored on motion alone
-        # its slow memory takes up smoother reversals, a lag or how the records start, and its
-        # refits failed on other records of the same plant (red-team runs, README known gaps)
-        cautions.append("no record holds the knob still after a move, where creep shows itself (the tip still "
-                        "moving after the knob stops): fitted on motion alone it may stand for smoother reversals, a "
-                        "lag or how the records start; record a `staircase` to confirm it")
+    # an effect fitted on records that lack what shows it (creep without a hold) may stand for something else
+    cautions += [c for e in new for c in unheld_cautions(e, train, val)]
     return predict_errors(m, val), cautions
 
 
@@ -225,7 +220,11 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     suspects = [s for s in tested if s.significant] or [s for s in tested if s.gain_pct >= min_gain_pct]
     # a candidate with a caution (a delay at its -0.5 s bound, a drift too fast to be one) ranks after the others
     suspects.sort(key=lambda s: bool(s.caution))
+    # the first suggestion against the look-alikes it declares, on records that separate them
+    suspects, settled = settle_lookalikes(suspects, tested, errs, dt, val, units, alpha, min_gain_pct,
+                                          lambda effects: _split_candidate(model, effects, dt, val)[0], have)
     notes = demoted(suspects) + (ambiguities(suspects, errs, alpha) if any(s.significant for s in suspects) else [])
+    notes += [x.words() for x in settled]
     notes += [f"{k}: {v}" for k, v in untestable.items()]
     if thin and fitted:
         notes.append(f"the validation data holds {units.n} {units.kind}s; with {len(fitted)} candidates at least "
@@ -237,7 +236,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
                      "from the candidate's by a few per cent")
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), 0, stride,
                       dt.n_samples, alpha, min_gain_pct, scheme="estimation/validation", scheme_reason=scheme_reason,
-                      units=units.to_dict(), min_units=need)
+                      units=units.to_dict(), min_units=need, lookalikes=tuple(settled))
 
 
 def check_fit_data(data: HysteresisData, what: str = "data") -> None:

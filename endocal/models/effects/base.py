@@ -155,11 +155,13 @@ class Effect(ABC):
         """
         return None
 
-    def gauge(self, homogeneous_base: bool) -> dict[str, float]:
+    def gauge(self, base_absorbs: str) -> dict[str, float]:
         """Parameters (full names) a model holds fixed so the fit has one solution (default: none).
 
-        ``homogeneous_base``: the base scales exactly with its input (the play operators of ``pi``,
-        ``Phi_{c r}[c x] = c Phi_r[x]``), so a scale of this effect trades off against it.
+        ``base_absorbs`` says which maps of its input the base takes up exactly: ``"scale"`` (the
+        play operators of ``pi`` are homogeneous, ``Phi_{c r}[c x] = c Phi_r[x]``) or ``"affine"``
+        (free branch functions); an effect whose output such a map can trade off against fixes
+        the matching parameters.
         """
         return {}
 

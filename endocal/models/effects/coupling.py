@@ -46,8 +46,8 @@ from numba import njit
 
 from endocal.errors import ModelError
 from endocal.models.data import OTHER_CMD, HysteresisData
-from endocal.models.effects.requirements import other_knob_moving
 from endocal.models.effects.base import OutputFilter
+from endocal.models.effects.requirements import other_knob_moving
 from endocal.models.params import Parameter
 
 _D2R = math.pi / 180.0

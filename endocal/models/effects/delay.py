@@ -18,9 +18,9 @@ import numpy as np
 from numba import njit
 
 from endocal.models.data import HysteresisData
+from endocal.models.effects.base import InputEffect
 from endocal.models.effects.rate import Rate
 from endocal.models.effects.requirements import TIME_STAMPS, speeds_spanning
-from endocal.models.effects.base import InputEffect
 from endocal.models.params import Parameter
 
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from endocal.models.data import HysteresisData
-from endocal.models.effects.requirements import TIME_STAMPS
 from endocal.models.effects.base import OutputEffect
+from endocal.models.effects.requirements import TIME_STAMPS
 from endocal.models.params import Parameter, fmt_value
 
 

@@ -19,8 +19,8 @@ import numpy as np
 
 from endocal.errors import ModelError
 from endocal.models.data import HysteresisData
-from endocal.models.effects.requirements import full_amplitude
 from endocal.models.effects.base import InputEffect
+from endocal.models.effects.requirements import full_amplitude
 from endocal.models.params import Parameter
 
 _K_MIN = 1e-12
@@ -118,11 +118,16 @@ class Envelope(InputEffect):
         """The full amplitude of the fitted range: any segment on this axis (every one sweeps it), else a sine."""
         return design.full_range(n_half_cycles)
 
-    def gauge(self, homogeneous_base: bool) -> dict[str, float]:
-        # The play operator is homogeneous (Phi_{c r}[c x] = c Phi_r[x]): with exponential weights
+    def gauge(self, base_absorbs: str) -> dict[str, float]:
+        # A homogeneous base (the play operator, Phi_{c r}[c x] = c Phi_r[x]): with exponential weights
         # the envelope's scale trades off exactly against r, w and beta, so one scale parameter is
-        # fixed. k1 = 1 makes f read in degrees around neutral.
-        return {f"{self.prefix}_k1": 1.0} if homogeneous_base else {}
+        # fixed; k1 = 1 makes f read in degrees around neutral. Branches that absorb any affine map
+        # of their input: the middle slope and the zero are fixed, so f only carries the shape.
+        if base_absorbs == "scale":
+            return {f"{self.prefix}_k1": 1.0}
+        if base_absorbs == "affine":
+            return {f"{self.prefix}_k1": 1.0, f"{self.prefix}_theta1_deg": 0.0}
+        return {}
 
     def shapes_base(self) -> dict:
         # the modified PI of the duodenoscope paper: exponential weights on the envelope, no offset

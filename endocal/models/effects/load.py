@@ -39,8 +39,8 @@ import numpy as np
 from endocal.errors import ModelError
 from endocal.models._kernels import causal_play_inverse, varplay_forward_jac
 from endocal.models.data import HysteresisData
-from endocal.models.effects.requirements import condition_varying
 from endocal.models.effects.base import InputEffect
+from endocal.models.effects.requirements import condition_varying
 from endocal.models.params import Parameter, fmt_value
 
 

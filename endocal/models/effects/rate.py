@@ -46,8 +46,8 @@ from numba import njit
 from endocal.errors import ModelError
 from endocal.models._kernels import varplay_forward_jac
 from endocal.models.data import HysteresisData
-from endocal.models.effects.requirements import TIME_STAMPS, speeds_spanning
 from endocal.models.effects.base import InputEffect
+from endocal.models.effects.requirements import TIME_STAMPS, speeds_spanning
 from endocal.models.params import Parameter
 
 

@@ -53,6 +53,11 @@ class Requirement:
         What it is needed for (module docstring).
     remedy : str
         The experiment that would provide it (``"run `staircase`"``), said in parentheses.
+    lacking : str
+        What ``--next`` calls records without it (``"no holds"``); default ``"no KEY"``.
+    caution : str
+        When set, a fit of the effect on records that lack it (estimation and validation alike)
+        carries this caution, and ranks after the effects fitted without one.
     """
 
     key: str
@@ -60,12 +65,19 @@ class Requirement:
     predicate: Callable
     to: str = "test"
     remedy: str = ""
+    lacking: str = ""
+    caution: str = ""
 
     def __post_init__(self):
         if self.to not in PURPOSES:
             raise ValueError(f"requirement '{self.key}': to must be one of {PURPOSES}, got {self.to!r}")
         if not callable(self.predicate):
             raise TypeError(f"requirement '{self.key}': predicate must be callable, got {self.predicate!r}")
+
+    @property
+    def status(self) -> str:
+        """What ``--next`` calls records without it."""
+        return self.lacking or f"no {self.key}"
 
     def check(self, data: HysteresisData, **context) -> tuple[str, str] | None:
         """None when ``data`` holds it, else ``(why, remedy)``.
@@ -144,8 +156,8 @@ def one_frequency(data: HysteresisData) -> str | None:
 
 def speeds_spanning(remedy: str, to: str = "test") -> Requirement:
     """The same motion at several speeds (half-cycles whose durations span 1.5 : 1 or more)."""
-    return Requirement("speeds", "motion at several speeds", lambda d: one_frequency(d) is None or one_frequency(d),
-                       to=to, remedy=remedy)
+    return Requirement("speeds", "motion at several speeds", lambda d: one_frequency(d) or True,
+                       to=to, remedy=remedy, lacking="one speed")
 
 
 def no_hold_after_move(data: HysteresisData) -> bool:
@@ -169,10 +181,10 @@ def no_hold_after_move(data: HysteresisData) -> bool:
     return True
 
 
-def holds_after_moves(remedy: str, to: str = "test") -> Requirement:
+def holds_after_moves(remedy: str, to: str = "test", caution: str = "") -> Requirement:
     """A hold of the knob (1 s or more) right after a move."""
     return Requirement("holds", "holds after moves", lambda d: not no_hold_after_move(d) or "no holds",
-                       to=to, remedy=remedy)
+                       to=to, remedy=remedy, lacking="no holds", caution=caution)
 
 
 @dataclass(frozen=True)
@@ -266,4 +278,5 @@ def full_amplitude(share: float = 0.9) -> Requirement:
         return (f"the validation record spans {np.ptp(data.cmd_deg):.3g} of the {span_deg:.3g} deg the model was "
                 "fitted on")
 
-    return Requirement("amplitude", "the full amplitude of the fitted range", held, to="next")
+    return Requirement("amplitude", "the full amplitude of the fitted range", held, to="next",
+                       lacking="not the full amplitude")
