@@ -393,3 +393,26 @@ def test_without_the_file_the_summary_says_the_residual_follows_the_loop():
     assert "wear" not in {s.effect for s in res.scan.tested}
     assert not any(s.significant for s in res.scan.suspects)
     assert "follows the loop" in res.unexplained and "docs/how-to/add-effect.md" in res.unexplained
+
+
+def test_next_designs_the_users_segment_or_says_its_experiment_in_words(tmp_path):
+    """Estimation data that cannot show either example (one cycle: two reversals, 160 deg of travel): `--next`
+    designs the stick-slip's own segment (small sines) and says the wear's experiment in words (it has none)."""
+    from endocal.validation.data import axis_data
+    from endocal.validation.next_experiment import write_next
+    from endocal.validation.offline import validate_offline
+    from tests.test_validation_hidden import simulate
+
+    load_effects_files([WEAR, EXAMPLES["stickslip"][0]])
+    cfg = SimConfig.default().replace(deadzone={"enabled": False})
+    est = [simulate(cfg, "sine", {"cycles": 1, "amplitude_deg": 40.0}, seed=0)[0]]
+    val = simulate(cfg, "random", {"amplitude_deg": 40.0, "duration_s": 30.0}, seed=0)[0]
+    model = make_model("linear", ["delay"], axis="ap").fit(axis_data(est, "ap"))
+    res = validate_offline(model, [val], train=est, model_path="m.json", max_scan_samples=1000)
+    assert "travel" in res.scan.untestable["wear"] and "reverse the knob" in res.scan.untestable["stickslip"]
+    out = write_next(model, res, [val], est, None, tmp_path / "next.toml", model_path="m.json")
+    tests = {t.effect: t for t in out.experiment.tests}
+    seg = out.experiment.protocol.to_dict()["params"]["segments"][tests["stickslip"].segment - 1]
+    assert seg["signal"] == "sine" and seg["amplitude_deg"] == pytest.approx(10.0)
+    assert any(n.startswith("wear: no segment of its own; record a long record of large cycles")
+               for n in out.experiment.notes), out.experiment.notes

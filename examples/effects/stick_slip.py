@@ -26,7 +26,9 @@ import math
 import numpy as np
 from numba import njit
 
+from endocal.models.data import reversals
 from endocal.models.effects.base import InputEffect
+from endocal.models.effects.requirements import Requirement
 from endocal.models.params import Parameter, fmt_value
 
 #: the least turn of the command that counts as a reversal (deg): above a logged command's jitter
@@ -63,6 +65,16 @@ def reversal_commands(u: np.ndarray, starts, ends) -> np.ndarray:
                               np.asarray(ends, dtype=np.int64), REVERSAL_DEG)
 
 
+#: the fewest reversals a record needs to show a stick at each (and the slip after it)
+MIN_REVERSALS = 6
+
+
+def _reversing(data):
+    """A record reverses the knob :data:`MIN_REVERSALS` times or more."""
+    most = max(reversals(data.cmd_deg[sl]) for sl in data.run_slices())
+    return True if most >= MIN_REVERSALS else f"the records reverse the knob {most} times at most, under {MIN_REVERSALS}"
+
+
 class StickSlip(InputEffect):
     """The tip holds at each reversal until the knob has moved ``stickslip_deg`` back, then jumps (module
     docstring)."""
@@ -75,7 +87,8 @@ class StickSlip(InputEffect):
     protocol = "reversals of every size, slow enough that each stick lasts several samples (small sines about the middle)"
     units = {"deg": "deg"}
     has_inverse = False
-    requires = ()  # every record has reversals; ``segment`` asks for many small ones
+    requires = (Requirement("reversals", f"{MIN_REVERSALS} reversals of the knob in a record", _reversing, to="fit",
+                            remedy="validate --next designs small sines"),)
     residual = ("abs speed",)
     lookalikes = {"deadzone": "a dead zone lags every reversal smoothly and never jumps; small reversals "
                               "inside the loop show the jump of a stick-slip",

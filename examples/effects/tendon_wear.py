@@ -28,8 +28,9 @@ from endocal.models.effects.base import InputEffect
 from endocal.models.effects.requirements import Requirement
 from endocal.models.params import Parameter, fmt_value
 
-#: the least travel a record needs before a wear of 1 % per 1000 deg shows (deg): 2000 deg lose 2 %
-MIN_TRAVEL_DEG = 2000.0
+#: the least travel a record needs for a wear to show (deg): a few full cycles of the knob; a record that
+#: travels less (a single sweep) cannot tell a worn gain from a lower one
+MIN_TRAVEL_DEG = 500.0
 
 
 def _travel_of(u: np.ndarray, data) -> np.ndarray:
