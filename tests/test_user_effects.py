@@ -166,6 +166,8 @@ def test_the_api_takes_the_class_itself(small_table):
     m = ec.fit([small_table], axis="ap", model="linear", effects=[cls])
     assert m.effects == ["mygain"] and EFFECTS["mygain"] is cls
     assert register_user_class(cls) is cls  # again: nothing new
+    m = ec.fit([small_table], axis="ap", model="linear", effects=["wear"], effects_file=WEAR)
+    assert m.effects == ["wear"] and source_of(EFFECTS["wear"]).path == str(WEAR.resolve())
 
 
 # ---------------------------------------------------------------------------------------------- bad input
@@ -258,6 +260,24 @@ def test_model_files_record_the_users_file_and_refuse_it_missing_or_changed(tmp_
     mine.unlink()
     forget_user_classes()
     with pytest.raises(EffectFileError, match="which does not exist"):
+        load_model(path)
+
+
+def test_a_users_base_is_recorded_and_needed_like_an_effect(tmp_path, small_table):
+    mine = _write(tmp_path, "mybase.py", '''
+    from endocal.models.linear import LinearModel
+
+    class MyLine(LinearModel):
+        base_name = "myline"
+    ''')
+    load_effects_files([mine])
+    path = tmp_path / "m.json"
+    out = endocal("fit", "hysteresis", small_table, "--axis", "ap", "--model", "myline", "--out", path,
+                  "--effects-file", mine)
+    assert out.returncode == 0, out.stderr
+    assert json.loads(path.read_text())["base_source"]["sha256"] == file_sha256(mine)
+    forget_user_classes()
+    with pytest.raises(EffectFileError, match=f"base 'myline' comes from {mine.resolve()}: give the file"):
         load_model(path)
 
 
@@ -416,3 +436,17 @@ def test_next_designs_the_users_segment_or_says_its_experiment_in_words(tmp_path
     assert seg["signal"] == "sine" and seg["amplitude_deg"] == pytest.approx(10.0)
     assert any(n.startswith("wear: no segment of its own; record a long record of large cycles")
                for n in out.experiment.notes), out.experiment.notes
+
+
+def test_the_commands_validate_prints_give_the_users_file_again():
+    from endocal.cli._effects_file import effects_file_args
+    from endocal.cli.refit import refit_command
+    from endocal.validation.refit import Refit
+
+    load_effects_files([WEAR])
+    refit = Refit(data_paths=("runs/train",), axis="ap", base="bspline", effects=("delay", "wear"),
+                  out_path="m-wear.json", start_from="m.json")
+    assert f"--effects-file {WEAR.resolve()} --out m-wear.json" in refit_command(refit)
+    catalogue_only = Refit(data_paths=("runs/train",), axis="ap", base="bspline", effects=("delay",), out_path="x.json")
+    assert "--effects-file" not in refit_command(catalogue_only)
+    assert effects_file_args() == ["--effects-file", str(WEAR.resolve())]  # validate ... --next repeats them

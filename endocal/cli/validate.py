@@ -21,7 +21,7 @@ from endocal.cli._common import (
     slow_clock_warning,
     warnings_as_lines,
 )
-from endocal.cli._effects_file import effects_file_option, use_effects_files
+from endocal.cli._effects_file import effects_file_args, effects_file_option, use_effects_files
 from endocal.cli.messages import EXPLAIN_HELP, capped, key_of, keyed_lines
 from endocal.cli.refit import refit_command, with_refit_commands
 from endocal.errors import EndocalError, ModelError
@@ -444,7 +444,7 @@ def _next_command(model, tables, model_path: Path, data: list[Path], train: list
     return shlex.join(["endocal", "validate", str(model_path), *(str(p) for p in data),
                        *(a for p in train for a in ("--train", str(p))), *(["--cv", cv] if cv != "auto" else []),
                        *(["--planes", str(planes)] if planes is not None else []),
-                       *(["--probe", probe] if probe != "tee" else []), "--next", "next.toml"])
+                       *(["--probe", probe] if probe != "tee" else []), *effects_file_args(), "--next", "next.toml"])
 
 
 def _rmse_ci(metrics) -> str:

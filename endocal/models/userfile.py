@@ -473,6 +473,12 @@ def sources_of_model(model) -> tuple[list[Source | None], Source | None]:
     return [source_of(type(e)) for e in model.effects_], source_of(type(model))
 
 
+def given_files() -> list[str]:
+    """The files the user named in this process (``--effects-file``, ``effects_file=``), in load order."""
+    return [path for path, (_, classes) in _LOADED.items()
+            if any((src := source_of(c)) is not None and src.given for c in classes)]
+
+
 def files_for(base: str, labels: Iterable[str]) -> list[str]:
     """The user's files a base and the effects named by ``labels`` (``wear``, ``load:col``) come from, each
     once (what a command that refits them gives with ``--effects-file``)."""
