@@ -15,14 +15,13 @@ import json
 import shutil
 import sys
 import textwrap
-import warnings
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from endocal.errors import ConfigError, ModelError
+from endocal.errors import ConfigError
 from endocal.models import EFFECTS, load_model, make_model, save_model
 from endocal.models.data import HysteresisData
 from endocal.models.registry import BASES

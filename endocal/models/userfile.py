@@ -186,8 +186,11 @@ def _load_file(path: Path) -> list[type]:
         del sys.modules[module_name]
         raise EffectFileError(f"{where}: running it raised {type(exc).__name__}: {_first_line(exc)}"
                               f"{_line_of(exc, str(path))}; fix the file") from None
-    source = Source(key, path.stem, sha, True)
-    classes = _register_module(module, source, where)
+    try:
+        classes = _register_module(module, Source(key, path.stem, sha, True), where)
+    except EffectFileError:
+        del sys.modules[module_name]  # nothing of a refused file stays
+        raise
     _LOADED[key] = (sha, classes)
     return classes
 
@@ -459,8 +462,9 @@ def check_model_sources(d: dict, where: str) -> None:
             raise EffectFileError(f"{where}: {what} '{name}' was the user's ({path}) but the catalogue now has its "
                                   f"own '{name}': rename the user's {what} and refit")
         if sha and now.sha256 and now.sha256 != sha:
-            change = (f"{what} '{name}': {now.path} changed since {where} was fitted (SHA-256 {sha[:12]} -> "
-                      f"{now.sha256[:12]})")
+            change = (f"{what} '{name}': {now.path} changed since {where} was fitted" if now.path == path else
+                      f"{what} '{name}': {where} was fitted with {path}, and it now comes from {now.path}")
+            change += f" (SHA-256 {sha[:12]} -> {now.sha256[:12]})"
             if not now.given:
                 raise EffectFileError(f"{where}: {change}, and was not given: give it with --effects-file {now.path} "
                                       "to use it as it is now, or refit")
