@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from endocal.errors import ConfigError
+from endocal.errors import ConfigError, ModelError
 from endocal.models import EFFECTS, load_model, make_model, save_model
 from endocal.models.data import HysteresisData
 from endocal.models.registry import BASES
@@ -286,6 +286,15 @@ def test_the_inverse_compensates_with_the_users_effect(tmp_path):
     desired = 25.0 * np.sin(2 * np.pi * 0.3 * t)
     cmd = model.inverse(desired, t_s=t)
     assert np.max(np.abs(model.predict(cmd, t_s=t) - desired)) < 1e-6  # the travel the inverse adds is its own
+
+
+def test_compensation_refuses_an_effect_without_inverse(tmp_path):
+    load_effects_files([EXAMPLES["stickslip"][0]])
+    t = np.arange(2000) / 100.0
+    cmd = 30.0 * np.sin(2 * np.pi * 0.4 * t)
+    model = make_model("linear", ["stickslip"], axis="ap").fit(HysteresisData(cmd_deg=cmd, meas_deg=0.8 * cmd, t_s=t))
+    with pytest.raises(ModelError, match="effect 'stickslip' has no inverse"):
+        model.inverse(0.5 * cmd, t_s=t)
 
 
 # ---------------------------------------------------------------------------------------------- simulator
