@@ -27,6 +27,8 @@ FORBIDDEN = {
     "protocols": ("endocal.backends", "endocal.cli", "endocal.sim"),
     "force": ("endocal.cli",),
     "backends": ("endocal.cli",),
+    # exports read runs and models, and never reach into the backends or the command line
+    "export": ("endocal.backends", "endocal.cli", "endocal.report"),
 }
 
 

@@ -6,6 +6,7 @@ beyond typer and rich it imports inside its function (tests/test_cli_startup.py 
 
 from endocal.cli import Group, app
 from endocal.cli import emulate as _emulate
+from endocal.cli import export as _export
 from endocal.cli import fit as _fit
 from endocal.cli import imports as _imports
 from endocal.cli import protocols as _protocols
@@ -26,3 +27,4 @@ app.add_typer(_protocols.app, name="protocols", cls=Group)
 app.add_typer(_fit.app, name="fit", cls=Group)
 app.add_typer(_imports.app, name="import", cls=Group)
 app.add_typer(_emulate.app, name="emulate", cls=Group)
+app.add_typer(_export.app, name="export", cls=Group)
