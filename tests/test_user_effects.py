@@ -280,6 +280,17 @@ def test_a_users_base_is_recorded_and_needed_like_an_effect(tmp_path, small_tabl
         load_model(path)
 
 
+def test_export_reads_the_model_with_the_file(tmp_path):
+    path = tmp_path / "m.json"
+    save_model(_wear_model(WEAR), path)
+    forget_user_classes()
+    one_line_exit_2(endocal("export", "c", path, "--out", tmp_path / "c"), "effect 'wear' comes from")
+    # with the file the model loads, and the C export says what it covers
+    one_line_exit_2(endocal("export", "c", path, "--out", tmp_path / "c", "--effects-file", WEAR),
+                    "effect 'wear' streams in Python but has no C code generator")
+    assert not (tmp_path / "c").exists()
+
+
 def test_the_inverse_compensates_with_the_users_effect(tmp_path):
     model = _wear_model(WEAR)
     t = np.arange(3000) / 100.0
