@@ -152,6 +152,22 @@ def test_an_entry_point_registers_a_packaged_effect(tmp_path, monkeypatch):
     load_effects_files([])
     src = source_of(EFFECTS["mygain"])
     assert src.module == "labfx" and src.path == str((tmp_path / "labfx.py").resolve()) and not src.given
+    t = np.arange(1000) / 100.0
+    cmd = 30.0 * np.sin(2 * np.pi * 0.5 * t)
+    path = tmp_path / "m.json"
+    save_model(make_model("linear", ["mygain"], axis="ap").fit(HysteresisData(cmd_deg=cmd, meas_deg=0.8 * cmd, t_s=t)),
+               path)
+    assert load_model(path).effects_[0].name == "mygain"
+    # the installed package changed since the fit: refused, unless its file is given
+    (tmp_path / "labfx.py").write_text(textwrap.dedent(GOOD) + "\n# version 2\n")
+    monkeypatch.delitem(sys.modules, "labfx")
+    forget_user_classes()
+    with pytest.raises(EffectFileError, match="changed since .*m.json was fitted .*and was not given: give it with "
+                                              "--effects-file"):
+        load_model(path)
+    load_effects_files([tmp_path / "labfx.py"])
+    with pytest.warns(EffectFileWarning, match="labfx.py changed since"):
+        load_model(path)
     monkeypatch.delitem(sys.modules, "labfx")
 
 
@@ -319,6 +335,52 @@ def test_a_sim_config_hiding_an_effect_needs_its_file():
     with pytest.raises(ConfigError, match="unknown key 'user_effects.wear.k'"):
         cfg.replace(user_effects={"wear": {"k": 1.0}})
     assert SimConfig.default().config_hash() == SimConfig.from_dict({}).config_hash()
+
+
+def test_the_simulator_hides_an_effect_by_its_simulate_hook(tmp_path):
+    """An effect that says how the plant produces it (``simulate(data, rng)``): here a 2 deg offset of the angle."""
+    from endocal.probe import load_probe
+    from endocal.protocols import load_protocol
+    from endocal.sim import Simulator
+
+    path = _write(tmp_path, "offset.py", '''
+    from endocal.models.effects.base import OutputEffect
+    from endocal.models.params import Parameter
+
+
+    class Offset(OutputEffect):
+        name = "offsetfx"
+        depends_on_command = False
+        cause = "a tracker sensor glued askew"
+        signature = "a constant residual"
+        protocol = "any record"
+        units = {"deg": "deg"}
+        requires = ()
+        residual = ()
+        lookalikes = {}
+
+        def initial(self, data, u):
+            return [Parameter(f"{self.prefix}_deg", 0.0, -10.0, 10.0)]
+
+        def term(self, p, cmd, data):
+            return p["deg"] + 0.0 * cmd
+
+        def describe(self, p, se):
+            return "offsetfx" + self._bracket(p, se)
+
+        def simulate(self, data, rng):
+            return data.meas_deg + 2.0
+    ''')
+    load_effects_files([path])
+    tee = load_probe("tee")
+    traj = load_protocol("sine", overrides={"cycles": 1, "amplitude_deg": 20.0}).trajectory(tee, seed=0)
+    cfg = SimConfig.default().replace(deviation_deg={"y+": 0.0, "y-": 0.0, "x+": 0.0, "x-": 0.0})  # in-plane bends
+    hidden = cfg.replace(user_effects={"offsetfx": {"deg": 0.0, "axes": ["axis1"]}})
+    a = Simulator(hidden, tee, seed=0).execute(traj.t_s, traj.goal).truth
+    b = Simulator(cfg, tee, seed=0).execute(traj.t_s, traj.goal).truth
+    # an in-plane bend: the eq.-1 angle is half the bend, so 2 deg of angle is 4 deg of bend, read back as 2
+    assert np.allclose(a["ap_true_deg"] - b["ap_true_deg"], 2.0, atol=1e-6)
+    assert np.allclose(a["ml_true_deg"], b["ml_true_deg"], atol=1e-9)  # the other axis untouched (rounding of 1e-15)
 
 
 def test_the_simulator_hides_the_effect_the_same_in_chunks():
