@@ -278,7 +278,8 @@ def _aligned(data, what: str = "data") -> list:
 
 def run_protocol(protocol: str, out: str | Path, *, backend: str = "sim", probe: str = "tee", seed: int = 0,
                  sim_config: str | Path | None = None, hardware_config: str | Path | None = None,
-                 realtime: bool = False, tip_load_n: float | None = None, force: bool = False, **params) -> Run:
+                 realtime: bool = False, tip_load_n: float | None = None, force: bool = False, effects_file=None,
+                 **params) -> Run:
     """Play an excitation protocol on the simulator (or the rig) and load the run it logged.
 
     What `endocal excite PROTOCOL --out OUT` does (without `--planes`, `--model` and
@@ -304,6 +305,8 @@ def run_protocol(protocol: str, out: str | Path, *, backend: str = "sim", probe:
         A known load hung at the tip (N), for `fit_force`.
     force : bool
         Replace `out` if it exists.
+    effects_file : path or sequence of paths, optional
+        Python files of one's own effects that `sim_config` hides (`[user_effects.NAME]`, :func:`use_effects`).
     **params
         Protocol parameters, e.g. `amplitude_deg=85, period_s=10, sample_rate_hz=25`
         (`endocal protocols show NAME` lists them; an unknown one raises).
@@ -325,6 +328,7 @@ def run_protocol(protocol: str, out: str | Path, *, backend: str = "sim", probe:
     from endocal.probe import load_probe
     from endocal.protocols import load_protocol
 
+    use_effects(effects_file)
     probe_cfg = load_probe(probe)
     proto = load_protocol(protocol, overrides=dict(params) or None)
     trajectory = proto.trajectory(probe_cfg, seed=seed)
