@@ -294,6 +294,7 @@ def test_a_users_base_is_recorded_and_needed_like_an_effect(tmp_path, small_tabl
     forget_user_classes()
     with pytest.raises(EffectFileError, match=f"base 'myline' comes from {mine.resolve()}: give the file"):
         load_model(path)
+    one_line_exit_2(endocal("validate", path, small_table), f"base 'myline' comes from {mine.resolve()}")
 
 
 def test_export_reads_the_model_with_the_file(tmp_path):
