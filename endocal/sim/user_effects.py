@@ -116,7 +116,11 @@ class HiddenEffects:
                 if resolved not in axes:
                     raise ConfigError(f"user_effects.{name}.axes: '{a}' is not a bending axis ({', '.join(axes)})")
                 on.append(list(axes).index(resolved))
-            effect = cls()
+            try:
+                effect = cls()
+            except Exception as exc:  # one that takes a column (NAME:COLUMN), or the user's constructor failing
+                raise ConfigError(f"sim config: [user_effects.{name}]: the simulator hides effects made without an "
+                                  f"argument; {name}() raised {type(exc).__name__}: {exc}") from None
             p = {k: v for k, v in values.items() if k != "axes"}
             hook = callable(getattr(effect, "simulate", None))
             item = (effect, p, sorted(set(on)), i)
