@@ -57,7 +57,7 @@ from endocal.errors import ModelError, OutputExistsError
 __all__ = [
     "Check", "ForceModel", "History", "Model", "Planes", "Report", "Run", "Suggestion", "Validation",
     "check_probe", "fit", "fit_force", "fit_planes", "history", "load_model", "load_planes", "load_run", "make_report",
-    "run_protocol", "validate",
+    "run_protocol", "use_effects", "validate",
 ]
 
 
@@ -280,7 +280,8 @@ def _aligned(data, what: str = "data") -> list:
 
 def run_protocol(protocol: str, out: str | Path, *, backend: str = "sim", probe: str = "tee", seed: int = 0,
                  sim_config: str | Path | None = None, hardware_config: str | Path | None = None,
-                 realtime: bool = False, tip_load_n: float | None = None, force: bool = False, **params) -> Run:
+                 realtime: bool = False, tip_load_n: float | None = None, force: bool = False, effects_file=None,
+                 **params) -> Run:
     """Play an excitation protocol on the simulator (or the rig) and load the run it logged.
 
     What `endocal excite PROTOCOL --out OUT` does (without `--planes`, `--model` and
@@ -306,6 +307,8 @@ def run_protocol(protocol: str, out: str | Path, *, backend: str = "sim", probe:
         A known load hung at the tip (N), for `fit_force`.
     force : bool
         Replace `out` if it exists.
+    effects_file : path or sequence of paths, optional
+        Python files of one's own effects that `sim_config` hides (`[user_effects.NAME]`, :func:`use_effects`).
     **params
         Protocol parameters, e.g. `amplitude_deg=85, period_s=10, sample_rate_hz=25`
         (`endocal protocols show NAME` lists them; an unknown one raises).
@@ -327,6 +330,7 @@ def run_protocol(protocol: str, out: str | Path, *, backend: str = "sim", probe:
     from endocal.probe import load_probe
     from endocal.protocols import load_protocol
 
+    use_effects(effects_file)
     probe_cfg = load_probe(probe)
     proto = load_protocol(protocol, overrides=dict(params) or None)
     trajectory = proto.trajectory(probe_cfg, seed=seed)
@@ -474,15 +478,50 @@ def _model(m, what: str = "model") -> Model:
     raise ModelError(f"{what}: expected a Model or a model file, got {type(m).__name__}")
 
 
-def load_model(path: str | Path) -> Model:
-    """Read a model file (`endocal fit hysteresis --out`, `Model.save`).
+def use_effects(effects_file=None, classes: Sequence = ()) -> list[str]:
+    """Load a user's effect files (`--effects-file`) and register effect or base classes given
+    themselves; the names to write them by.
+
+    Parameters
+    ----------
+    effects_file : path or sequence of paths, optional
+        Python files of one's own effects and bases (`docs/how-to/add-effect.md`). Loading one
+        runs it, as pytest runs a `conftest.py`.
+    classes : sequence
+        Effect names or classes (`effects=["delay", MyEffect]`); each class is checked and registered.
 
     Raises
     ------
     ModelError
-        Missing or unreadable file, not a model file, unknown version or fields.
+        A file or class that cannot be used (one line naming the file and the effect).
+    """
+    from endocal.models.userfile import load_effects_files, register_user_class
+
+    files = [] if effects_file is None else [effects_file] if isinstance(effects_file, (str, Path)) else list(effects_file)
+    load_effects_files(files)
+    out = []
+    for c in classes:
+        if isinstance(c, type):
+            register_user_class(c)
+            c = getattr(c, "name", None) or c.base_name
+        out.append(c)
+    return out
+
+
+def load_model(path: str | Path, *, effects_file=None) -> Model:
+    """Read a model file (`endocal fit hysteresis --out`, `Model.save`).
+
+    `effects_file`: the user's effect files the model was fitted with (`use_effects`).
+
+    Raises
+    ------
+    ModelError
+        Missing or unreadable file, not a model file, unknown version or fields; a user's
+        effect whose file is not given, or changed since the fit.
     """
     from endocal.models import load_model as _load
+
+    use_effects(effects_file)
 
     return Model(_load(path), path=path)
 
@@ -501,7 +540,7 @@ def _planes_path(planes) -> Path | None:
 
 
 def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = (), planes=None,
-        start_from: Model | str | Path | None = None, settings: Mapping | None = None) -> Model:
+        start_from: Model | str | Path | None = None, settings: Mapping | None = None, effects_file=None) -> Model:
     """Fit a hysteresis model of one axis to runs (`endocal fit hysteresis`).
 
     Parameters
@@ -514,9 +553,9 @@ def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = ()
         Base model: `pi` with `effects=["envelope"]` is the duodenoscope paper's modified
         Prandtl-Ishlinskii model (eqs. 5-8, analytic inverse eqs. 9-11); `bspline` the
         thesis's direction-dependent B-splines; `linear` a piecewise-linear model.
-    effects : sequence of str, or a comma-separated str
+    effects : sequence of str or effect classes, or a comma-separated str
         Effect terms (`endocal effects` lists the catalogue), e.g. `["envelope", "delay"]`,
-        `"load:sheath_wrap_deg"`.
+        `"load:sheath_wrap_deg"`, or a class of one's own (`[MyEffect]`, checked and registered).
     planes : Planes or path, optional
         Bending planes (`fit_planes`): measured angles are mapped into the twisted
         planes the knob drives first.
@@ -525,6 +564,8 @@ def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = ()
         (what `validate`'s refits do).
     settings : mapping, optional
         Base-model settings, e.g. `{"n_operators": 30}` (`--set` on the command line).
+    effects_file : path or sequence of paths, optional
+        Python files of one's own effects and bases (`--effects-file`, :func:`use_effects`).
 
     Returns
     -------
@@ -543,6 +584,9 @@ def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = ()
     """
     from endocal.fitting import fit_hysteresis, fit_provenance
 
+    model = use_effects(effects_file, [model])[0]
+    if not isinstance(effects, str):
+        effects = use_effects(None, list(effects))
     datas = _aligned(data)
     start = None if start_from is None else _model(start_from, "start_from")
     planes_path = _planes_path(planes)
@@ -551,7 +595,7 @@ def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = ()
         from endocal.planes import load_planes as _load
 
         cal = _load(planes_path)
-    result = fit_hysteresis(datas, axis, model, list(effects) if not isinstance(effects, str) else effects,
+    result = fit_hysteresis(datas, axis, model, effects,
                             planes=cal, start_from=None if start is None else start.estimator, **dict(settings or {}))
     command = _call("fit", [str(d.source) for d in datas], axis=axis, model=model,
                     effects=[e.label for e in result.model.effects_], **({"settings": dict(settings)} if settings else {}))
@@ -778,7 +822,7 @@ class Validation(_Result):
 def validate(model: Model | str | Path, data, *, train=None, compare: Model | str | Path | bool | None = None,
              cv: str = "auto", refit_on: str = "estimation", folds: int = 5, seed: int = 0, planes=None,
              load_columns: Sequence[str] | None = None, next: str | Path | None = None,
-             probe: str | Path = "tee") -> Validation:
+             probe: str | Path = "tee", effects_file=None) -> Validation:
     """Hold a model against validation records: how far off, where it fails, which effect is missing.
 
     What `endocal validate MODEL DATA...` does offline: error metrics with 95 %
@@ -820,6 +864,9 @@ def validate(model: Model | str | Path, data, *, train=None, compare: Model | st
         nothing is written when nothing is suspected (`Validation.next.reason` says so).
     probe : str or Path
         The probe the protocol is for when the records name none (`--probe`).
+    effects_file : path or sequence of paths, optional
+        Python files of one's own effects (`--effects-file`, :func:`use_effects`): the model's,
+        and candidates the scan tests beside the catalogue's.
 
     Returns
     -------
@@ -842,6 +889,7 @@ def validate(model: Model | str | Path, data, *, train=None, compare: Model | st
         raise ModelError(f"folds must be 2 or more (held-out blocks of the rolling-origin scan), got {folds}")
     if refit_on not in ("estimation", "all"):
         raise ModelError(f"refit_on must be 'estimation' or 'all', got {refit_on!r}")
+    use_effects(effects_file)
     m = _model(model)
     tables = _aligned(data, "validation data")
     if next is not None:
@@ -956,7 +1004,7 @@ class Report(_Result):
 
 def make_report(models, data, *, planes=None, out: str | Path | None = None, force: bool = False,
                 bootstrap: int = 400, seed: int = 0, history: str | Path | None = None,
-                probe_id: str | None = None) -> Report:
+                probe_id: str | None = None, effects_file=None) -> Report:
     """Compare hysteresis models on records (`endocal report`).
 
     Every model is scored on every record of its axis; models are compared on per-half-cycle
@@ -982,6 +1030,8 @@ def make_report(models, data, *, planes=None, out: str | Path | None = None, for
         against these models (`report --history`).
     probe_id : str, optional
         With `history`: the probe to chart, when its checks used other model files.
+    effects_file : path or sequence of paths, optional
+        Python files of one's own effects the models were fitted with (:func:`use_effects`).
 
     Returns
     -------
@@ -998,6 +1048,7 @@ def make_report(models, data, *, planes=None, out: str | Path | None = None, for
     """
     from endocal.report import build_report, side_files
 
+    use_effects(effects_file)
     items = [models] if isinstance(models, (str, Path, Model)) else list(models)
     ms, names = [], []
     for m in map(_model, items):  # a saved model goes in by its file: named by its stem, its hash recorded

@@ -34,6 +34,9 @@ def refit_command(refit: Refit) -> str:
         parts += ["--set", f"{k}={json.dumps(v)}"]
     if refit.start_from:
         parts += ["--start-from", refit.start_from]
+    from endocal.cli._effects_file import effects_file_args
+
+    parts += effects_file_args(refit.base, refit.effects)  # a user's effect or base: the file it comes from
     parts += ["--out", refit.out_path]
     return "endocal fit hysteresis " + shlex.join(parts)
 

@@ -21,6 +21,7 @@ from endocal.cli._common import (
     slow_clock_warning,
     warnings_as_lines,
 )
+from endocal.cli._effects_file import effects_file_args, effects_file_option, use_effects_files
 from endocal.cli.messages import EXPLAIN_HELP, capped, key_of, keyed_lines
 from endocal.cli.refit import refit_command, with_refit_commands
 from endocal.errors import EndocalError, ModelError
@@ -271,7 +272,8 @@ def _verdict(result, folded: bool, model_path: Path, data: list[Path], old_path:
         return f"missing: not tested: {scan.scheme_reason}", []
     if result.pointers:
         p = result.pointers[0]
-        return ("missing: nothing the scan confirmed, but the data point at effects it could not settle",
+        return ("missing: nothing the scan confirmed, but the data point at effects it could not settle"
+                + (f"; and {result.unexplained}" if result.unexplained else ""),
                 design or [f"next: to test {p.effect}: {p.experiment}"])
     # after a refit (a model to compare with) the report of the two stays a next step beside the design
     then = [*design, report] if design and old_path is not None else design or [report]
@@ -315,6 +317,7 @@ def validate(
     max_force_n: Optional[float] = typer.Option(None, "--max-force-n", help="With --force-model: stop bending into the load at this predicted tip force (N)."),
     explain: bool = typer.Option(False, "--explain", "-v", help=EXPLAIN_HELP + " Offline: the metrics table, the worst regimes, the residual tests, every candidate with its physics, the untested suspects with why and how to test them."),
     next_path: Optional[Path] = typer.Option(None, "--next", help="Offline: write the protocol that would settle what this validation could not (suspects it could not confirm, effects the data cannot test) to this .toml, sized from the effects seen, for the probe the records were made on (else --probe); prints the excite commands that record it (with --json or --json-out: the object's `next`: the file, the suspects, each one's half-cycles needed at the gain seen, the excite commands)."),
+    effects_files: list[Path] = effects_file_option(),
 ) -> None:
     """Compare a model with measurements: how far off, where it fails, which physical effect is missing.
 
@@ -328,6 +331,7 @@ def validate(
     """
     from endocal.models import load_model
 
+    use_effects_files(effects_files)  # before the model that may need them
     if folds < 2:
         raise ModelError(f"--folds must be 2 or more (held-out blocks of the rolling-origin scan), got {folds}")
     refuse_input_as_output("--json-out", json_out, [model_path, *(data or []), *train, *compare, planes, force_model,
@@ -440,7 +444,7 @@ def _next_command(model, tables, model_path: Path, data: list[Path], train: list
     return shlex.join(["endocal", "validate", str(model_path), *(str(p) for p in data),
                        *(a for p in train for a in ("--train", str(p))), *(["--cv", cv] if cv != "auto" else []),
                        *(["--planes", str(planes)] if planes is not None else []),
-                       *(["--probe", probe] if probe != "tee" else []), "--next", "next.toml"])
+                       *(["--probe", probe] if probe != "tee" else []), *effects_file_args(), "--next", "next.toml"])
 
 
 def _rmse_ci(metrics) -> str:

@@ -17,6 +17,11 @@ Layout
     names its section, ``Effect.sim_section``); each has ``enabled``.
 ``[contact]``
     an optional obstacle at the tip (ground truth for the contact-force issue).
+``[user_effects.NAME]``
+    a user's own effect hidden in the plant (:mod:`endocal.sim.user_effects`): its parameters
+    by their short names (``per_kdeg = 0.01``) and optionally ``axes = ["axis1"]`` (default: both
+    bending axes). The effect comes from the file given with ``--effects-file``, never from
+    the config: a config that names an effect no file provides is refused.
 """
 
 from __future__ import annotations
@@ -309,6 +314,9 @@ class SimConfig:
         Effects, each with ``enabled``.
     contact :
         Optional obstacle at the tip.
+    user_effects : dict
+        ``name -> {short parameter name: value, "axes": [...]}``: a user's effects hidden in the
+        plant (:mod:`endocal.sim.user_effects`).
     """
 
     deviation_deg: dict = field(default_factory=lambda: dict(PAPER_DEVIATION_DEG))
@@ -325,6 +333,7 @@ class SimConfig:
     creep: CreepConfig = field(default_factory=CreepConfig)
     load: LoadConfig = field(default_factory=LoadConfig)
     contact: ContactConfig = field(default_factory=ContactConfig)
+    user_effects: dict = field(default_factory=dict)
 
     # -- construction -------------------------------------------------------------------
     @classmethod
@@ -343,7 +352,7 @@ class SimConfig:
         """
         if not isinstance(data, dict):
             raise ConfigError(f"{where}: a sim config must be a table of sections")
-        known = {"deviation_deg", *_SECTIONS}
+        known = {"deviation_deg", "user_effects", *_SECTIONS}
         unknown = sorted(set(data) - known)
         if unknown:
             raise ConfigError(f"{where}: unknown key '{unknown[0]}' (known sections: deviation_deg, {', '.join(_SECTIONS)})")
@@ -353,6 +362,10 @@ class SimConfig:
         for name, section_cls in _SECTIONS.items():
             if name in data:
                 kwargs[name] = _build_section(name, section_cls, data[name], where)
+        if "user_effects" in data:
+            from endocal.sim.user_effects import check_user_effects
+
+            kwargs["user_effects"] = check_user_effects(data["user_effects"], where)
         cfg = cls(**kwargs)
         cfg._check_consistency(where)
         return cfg
@@ -386,6 +399,8 @@ class SimConfig:
         """
         data = self.to_dict()
         for name, values in sections.items():
+            if name == "user_effects" and name not in data:  # the first hidden user effect
+                data[name] = {}
             if name not in data:
                 raise ConfigError(f"sim config: unknown section '{name}'")
             if not isinstance(values, dict):
@@ -411,14 +426,17 @@ class SimConfig:
             section = getattr(self, name)
             out[name] = {f.name: (list(v) if isinstance(v := getattr(section, f.name), tuple) else v)
                          for f in dataclasses.fields(section)}
+        if self.user_effects:  # absent otherwise: the hash of every config without one is unchanged
+            out["user_effects"] = {k: dict(v) for k, v in self.user_effects.items()}
         return out
 
     def effects_enabled(self) -> list[str]:
-        """Names of the switched-on effects, in catalog order (``contact`` is listed last if on)."""
+        """Names of the switched-on effects, in catalog order (``contact`` is listed after them if on, then the
+        user's hidden effects)."""
         names = [name for name in EFFECTS if getattr(self, name).enabled]
         if self.contact.enabled:
             names.append("contact")
-        return names
+        return names + list(self.user_effects)
 
     def config_hash(self) -> str:
         """First 16 hex digits of the SHA-256 of the canonical JSON of :meth:`to_dict`."""
