@@ -56,25 +56,18 @@ PASSED_ON = ("provenance", "fit", "training_data", "correlation", "drive_unit", 
 
 
 @pytest.fixture(scope="module")
-def models(small_run, other_run, tmp_path_factory) -> dict[str, Path]:
-    """Model files of three bases fitted on ``small_run``, each with the provenance `fit hysteresis`
+def models(small_run, tmp_path_factory) -> dict[str, Path]:
+    """Model files of three bases fitted on ``small_run`` by `fit hysteresis`, with the provenance it
     writes (its data path and hash, the probe, the working folder)."""
-    from endocal.models import make_model, model_to_dict
-    from endocal.runs.aligned import load_aligned
-    from endocal.validation.data import axis_data
     from tests._cli import endocal
 
     d = tmp_path_factory.mktemp("models")
-    proc = endocal("fit", "hysteresis", small_run, "--axis", "ap", "--model", "linear", "--effects", "drift",
-                   "--out", d / "linear.json")
-    assert proc.returncode == 0, proc.stderr
-    provenance = json.loads((d / "linear.json").read_text())["provenance"]
-    data = axis_data(load_aligned(small_run), "ap")
-    out = {"linear": d / "linear.json"}
-    for base, effects in (("pi", ["envelope"]), ("bspline", ["deadzone"])):
-        doc = model_to_dict(make_model(base, effects, axis="ap").fit(data, max_nfev=30))
+    out = {}
+    for base, effects in (("linear", "drift"), ("pi", "envelope"), ("bspline", "deadzone")):
         out[base] = d / f"{base}.json"
-        out[base].write_text(json.dumps({**doc, "provenance": provenance}, indent=2))
+        proc = endocal("fit", "hysteresis", small_run, "--axis", "ap", "--model", base, "--effects", effects,
+                       "--out", out[base])
+        assert proc.returncode == 0, proc.stderr
     return out
 
 
@@ -97,7 +90,7 @@ def _export_commands(model: Path, out: Path) -> dict[str, list]:
 
 #: Cases per model base: (all fields and bytes, fields passed on); `report` (a second a case, for its
 #: figures) runs on every case the loader refuses and on the first REPORTED it accepts.
-MODEL_CASES = {"linear": (12, 16), "pi": (4, 6), "bspline": (4, 6)}
+MODEL_CASES = {"linear": (10, 14), "pi": (3, 5), "bspline": (3, 5)}
 REPORTED = 1
 
 
@@ -125,7 +118,12 @@ def test_mutated_model_files_through_every_command_that_reads_one(models, base, 
         except EndocalError:
             accepted = False
         commands = {
-            "validate": ["validate", path, other_run, "--json", "--json-out", out / "v.json"],
+            # a PI or B-spline model's effect scan refits each candidate on the estimation data (seconds
+            # a case): those two are scored by rolling origin on the record (which says at once that one
+            # cycle is too short for it); the linear model's cases read the estimation data its
+            # provenance names, as validate does for every base
+            "validate": ["validate", path, other_run, "--json", "--json-out", out / "v.json",
+                         *(["--cv", "rolling"] if base != "linear" else [])],
             "validate --compare": ["validate", models["linear"], other_run, "--compare", path],
             "excite --model": ["excite", "triangle", "--model", path, "--set", "cycles=1", "--amplitude", "10",
                                "--out", out / "run", "-q"],
