@@ -355,6 +355,9 @@ def test_mutated_ros_bags_through_import(small_run, tmp_path):
 
 
 def test_zz_the_count():
-    """Every command test above ran its cases (printed for the evidence page)."""
+    """Every command test above ran its cases (printed for the evidence page), when the whole module ran
+    (16 kinds of input; 15 without the rosbags package)."""
     print("\nmutated inputs through the commands:", sum(COUNTS.values()), COUNTS)
-    assert sum(COUNTS.values()) >= 600 * SCALE or len(COUNTS) < 8, COUNTS
+    if len(COUNTS) < 15:
+        pytest.skip("only part of the module ran")
+    assert sum(COUNTS.values()) >= 1000 * SCALE, COUNTS
