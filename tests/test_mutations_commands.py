@@ -83,6 +83,19 @@ def models(small_run, tmp_path_factory) -> dict[str, Path]:
     return out
 
 
+def test_the_issue_33_case_a_deleted_probe_name_is_one_line_in_every_command(models, other_run, tmp_path):
+    """`provenance.probe.name` deleted: `validate` stopped with ``KeyError: 'name'`` and exit code 1."""
+    from tests._cli import endocal, one_line_exit_2
+
+    doc = json.loads(models["linear"].read_text())
+    del doc["provenance"]["probe"]["name"]
+    path = tmp_path / "m.json"
+    path.write_text(json.dumps(doc))
+    for args in (["validate", path, other_run], ["report", path, "--data", other_run, "--out", tmp_path / "r.html"],
+                 ["excite", "triangle", "--model", path, "--out", tmp_path / "run"]):
+        one_line_exit_2(endocal(*args), "provenance/probe/name", "restore the file or refit the model")
+
+
 def _export_commands(model: Path, out: Path) -> dict[str, list]:
     """Every `endocal export ...` command, once the export group is registered (issue 33: a model
     file goes through every export). HOOK: if its commands take the model otherwise than
