@@ -100,15 +100,13 @@ def _export_commands(model: Path, out: Path, run: Path) -> dict[str, list]:
     """Every `endocal export ...` command that reads a model file, as it takes one: `export c MODEL`,
     `export mcap RUN --model MODEL`. An export command added later that takes a model otherwise fails
     here until it is named (issue 33: a model file goes through every export)."""
-    import click
     import typer.main
 
     from endocal.cli import app
     from endocal.cli import commands  # noqa: F401
 
-    group = typer.main.get_command(app)
-    export = group.commands.get("export") if isinstance(group, click.Group) else None
-    if not isinstance(export, click.Group):
+    export = getattr(typer.main.get_command(app), "commands", {}).get("export")
+    if not hasattr(export, "commands"):  # a click group (typer's own Group class is not click.Group's)
         return {}
     argv = {}
     for name, cmd in export.commands.items():
