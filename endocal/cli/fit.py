@@ -121,7 +121,21 @@ def hysteresis(
     else:
         _fit_summary(result)
     err.print(f"wrote {out_path}")
-    err.print(f"next: endocal validate {shlex.quote(str(out_path))} RECORDS (records it was not fitted on)", markup=False)
+    for line in _next_validate(out_path, result.sources):
+        err.print(line, markup=False)
+
+
+def _next_validate(model_path: Path, sources: list) -> list[str]:
+    """What to run after a fit: validate on other records; after a fit on one record, also what to do
+    when that record is all there is (rolling origin on it, or a held-out part with --cv split)."""
+    m = shlex.quote(str(model_path))
+    lines = [f"next: endocal validate {m} RECORDS (records it was not fitted on)"]
+    if len(sources) == 1:
+        rec = shlex.quote(str(sources[0]))
+        lines.append(f"  only this one record? endocal validate {m} {rec} --cv rolling (rolling origin: each "
+                     "candidate effect refitted on the record's start, scored on the stretch after it); or fit on "
+                     "part of the log and validate on the rest with --cv split")
+    return lines
 
 
 def _fit_explained(result) -> None:
@@ -129,7 +143,7 @@ def _fit_explained(result) -> None:
     rep = result.model.fit_report_
     out.print(str(result.model), markup=False)
     out.print(
-        f"fit: {result.samples} samples ({result.duration_s:.4g} s, {result.rate_hz:.3g} Hz) from "
+        f"fit: {result.samples} samples ({result.duration_s:.4g} s, {result.rate_hz:.1f} Hz) from "
         f"{len(result.sources)} source(s); RMSE {rep.rmse_deg:.3f} deg; {rep.nfev} evaluations; "
         + ("converged" if rep.status > 0 else f"stopped before converging ({rep.message}): the parameters may not be "
            "final; refit with --start-from this model"),
@@ -149,7 +163,7 @@ def _fit_summary(result) -> None:
     rep = result.model.fit_report_
     out.print(str(result.model), markup=False)
     out.print(f"RMSE {rep.rmse_deg:.3f} deg on {result.samples} samples ({result.duration_s:.4g} s, "
-              f"{result.rate_hz:.3g} Hz) from {len(result.sources)} source(s); "
+              f"{result.rate_hz:.1f} Hz) from {len(result.sources)} source(s); "
               + ("converged" if rep.status > 0 else "not converged"), markup=False)
     lines = []
     if rep.status <= 0:

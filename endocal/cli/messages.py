@@ -91,7 +91,8 @@ KEYS: dict[str, str] = {
                      "why.",
     "planes-figure": "The bending-plane figure could not draw everything (sweeps not found, or not the ones the "
                      "planes were fitted on).",
-    "no-tip-path": "A record has no tracker stream, so the report draws no task-space tip trajectory for it.",
+    "no-tip-path": "A record's tracker stream is there but cannot be read (the note says why), so the report draws no "
+                   "task-space tip trajectory for it; a record without one (an aligned table) is drawn without a note.",
     "force-stop": "The contact-force guard stopped a playback: the predicted tip force reached its threshold.",
     # ---- export c
     "float-holds": "A float compensator whose inverse jumps (a play: deadzone, tension, rate; a linear or B-spline "

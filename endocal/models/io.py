@@ -198,6 +198,9 @@ def _check_shape(d: dict, where: str) -> None:
 
     for key in ("settings", "structure"):
         need(isinstance(d[key], dict), key, "an object")
+    need(d["axis"] is None or (isinstance(d["axis"], str) and d["axis"].isidentifier()), "axis",
+         "the name of a bending axis (or null)")
+    need(isinstance(d["out_of_range"], str), "out_of_range", "a text")
     need(isinstance(d["effects"], list) and all(isinstance(e, dict) and isinstance(e.get("name"), str)
                                                  and isinstance(e.get("settings"), dict) for e in d["effects"]),
          "effects", 'a list of {"name": ..., "settings": {...}}')
@@ -229,7 +232,82 @@ def _check_shape(d: dict, where: str) -> None:
         need(not (isinstance(value, int) and not isinstance(value, bool) and abs(value) > limit),
              f"structure/{key}", f"a count in proportion with the file's {len(d['parameters'])} parameters")
     need(d["fit"] is None or isinstance(d["fit"], dict), "fit", "null or an object")
-    need(isinstance(d["training_data"], list), "training_data", "a list")
+    if isinstance(d["fit"], dict):
+        _check_fit_report(d["fit"], need)
+    need(isinstance(d["training_data"], list) and all(
+        isinstance(t, dict) and isinstance(t.get("sha256"), str) and _is_count(t.get("n_samples"))
+        for t in d["training_data"]), "training_data", 'a list of {"sha256": "...", "n_samples": N}')
+    _check_provenance(d.get("provenance"), need)
+
+
+#: FitReport's fields and the JSON types each must have (what the fit summary, `validate` and the
+#: report format: a text where a number is printed with :.3f stops them, not the loader).
+_FIT_FIELDS = {"success": "bool", "status": "int", "message": "str", "nfev": "count", "njev": "count",
+               "cost": "number", "rmse_deg": "number", "n_samples": "count", "n_runs": "count", "n_free": "count",
+               "rank_deficient": "bool", "method": "str", "warnings": "texts", "estimated_starts": "objects"}
+_FIT_REQUIRED = set(_FIT_FIELDS) - {"method", "warnings", "estimated_starts"}
+
+
+def _is_count(x) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool) and x >= 0
+
+
+def _of_type(x, kind: str) -> bool:
+    return {"bool": lambda: isinstance(x, bool),
+            "int": lambda: isinstance(x, int) and not isinstance(x, bool),
+            "count": lambda: _is_count(x),
+            "number": lambda: _is_number(x) and x >= 0,
+            "str": lambda: isinstance(x, str),
+            "texts": lambda: isinstance(x, list) and all(isinstance(s, str) for s in x),
+            "objects": lambda: isinstance(x, list) and all(isinstance(s, dict) for s in x)}[kind]()
+
+
+def _check_fit_report(fit: dict, need) -> None:
+    """The ``fit`` object's fields: each known, present when required, of its type."""
+    unknown, missing = set(fit) - set(_FIT_FIELDS), _FIT_REQUIRED - set(fit)
+    need(not unknown and not missing, "fit", f"an object with the fields {', '.join(_FIT_FIELDS)} "
+         f"(unknown {sorted(unknown)}, missing {sorted(missing)})")
+    for key, value in fit.items():
+        need(_of_type(value, _FIT_FIELDS[key]), f"fit/{key}",
+             {"bool": "true or false", "int": "an integer", "count": "an integer >= 0", "number": "a number >= 0",
+              "str": "a text", "texts": "a list of texts", "objects": "a list of objects"}[_FIT_FIELDS[key]])
+
+
+def _check_provenance(prov, need) -> None:
+    """A model file's ``provenance``: null, or an object whose known fields have the types its readers use.
+
+    ``validate`` finds the estimation data and the planes through it and checks the probe of
+    the records against it, the report lists it: a field changed by hand must stop here, on a
+    line naming it. Fields it does not know are kept (a provenance is a record, not a setting).
+    """
+    if prov is None:
+        return
+    need(isinstance(prov, dict), "provenance", "null or an object")
+
+    def text_or_null(key: str) -> None:
+        need(prov.get(key) is None or isinstance(prov[key], str), f"provenance/{key}", "a text or null")
+
+    for key in ("created_utc", "command", "cwd", "planes", "planes_sha256"):
+        text_or_null(key)
+    need(prov.get("software") is None or isinstance(prov["software"], dict), "provenance/software",
+         "null or an object")
+
+    def file_ref(x) -> bool:
+        return (isinstance(x, dict) and isinstance(x.get("path"), str) and bool(x["path"])
+                and (x.get("sha256") is None or isinstance(x["sha256"], str)))
+
+    need(prov.get("data") is None or (isinstance(prov["data"], list) and all(file_ref(x) for x in prov["data"])),
+         "provenance/data", 'a list of {"path": "...", "sha256": "..."}')
+    need(prov.get("start_from") is None or file_ref(prov["start_from"]), "provenance/start_from",
+         'null or {"path": "...", "sha256": "..."}')
+    probe = prov.get("probe")
+    need(probe is None or isinstance(probe, dict), "provenance/probe", 'null or {"name": ..., "bending_axes": [...]}')
+    if probe:
+        need(isinstance(probe.get("name"), str) and bool(probe["name"]), "provenance/probe/name",
+             "the name of the probe the model was fitted on")
+        axes = probe.get("bending_axes", [])
+        need(isinstance(axes, list) and all(isinstance(a, str) for a in axes), "provenance/probe/bending_axes",
+             "a list of axis names")
 
 
 class _AnyColumn(dict):

@@ -42,12 +42,22 @@ def _other_axis(hdata: HysteresisData) -> tuple[str, np.ndarray] | None:
     return ("other axis command", other)
 
 
-def _tip_path(d: DataEntry) -> np.ndarray:
+def _tip_path(d: DataEntry) -> np.ndarray | None:
+    """The measured tip in the base sensor's frame (mm), or None for a record that logged no tracker.
+
+    An aligned table, or a run of a rig that measures the angle itself, has no tip path to draw,
+    and nothing is missing: only a tracker stream that is there and cannot be read is an error.
+
+    Raises
+    ------
+    EndocalError
+        The record's tracker stream is unreadable or holds no usable pose pair.
+    """
     from endocal.planes.segment import tip_in_base_from_tracker
 
     src = Path(d.aligned.source)
-    if not src.is_dir():
-        raise RunFormatError(f"{d.label} is an aligned table: no tracker stream to draw the tip from")
+    if not (src / TRACKER).is_dir():
+        return None
     _, tip_in_base_mm, _, _ = tip_in_base_from_tracker(read_stream(src, TRACKER), where=d.label)
     return tip_in_base_mm
 
@@ -333,9 +343,12 @@ def build_report(
     paths = {}
     for d in data_entries:
         try:
-            paths[d.label] = _tip_path(d)
+            tip = _tip_path(d)
         except EndocalError as exc:
             notes.append(f"no task-space tip trajectory for {d.label}: {exc}")
+            continue
+        if tip is not None:
+            paths[d.label] = tip
     for d in data_entries:
         walk = _walked_path(d)
         if walk is None:
