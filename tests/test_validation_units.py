@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from endocal.cli.refit import refit_command
+from endocal.shell import refit_command
 from endocal.errors import ModelError
 from endocal.models import HysteresisData
 from endocal.runs.aligned import AlignedData
