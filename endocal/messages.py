@@ -125,55 +125,12 @@ class Message(str):
         return (Message, (str(self), self.key))
 
 
-#: ``(key, pattern)``: the first pattern found in a message's words names its key.
-_RULES: tuple[tuple[str, str], ...] = (
-    ("not-converged", r"stopped before converging"),
-    ("slow-clock", r"samples per second: is t_s in seconds"),
-    ("few-samples", r"samples for \d+ free parameters"),
-    ("at-bound", r"sits at its (lower|upper) bound"),
-    ("unidentified", r"standard error exceeds its value"),
-    ("dead-band", r"the envelope is a dead band"),
-    ("line-fit", r"no better than a straight line through the data"),
-    ("local-minimum", r"worse than the start model itself"),
-    ("pi-weights", r"than a straight line per direction of motion"),
-    ("glitches", r"^left out .*glitch"),
-    ("start-estimated", r"run from an estimated start"),
-    ("start-cut", r"error before the first reversal is"),
-    ("in-sample", r"estimation data includes the (validation data|record validated)"),
-    ("beyond-range", r"beyond (the model's fitted range|the range the model was fitted on|.*'s fitted range)"),
-    ("untestable", r"cannot be identified|could not be fitted on"),
-    ("subsampled", r"^(candidates fitted on|scanned) 1 (estimation )?sample in \d+"),
-    ("few-units", r"holds \d+ \w+s; with \d+ candidates"),
-    ("alike", r"explain the residual"),
-    ("demoted", r"but ranks after it"),
-    ("still-blocks", r"no motion of this axis"),
-    ("dedupe-dropped", r"--dedupe dropped"),
-    ("dedupe-merged", r"--dedupe merged"),
-    ("incomplete-rows", r"but not every knob position"),
-    ("invalid-frames", r"tracker frame\(s\) were invalid"),
-    ("unused-rows", r"held neither a motor sample"),
-    ("gap", r"left out of the aligned table, with no"),
-    ("no-aligned-table", r"^no aligned table"),
-    ("unpaired-poses", r"had no base pose within"),
-    ("planes-figure", r"^bending planes: "),
-    ("no-tip-path", r"^no task-space tip trajectory"),
-    ("force-stop", r"^force guard stop"),
-)
-
 _PREFIX = re.compile(r"^(warning|note|fit warning): ")
 
 
 def key_of(text: str) -> str:
-    """The key a message was made with (:class:`Message`); plain text is found from its words (``"other"`` when
-    no rule names one)."""
-    key = getattr(text, "key", None)
-    if key is not None:
-        return key
-    body = _PREFIX.sub("", text)
-    for key, pattern in _RULES:
-        if re.search(pattern, body):
-            return key
-    return "other"
+    """The key a message was made with (:class:`Message`); ``"other"`` for plain text, which no key names."""
+    return getattr(text, "key", "other")
 
 
 #: First clauses that only say what a message is about ("load: ...", "bending planes: ..."): the fact follows.

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from endocal.errors import ModelError
-from endocal.messages import Message
+from endocal.messages import Message, key_of
 from endocal.models import HysteresisData
 from endocal.models.base import HysteresisModel
 from endocal.runs.aligned import AlignedData
@@ -167,7 +167,7 @@ class ValidationResult:
         """One JSON-able object: ``metrics``, ``regimes``, ``residuals``, ``suspects``, ``notes`` and more."""
         return {
             "axis": self.axis,
-            "model": dict(self.model),
+            "model": {**self.model, "fit_warning_keys": [key_of(w) for w in self.model.get("fit_warnings", [])]},
             "data": list(self.data),
             "metrics": self.metrics.to_dict(),
             "heldout_rmse_deg": self.scan.baseline_rmse_heldout_deg,
@@ -183,6 +183,7 @@ class ValidationResult:
             "unexplained": self.unexplained,
             "beyond_samples": self.beyond_samples,
             "notes": list(self.notes),
+            "note_keys": [key_of(n) for n in self.notes],
             "compare": None if self.compare is None else self.compare.to_dict(),
             **({} if self.next is None else {"next": self.next.to_dict()}),
         }
@@ -379,17 +380,16 @@ def _no_scan(reason: str, alpha: float, min_gain_pct: float) -> ScanResult:
                       scheme_reason=reason)
 
 
-def slow_clock(info: Sequence[dict]) -> str:
-    """A ``slow-clock`` warning when the records hold under one sample per second, else ``""``.
+def slow_clock(n_samples: int, span_s: float) -> str:
+    """A ``slow-clock`` warning when records of ``n_samples`` over ``span_s`` hold under one sample per second,
+    else ``""`` (``fit`` says it too).
 
     Knob loops are logged at tens of Hz or more; a clock in ms written as ``t_s`` reads 1000x too
     slow and would make every time-based effect (delay, creep, drift) meaningless.
     """
     from endocal.runs.format import LOG_RATE_RANGE_HZ
 
-    n = sum(d["n_samples"] for d in info)
-    span = sum(d.get("duration_s") or 0.0 for d in info)
-    rate = n / span if span > 0 else 0.0
+    rate = n_samples / span_s if span_s > 0 else 0.0
     if not 0 < rate < LOG_RATE_RANGE_HZ[0]:
         return ""
     return Message(f"{rate:.3g} samples per second: is t_s in seconds? (a clock in ms reads 1000x too slow; endocal "
@@ -516,7 +516,8 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     regimes = error_by_regime(data, pred, seed=seed)
     load_cols = list(dict.fromkeys([*(load_columns or []), *load_candidates(data, axes_all)[0]]))
     resid = residual_tests(data, data.meas_deg - pred, alpha=alpha, load_columns=load_cols)
-    notes = [slow_clock(info), val_glitches, cut_start(data, data.meas_deg - pred, starts=starts)]
+    notes = [slow_clock(sum(d["n_samples"] for d in info), sum(d.get("duration_s") or 0.0 for d in info)),
+             val_glitches, cut_start(data, data.meas_deg - pred, starts=starts)]
     if est is not None:
         same = {d["sha256"] for d in est_info if d["sha256"]} & {d["sha256"] for d in info if d["sha256"]}
         if same:

@@ -233,12 +233,16 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
         suspects = [replace(s, refit=replace(s.refit, scan_stride=stride, expected_rmse_deg=r))
                     for s, r in zip(suspects, ranges)]
         tested = [next((x for x in suspects if x.effect == s.effect), s) for s in tested]
-    notes = demoted(suspects) + (ambiguities(suspects, errs, alpha) if any(s.significant for s in suspects) else [])
-    notes += [f"{k}: {v}" for k, v in untestable.items()]
+    # ambiguity.py words these notes, one kind per function: each gets its key as it enters the result
+    notes = [Message(n, "demoted") for n in demoted(suspects)] + (
+        [Message(n, "alike") for n in ambiguities(suspects, errs, alpha)] if any(s.significant for s in suspects)
+        else [])
+    notes += [Message(f"{k}: {v}", "untestable") for k, v in untestable.items()]
     if thin and fitted:
-        notes.append(f"the validation data holds {units.n} {units.kind}s; with {len(fitted)} candidates at least "
-                     f"{need} are needed before any can be significant at {alpha:g}: candidates are ranked by their "
-                     "validation gain alone; validate on a longer record (or more records) to test them")
+        notes.append(Message(f"the validation data holds {units.n} {units.kind}s; with {len(fitted)} candidates at "
+                             f"least {need} are needed before any can be significant at {alpha:g}: candidates are "
+                             "ranked by their validation gain alone; validate on a longer record (or more records) to "
+                             "test them", "few-units"))
     if stride > 1:
         expect = ""
         if suspects and suspects[0].refit.expected_rmse_deg is not None:
@@ -406,16 +410,16 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
             errs[c] = err
     tested.sort(key=lambda s: -s.gain_pct)
     suspects = [s for s in tested if s.significant]
-    notes = ambiguities(suspects, errs, alpha)
-    notes += [f"{k}: {v}" for k, v in untestable.items()]
+    notes = [Message(n, "alike") for n in ambiguities(suspects, errs, alpha)]
+    notes += [Message(f"{k}: {v}", "untestable") for k, v in untestable.items()]
     if stride > 1:
-        notes.append(f"scanned 1 sample in {stride} ({d.n_samples} of {data.n_samples})")
+        notes.append(Message(f"scanned 1 sample in {stride} ({d.n_samples} of {data.n_samples})", "subsampled"))
     still = still_blocks(d, bounds)
     if still:
         where = (f"all {folds} held-out blocks hold" if still == folds else f"{still} of the {folds} held-out blocks hold")
-        notes.insert(0, f"{where} no motion of this axis (its knob rests while the record goes on): there the scan "
-                        "scores only where the model puts the resting bend, not its hysteresis; validate on a record "
-                        "where this axis moves throughout")
+        notes.insert(0, Message(f"{where} no motion of this axis (its knob rests while the record goes on): there the "
+                                "scan scores only where the model puts the resting bend, not its hysteresis; validate "
+                                "on a record where this axis moves throughout", "still-blocks"))
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), folds, stride,
                       d.n_samples, alpha, min_gain_pct, scheme="rolling-origin", scheme_reason=scheme_reason,
                       still_blocks=still)
