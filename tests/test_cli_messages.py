@@ -92,3 +92,21 @@ def test_capped_lines_say_how_many_more_explain_prints(n, budget, kept):
     assert len(lines) == min(n, budget) and lines[:kept] == [f"w{i}" for i in range(kept)]
     if n > budget:
         assert lines[-1] == f"... {n - kept} more warnings (--explain prints them)"
+
+
+def test_validate_repeats_a_fit_that_did_not_converge_with_the_start_to_refit_from():
+    from endocal.models import make_model
+    from endocal.models.data import HysteresisData
+    from endocal.validation.offline import validate_offline
+    from endocal.views import validation_summary
+
+    t = np.arange(0, 40, 0.05)
+    cmd = 40 * np.sin(2 * np.pi * 0.1 * t)
+    meas = 0.8 * cmd + 3 * np.sign(np.gradient(cmd)) + np.random.default_rng(0).normal(0, 0.2, t.size)
+    model = make_model("linear", axis="ap").fit(HysteresisData(cmd_deg=cmd, meas_deg=meas, t_s=t), max_nfev=1)
+    assert model.fit_report_.status == 0
+    result = validate_offline(model, HysteresisData(cmd_deg=cmd, meas_deg=meas, t_s=t), model_path="m.json")
+    assert key_of(result.model["fit_warnings"][0]) == "not-converged"
+    line = next(x for x in validation_summary(result) if x.startswith("warning[not-converged]"))
+    assert line.startswith("warning[not-converged]: the model's fit stopped before converging (") and \
+        line.endswith("refit it from its own values with --start-from m.json"), line

@@ -80,6 +80,7 @@ def tendon(tmp_path_factory):
     return tmp
 
 
+@pytest.mark.slow  # two validations of a 21-weight PI: ~30 s of CPU
 def test_a_linear_drive_logs_suggestion_delivers_what_validate_promised(tendon):
     # the bench's tendon slack is what pi + envelope lacks: deadzone, -42 % promised
     kept = keep_promises(tendon / "s-pi.json", [tendon / "check.csv"], tendon, first_only=True)
@@ -142,11 +143,35 @@ def test_a_subsampled_scan_promises_the_range_its_refit_on_every_sample_lands_in
     assert f"{lo:.3g} .. {hi:.3g} deg" in note, note
 
 
-def test_a_setting_the_base_lacks_is_one_line(tendon):
+def test_the_refit_keeps_the_structure_the_fit_resolved():
+    """A `weights="auto"` PI fitted as `exponential` (the paper's law, with the envelope) is refitted as
+    `exponential`: the scan's candidates (`template`) and the printed refit (`Refit.settings`, as
+    `--set weights="exponential" --set offset=false`) take the resolved settings, never "auto" again."""
+    from endocal.models import make_model
+    from endocal.validation.refit import suggest_refit
+    from endocal.validation.structure import resolved_settings, template
+    from tests._models_signals import PAPER_TABLE1
+
+    model = make_model("pi", ["envelope"], axis="ap").set_parameters(PAPER_TABLE1)
+    assert model.get_settings()["weights"] == "auto" and model.structure_["weights"] == "exponential"
+    assert resolved_settings(model) == {"n_operators": 20, "weights": "exponential", "offset": False}
+    assert template(model, ["envelope", "delay"]).weights == "exponential"
+    refit = suggest_refit(model, "delay", ["fit.csv"], model_path="m.json")
+    assert refit.settings == {"weights": "exponential", "offset": False}
+    from endocal.shell import refit_argv
+
+    argv = refit_argv(refit)
+    assert argv[argv.index("--set") + 1] == 'weights="exponential"' and "offset=false" in argv
+
+
+def test_a_setting_the_base_lacks_is_one_line(tmp_path):
     from tests._cli import one_line_exit_2
 
-    one_line_exit_2(endocal("fit", "hysteresis", tendon / "fit.csv", "--axis", "ap", "--model", "linear", "--set",
-                            'weights="exponential"', "--out", tendon / "x.json"),
+    df = tendon_log(1, "damped", duration_s=10.0)
+    pd.DataFrame({"t_s": df["Time"], "ap_cmd_mm": df["Tendon Disp."], "ap_meas_deg": df["Angle y"]}).to_csv(
+        tmp_path / "fit.csv", index=False)
+    one_line_exit_2(endocal("fit", "hysteresis", tmp_path / "fit.csv", "--axis", "ap", "--model", "linear", "--set",
+                            'weights="exponential"', "--out", tmp_path / "x.json"),
                     "--set weights", "model 'linear' has no such setting")
 
 

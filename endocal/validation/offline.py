@@ -586,8 +586,8 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     fit_warnings = list(rep.warnings) if rep is not None else []
     if rep is not None and rep.status <= 0:  # said by `fit`, and again here: the scores are of unfinished values
         fit_warnings.insert(0, Message(
-            f"the model's fit stopped before converging ({rep.message}): its parameters may not be final; refit it "
-            f"starting from its own values (--start-from {model_path or 'the model'})", "not-converged"))
+            f"the model's fit stopped before converging ({rep.message}), refit it from its own values with "
+            f"--start-from {model_path or 'the model'}: its parameters may not be final", "not-converged"))
     model_info = {"path": model_path, "base": model.base_name, "effects": labels, "label": model_label(model),
                   "equation": model.equation(), "drive_unit": model.drive_unit_, "fit_warnings": fit_warnings}
     return ValidationResult(axis=ax, model=model_info, data=info, metrics=metrics, regimes=regimes,
