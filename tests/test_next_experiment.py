@@ -278,7 +278,7 @@ def test_the_summary_points_at_next_when_only_untested_effects_remain(loop, monk
     is this validation with --next, within the summary's 15 lines."""
     import dataclasses
 
-    from endocal.cli.validate import SUMMARY_MAX_LINES
+    from endocal.views import SUMMARY_MAX_LINES
     from endocal.validation import offline
 
     tmp, _ = loop
@@ -301,13 +301,13 @@ def test_the_summary_points_at_next_when_only_untested_effects_remain(loop, monk
 def test_the_summary_points_at_next_only_where_next_can_design(loop):
     """The pointer is a command that works: for a model --next would refuse (an axis no knob of the
     probe drives: the real piezo stack's), the summary says each experiment in words instead."""
-    from endocal.cli.validate import _next_command
+    from endocal.errors import EndocalError
     from endocal.validation.data import axis_data
+    from endocal.validation.next_experiment import check_next
 
     tmp, _ = loop
-    knob = _next_command(load_model(tmp / "m.json"), [load_aligned(tmp / "val")], tmp / "m.json", [tmp / "val"], [],
-                         "auto", None, "tee")
-    assert knob is not None and knob.endswith("--next next.toml"), knob
+    check_next(load_model(tmp / "m.json"), [load_aligned(tmp / "val")], "tee")  # validate_records: next_possible
     piezo = load_aligned(ROOT / "data_samples" / "piezo" / "piezo_aligned.csv")
     model = make_model("linear", axis="piezo").fit(axis_data([piezo], "piezo"))
-    assert _next_command(model, [piezo], Path("m.json"), [Path("check.csv")], [], "auto", None, "tee") is None
+    with pytest.raises(EndocalError):  # the summary then says each experiment in words
+        check_next(model, [piezo], "tee")

@@ -61,16 +61,17 @@ def heldout_label(scan, in_sample: bool = False) -> str:
     return f"held-out RMSE (model refitted on earlier data, rolling origin, {scan.folds} blocks)"
 
 
-def render(v) -> None:
-    """``--explain``: print every detail of a :class:`~endocal.validation.offline.ValidationResult` (the result the summary renders
-    too): the metrics table, the worst regimes, the residual tests, every candidate with its physics and
-    promise, the untested suspects with why and how to test them, every warning and note in full."""
+def render(result) -> None:
+    """``--explain``: print every detail of a :class:`~endocal.validation.offline.ValidationResult` (the result
+    the summary renders too): the metrics table, the worst regimes, the residual tests, every candidate with
+    its physics and promise, the untested suspects with why and how to test them, every warning and note in
+    full."""
     from rich.markup import escape
 
     from endocal.shell import refit_command
     from endocal.views import promise, scheme_word
 
-    result, folded = v, v.request is not None and v.request.folded
+    folded = result.request is not None and result.request.folded
     m = result.model
     scan = result.scan
     out.print(f"[bold]{m['label']}[/] on axis {result.axis}: {sum(d['n_samples'] for d in result.data)} samples "
