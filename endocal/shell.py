@@ -14,6 +14,7 @@ It imports nothing of the library: the command line's ``--help`` imports it.
 from __future__ import annotations
 
 import json
+import re
 import shlex
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
@@ -26,8 +27,7 @@ def refit_argv(refit: Refit) -> list[str]:
     """``endocal fit hysteresis DATA... --axis AXIS --model BASE --effects E1,E2 [--planes P] [--set K=V...]
     [--start-from M] --out OUT`` as an argument list.
 
-    Setting values are written as JSON, which ``--set`` reads as TOML values (``"exponential"``,
-    ``false``, ``30``).
+    Setting values are written as ``--set`` reads them (:func:`setting_value`).
     """
     parts = ["endocal", "fit", "hysteresis", *refit.data_paths]
     if refit.axis:
@@ -38,10 +38,22 @@ def refit_argv(refit: Refit) -> list[str]:
     if refit.planes_path:
         parts += ["--planes", refit.planes_path]
     for k, v in refit.settings.items():
-        parts += ["--set", f"{k}={json.dumps(v)}"]
+        parts += ["--set", f"{k}={setting_value(v)}"]
     if refit.start_from:
         parts += ["--start-from", refit.start_from]
     return parts + ["--out", refit.out_path]
+
+
+def setting_value(v) -> str:
+    """A base setting's value as ``--set KEY=VALUE`` reads it back (TOML, else a plain word): a word as it is
+    (``exponential``), anything else as JSON (``false``, ``30``, ``"two words"``)."""
+    if isinstance(v, str) and re.fullmatch(r"[A-Za-z_][A-Za-z0-9_.-]*", v) and v not in _TOML_WORDS:
+        return v
+    return json.dumps(v)
+
+
+#: Bare words TOML reads as something other than a string.
+_TOML_WORDS = ("true", "false", "inf", "nan")
 
 
 def refit_command(refit: Refit) -> str:

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from endocal.messages import capped, keyed_lines, key_of
+from endocal.messages import capped, key_of, keyed_lines
 from endocal.shell import excite_commands, refit_command, report_command, validate_command
 
 #: Lines the summary of an offline validation prints at most (issue 26: a verdict a person reads at a glance).
@@ -38,7 +38,7 @@ def scheme_word(result) -> str:
 
 def promise(suspect, what: str) -> str:
     """``-45 % validation RMSE (2.45 -> 1.33 deg)``, and where the scan fitted a subsample, the range to
-    expect of the refit on every sample: ``; expect 1.30 .. 1.41 deg from its refit``."""
+    expect of the refit on every sample: ``, its refit on every sample expected at 1.3 .. 1.41 deg``."""
     line = (f"-{suspect.gain_pct:.0f} % {what} RMSE ({suspect.base_rmse_heldout_deg:.3g} -> "
             f"{suspect.rmse_heldout_deg:.3g} deg)")
     r = suspect.refit.expected_rmse_deg

@@ -146,7 +146,7 @@ def test_a_subsampled_scan_promises_the_range_its_refit_on_every_sample_lands_in
 def test_the_refit_keeps_the_structure_the_fit_resolved():
     """A `weights="auto"` PI fitted as `exponential` (the paper's law, with the envelope) is refitted as
     `exponential`: the scan's candidates (`template`) and the printed refit (`Refit.settings`, as
-    `--set weights="exponential" --set offset=false`) take the resolved settings, never "auto" again."""
+    `--set weights=exponential --set offset=false`) take the resolved settings, never "auto" again."""
     from endocal.models import make_model
     from endocal.validation.refit import suggest_refit
     from endocal.validation.structure import resolved_settings, template
@@ -161,7 +161,10 @@ def test_the_refit_keeps_the_structure_the_fit_resolved():
     from endocal.shell import refit_argv
 
     argv = refit_argv(refit)
-    assert argv[argv.index("--set") + 1] == 'weights="exponential"' and "offset=false" in argv
+    assert argv[argv.index("--set") + 1] == "weights=exponential" and "offset=false" in argv
+    from endocal.protocols import parse_overrides
+
+    assert parse_overrides([a for a in argv if "=" in a]) == refit.settings  # read back as written
 
 
 def test_a_setting_the_base_lacks_is_one_line(tmp_path):
