@@ -142,9 +142,11 @@ class FitReport:
         """The inverse of :meth:`to_dict` (a file without ``warning_keys``, written before warnings carried
         keys, gives plain text: its warnings print under the key ``other``)."""
         d = dict(d)
-        keys = d.pop("warning_keys", None) or []
-        d["warnings"] = [Message(w, k) if k in KEYS else w for w, k in zip(d.get("warnings", []), keys)] + list(
-            d.get("warnings", [])[len(keys):])
+        keys = d.pop("warning_keys", None)
+        keys = keys if isinstance(keys, list) else []
+        warnings = list(d.get("warnings") or [])
+        d["warnings"] = [Message(w, k) if isinstance(w, str) and isinstance(k, str) and k in KEYS else w
+                         for w, k in zip(warnings, keys + [None] * (len(warnings) - len(keys)))]
         return cls(**d)
 
 
