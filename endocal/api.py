@@ -649,9 +649,10 @@ _KINDS = {"time_series": "ts-", "loops": "loops-", "residuals": "resid-", "regim
 class Validation(_Result):
     """A model held against measurements: how far off, where, what is missing (`endocal validate`).
 
-    Made by `validate`, which the command line calls too: its summary (`summary()`, also its
-    `repr`) is what `endocal validate` prints, line for line, and `to_dict()` what `--json`
-    prints, key for key.
+    Made by `validate`, which runs the pipeline the command line runs
+    (`endocal.validation.offline.validate_records`) and renders its one result with the same
+    functions (`endocal.views`): its summary (`summary()`, also its `repr`) is what `endocal
+    validate` prints, line for line, and `to_dict()` what `--json` prints, key for key.
 
     Attributes
     ----------
