@@ -729,9 +729,9 @@ class Validation(_Result):
         lines = self.summary()
         nx = None if self.next is None else self.next.experiment
         if self.next is not None:  # what the command line prints after the summary (endocal.cli.next_protocol)
-            lines.append(f"next experiment: {self.next.path} written ({nx.duration_s:.0f} s on probe {nx.probe}), "
-                         f"tests {', '.join(nx.suspects)}; .next.excite records it" if nx is not None else
-                         f"next experiment: none written: {self.next.reason}")
+            lines.append(f"next: {self.next.path} written ({nx.duration_s:.0f} s on probe {nx.probe}), tests "
+                         f"{', '.join(nx.suspects)}; .next.excite records it" if nx is not None else
+                         f"next: {self.next.reason}")
         return "\n".join(lines)
 
     def _record_figures(self):

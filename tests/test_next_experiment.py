@@ -197,7 +197,8 @@ def test_a_fitted_range_too_narrow_is_refused_naming_it():
 # ---------------------------------------------------------------------------- what --json and the API carry
 #: The keys `validate --json` had before --next added its own (issue 27: add, never rename)
 JSON_KEYS = {"axis", "model", "data", "metrics", "heldout_rmse_deg", "regimes", "residuals", "suspects", "scan",
-             "scheme", "estimation", "pointers", "shift", "clean", "unexplained", "beyond_samples", "notes", "compare"}
+             "scheme", "estimation", "pointers", "shift", "clean", "unexplained", "beyond_samples", "notes", "note_keys",
+             "compare"}
 
 
 def test_the_json_says_what_was_designed_and_how_to_record_it(loop):
