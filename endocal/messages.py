@@ -56,7 +56,8 @@ KEYS: dict[str, str] = {
                   "varying covariate column, `coupling` when the other knob never moves); the full text says what "
                   "to record.",
     "subsampled": "The effect scan fitted its candidates on 1 sample in N, to stay quick; the printed refit fits "
-                  "every sample, so its RMSE can differ from the candidate's by a few per cent.",
+                  "every sample, and each suggestion gives the range of validation RMSE to expect of it (the "
+                  "candidate fitted on two interleaved subsamples).",
     "few-units": "The validation data holds too few units (half-cycles or blocks) for the Holm-corrected tests of "
                  "every candidate to reach significance: record more cycles.",
     "alike": "Two candidate effects explain the residual about equally well; the full text names the experiment "
