@@ -219,6 +219,9 @@ def run_excitation(
             timing = getattr(backend, "timing", None)  # a real-time loop's: set and achieved rate, overruns
             if timing is not None and "backend" in meta:
                 meta["backend"]["timing"] = timing.describe()
+            notes = getattr(backend, "close_notes", None)  # what closing could not do (a rig's unanswering device)
+            if notes and "backend" in meta:
+                meta["backend"]["close_notes"] = list(notes)
             if guard is not None:
                 meta["force_guard"] = guard.describe()
                 meta["events"] = list(guard.events)

@@ -41,7 +41,7 @@ def refit_argv(refit: Refit) -> list[str]:
         parts += ["--set", f"{k}={setting_value(v)}"]
     if refit.start_from:
         parts += ["--start-from", refit.start_from]
-    return parts + ["--out", refit.out_path]
+    return parts + effects_file_args(refit.base, refit.effects) + ["--out", refit.out_path]
 
 
 def setting_value(v) -> str:
@@ -54,6 +54,15 @@ def setting_value(v) -> str:
 
 #: Bare words TOML reads as something other than a string.
 _TOML_WORDS = ("true", "false", "inf", "nan")
+
+
+def effects_file_args(base: str | None = None, effects: Sequence[str] = ()) -> list[str]:
+    """``--effects-file PATH`` for each of a user's files a refit of ``base`` + ``effects`` needs; without
+    ``base``, for every file this session was given (a command that repeats this one)."""
+    from endocal.models.userfile import files_for, given_files
+
+    paths = given_files() if base is None else files_for(base, effects or ())
+    return [a for path in paths for a in ("--effects-file", str(path))]
 
 
 def refit_command(refit: Refit) -> str:
@@ -79,5 +88,5 @@ def validate_command(model: str, data: Sequence[str], *, train: Sequence[str] = 
     return shlex.join(["endocal", "validate", str(model), *map(str, data),
                        *(a for t in train for a in ("--train", str(t))), *(["--cv", cv] if cv != "auto" else []),
                        *(["--planes", str(planes)] if planes is not None else []),
-                       *(["--probe", str(probe)] if str(probe) != "tee" else []),
+                       *(["--probe", str(probe)] if str(probe) != "tee" else []), *effects_file_args(),
                        *(["--next", str(next_path)] if next_path is not None else [])])

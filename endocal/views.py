@@ -152,7 +152,8 @@ def _verdict(result) -> tuple[str, list[str]]:
         return f"missing: not tested: {scan.scheme_reason}", []
     if result.pointers:
         p = result.pointers[0]
-        return ("missing: nothing the scan confirmed, but the data point at effects it could not settle",
+        return ("missing: nothing the scan confirmed, but the data point at effects it could not settle"
+                + (f"; and {result.unexplained}" if result.unexplained else ""),
                 design or [f"next: to test {p.effect}: {p.experiment}"])
     # after a refit (a model to compare with) the report of the two stays a next step beside the design
     then = [*design, *report] if design and old_path is not None else design or report

@@ -147,6 +147,47 @@ def test_a_jupytext_notebook_renders_as_text_and_code(tmp_path):
     assert "Not in this checkout" in hooks.notebook_markdown(tmp_path / "absent.py", "absent.py")
 
 
+def test_a_notebook_page_shows_each_cells_outputs_with_paths_made_relative(tmp_path):
+    import base64
+
+    import nbformat
+
+    spec = importlib.util.spec_from_file_location("endocal_docs_hooks", ROOT / "docs" / "hooks" / "endocal_docs.py")
+    hooks = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hooks)
+    script = tmp_path / "nb.py"
+    script.write_text("# %% [markdown]\n# # Title\n\n# %%\nrun = make()\nrun\n\n# %%\nrun.plot()\n")
+    ran_in = tmp_path / "ran"
+    png = base64.b64encode(b"\x89PNG fake").decode()
+    v4 = nbformat.v4
+    nb = v4.new_notebook(cells=[
+        v4.new_markdown_cell("# Title"),
+        v4.new_code_cell("run = make()\nrun", outputs=[
+            v4.new_output("stream", name="stdout", text=f"wrote {ran_in}/out/run.json\n"),
+            v4.new_output("execute_result", data={"text/plain": f"Run '{ran_in / 'out'}' in {ran_in}, {ROOT}/docs"},
+                          execution_count=1)]),
+        v4.new_code_cell("run.plot()", outputs=[v4.new_output("display_data", data={
+            "image/png": png, "text/plain": "<Figure>"})]),
+    ])
+    index = hooks.write_notebook_outputs(nb, script, ran_in)
+    assert index == tmp_path / "nb_outputs" / "outputs.json" and (tmp_path / "nb_outputs" / "cell-01-0.png").is_file()
+    md = hooks.notebook_markdown(script, "nb.py")
+    # a machine path is written relative: to the folder the notebook ran in, to the repository
+    assert "```text\nwrote out/run.json\n```" in md and "```text\nRun 'out' in ., docs\n```" in md
+    assert str(tmp_path) not in md and str(ROOT) not in md
+    assert "```python\nrun.plot()\n```\n\n![A figure the cell above drew](nb_outputs/cell-01-0.png)" in md
+    assert "<Figure>" not in md and "Outputs" not in md
+    # a cell edited since it ran shows no output (never another cell's), and the page says so
+    script.write_text(script.read_text().replace("run.plot()", "run.plot('loop')"))
+    md = hooks.notebook_markdown(script, "nb.py")
+    assert "cell-01-0.png" not in md and "1 of its 2 code cells differ from the ones that ran" in md
+    assert "wrote out/run.json" in md
+    # a cell that raised: nothing kept
+    nb.cells[2].outputs = [v4.new_output("error", ename="KeyError", evalue="'x'", traceback=[])]
+    with pytest.raises(ValueError, match="code cell 1 raised KeyError"):
+        hooks.write_notebook_outputs(nb, script, ran_in)
+
+
 def test_api_reference_renders_the_docstrings_rst_as_markdown(site):
     page = (site / "reference" / "api.html").read_text()
     text = _text(site / "reference" / "api.html")

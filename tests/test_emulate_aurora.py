@@ -3,6 +3,7 @@ ndicapi against the emulated System Control Unit on a pseudo-terminal (endocal/e
 
 from __future__ import annotations
 
+import re
 import time
 
 import numpy as np
@@ -141,7 +142,41 @@ def test_port_status_out_of_volume_flags_the_frames_for_its_span_only(firmware):
     assert np.all(np.diff(t_tip) > 0)
 
 
+def test_a_unit_that_goes_silent_is_named_as_the_tracker_and_lets_go_within_2_s():
+    # the control unit loses power 0.3 s after TSTART: no frame from either sensor, every command
+    # unanswered (ndicapi waits 5 s for each reply, so a TX in flight and then TSTOP would hold close 10 s)
+    with AuroraEmulator(0x0A, 0x0B, faults=AuroraFaults(silent_after_s=0.3)) as emu:
+        emu.set_poses({"tip": TIP, "base": BASE})
+        tr = _tracker(emu, max_lost_s=0.5)
+        tr.open()
+        tr.start(time.monotonic)
+        deadline, error = time.monotonic() + 10.0, None
+        while error is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+            try:
+                tr.check()
+            except HardwareError as exc:
+                error = str(exc)
+        frames = tr.drain()
+        began = time.monotonic()
+        tr.close()  # never raises for the device
+        closed_in = time.monotonic() - began
+    # (how long past max_lost_s the loop here noticed it is the machine's load, not asserted)
+    assert error is not None and re.match(
+        r"NDI Aurora: the tracker stopped answering: no frame from either sensor for [\d.]+ s \(tracker.max_lost_s = "
+        r"0.5; a frame request has waited [\d.]+ s for its reply; serial port /dev/pts/\d+\): ", error), error
+    assert error.endswith("check the System Control Unit's power (is it switched on, its lights lit?) and the USB or "
+                          "serial cable between it and this computer")
+    # what came before the silence was read, both sensors, valid (40 Hz for 0.3 s, from TSTART at open)
+    assert set(frames["sensor"]) == {"tip", "base"} and frames["valid"].all() and len(frames["t_s"]) >= 2
+    assert closed_in < 2.0 and tr.close_notes == [
+        f"NDI Aurora: no answer within 1 s of closing (stopping tracking, then the port {emu.port}): left to the "
+        "driver's timeouts in the background"]
+
+
 @pytest.mark.parametrize("args, fragment", [
+    (["aurora", "--silent-after", "-1"], "--silent-after -1: give 0 s (never answers) or more"),
+    (["rig", "--config-out", "unused.toml", "--tracker-silent-after", "-0.5"], "--tracker-silent-after -0.5: give 0 s"),
     (["aurora", "--out-of-volume", "elbow"], "--out-of-volume 'elbow': name a sensor, tip or base"),
     (["rig", "--config-out", "unused.toml", "--partly-out-of-volume", "shaft"], "--partly-out-of-volume 'shaft'"),
     (["aurora", "--out-of-volume", "tip", "--out-of-volume-for", "0"], "--out-of-volume-for more than 0 s"),

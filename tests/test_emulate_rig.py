@@ -5,6 +5,7 @@ whose probe is the simulator's; compared with the sim backend, and every fault e
 from __future__ import annotations
 
 import json
+import time
 
 import numpy as np
 import pytest
@@ -88,6 +89,10 @@ def test_a_run_on_the_emulated_rig_matches_the_simulator(tmp_path, protocol):
     ({"bus_faults": BusFaults(unplug_after_s=2.0)}, ("sync read", "failed", "check cables and power")),
     ({"stage": True, "stage_faults": StageFaults(silent_after_s=2.0)},
      ("translation/rotation stage at 127.0.0.1:", "stopped answering", "check the LabVIEW PC")),
+    # the Aurora's control unit loses power: no frame from either sensor, every command unanswered
+    ({"aurora_faults": AuroraFaults(silent_after_s=2.0)},
+     ("NDI Aurora: the tracker stopped answering: no frame from either sensor for 1.0 s (tracker.max_lost_s = 1;",
+      "check the System Control Unit's power", "the USB or serial cable")),
 ])
 def test_a_device_fault_mid_run_ends_safely(tmp_path, rig_kw, fragments):
     unplugged = "unplug_after_s=2.0" in repr(rig_kw)
@@ -103,6 +108,16 @@ def test_a_device_fault_mid_run_ends_safely(tmp_path, rig_kw, fragments):
     if not unplugged:
         assert torque == {1: False, 2: False}  # the emulator saw torque switched off on every servo
         assert "servo 1 torque off" in events and "servo 2 torque off" in events
+    if "aurora_faults" in rig_kw and rig_kw["aurora_faults"].silent_after_s is not None:
+        assert "sensor (port handle" not in lines[0]  # the tracker is named, not the tip (nor the base) sensor
+        # every frame read before the unit went silent is kept, both sensors': the last of them 1 s (max_lost_s)
+        # and a chunk (0.1 s) at most before the last tick logged, plus the run clock's and the reader's slack
+        tracker, motor = read_stream(tmp_path / "rig-run", "tracker"), read_stream(tmp_path / "rig-run", "motor")
+        assert set(tracker["sensor"]) == {"tip", "base"} and tracker["valid"].all()
+        assert motor["t_s"].max() - 1.0 - 0.1 - 0.2 <= tracker["t_s"].max() < motor["t_s"].max() - 0.5
+        # closing did not wait for the dead unit (ndicapi: 5 s a command): it said so in run.json, not over the error
+        notes = meta["backend"]["close_notes"]
+        assert len(notes) == 1 and "no answer within 1 s of closing" in notes[0], notes
     if "out_of_volume=('tip',)" in repr(rig_kw):  # the frames that stopped it are in the stream, flagged
         tracker = read_stream(tmp_path / "rig-run", "tracker")
         out = tracker[tracker["status"] == "out_of_volume"]
@@ -115,6 +130,58 @@ def test_a_tracker_that_does_not_see_both_sensors_is_refused_before_torque(tmp_p
     assert proc.returncode == 3, proc.stderr
     assert "tip (port handle 0x0a) reported no valid pose" in proc.stderr
     assert not [e for e in events if e.endswith("torque on")] and torque == {1: False, 2: False}
+
+
+def test_a_tracker_that_never_answers_is_one_line_before_any_servo_moves(tmp_path):
+    # the control unit is off from the start: the driver's probe of the port gets no reply (ndicapi's own
+    # timeouts: about 7 s); the servos were only pinged, set torque off and given their limits
+    proc, events, torque, sent = _excite_on_rig(tmp_path, SINE, aurora_faults=AuroraFaults(silent_after_s=0))
+    assert proc.returncode == 3, proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: NDI Aurora: no answer on /dev/pts/"), proc.stderr
+    assert "check the System Control Unit's power" in lines[0] and "the USB or serial cable" in lines[0]
+    assert not [e for e in events if e.endswith("torque on")] and torque == {1: False, 2: False} and sent == 0
+    assert not (tmp_path / "rig-run").exists()  # a rig that fails to open leaves no run folder
+
+
+def test_a_tracker_silent_mid_run_torque_off_first_and_close_within_2_s(tmp_path):
+    # in process, to see the order and the time: the hardware backend on the emulated rig, its Aurora silent
+    # 1 s after TSTART; the run loop's tracker check stops it max_lost_s later
+    from endocal.backends.hardware import HardwareBackend, HardwareConfig
+    from endocal.errors import HardwareError
+
+    stamped = []  # (monotonic s, event)
+    with EmulatedRig(TEE, seed=1, on_event=lambda line: stamped.append((time.monotonic(), line)),
+                     aurora_faults=AuroraFaults(silent_after_s=1.0)) as rig:
+        backend = HardwareBackend(HardwareConfig.from_toml(rig.write_config(tmp_path / "rig.toml")), TEE)
+        tracker_close = backend.tracker.close
+
+        def timed_close():
+            stamped.append((time.monotonic(), "tracker close begins"))
+            tracker_close()
+            stamped.append((time.monotonic(), "tracker close returned"))
+
+        backend.tracker.close = timed_close
+        rate_hz, chunk = 100.0, 10
+        with pytest.raises(HardwareError) as err:
+            with backend:
+                for k in range(600):  # 60 s of a 0.25 Hz, 5 deg sine: far longer than the fault takes
+                    t = (k * chunk + np.arange(1, chunk + 1)) / rate_hz
+                    goal = {d: np.zeros(chunk) for d in TEE.dofs}
+                    goal["ap"] = 5.0 * np.sin(2 * np.pi * 0.25 * t)
+                    backend.execute(t, goal)
+        closed_in = time.monotonic() - next(t for t, e in stamped if e == "tracker close begins")
+        assert_torque_off_last(rig.bus)
+    message = str(err.value)
+    assert message.startswith("NDI Aurora: the tracker stopped answering: no frame from either sensor for 1.")
+    assert "sensor (port handle" not in message and "System Control Unit's power" in message
+    when = {e: t for t, e in stamped}  # the last of each
+    assert when["servo 1 torque off"] < when["tracker close begins"] and when["servo 2 torque off"] < when[
+        "tracker close begins"]
+    # ndicapi would hold the close 5 s per unanswered command (14.4 s measured before): bounded by CLOSE_TIMEOUT_S
+    assert when["tracker close returned"] - when["tracker close begins"] < 2.0 and closed_in < 2.0
+    assert backend.close_notes and "no answer within 1 s of closing" in backend.close_notes[0]
+    backend.close()  # again: nothing left to do, nothing raised
 
 
 def test_the_rig_with_its_udp_stage_plays_and_records_it(tmp_path):

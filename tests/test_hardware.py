@@ -746,6 +746,61 @@ def test_a_sensor_out_of_volume_for_max_lost_s_stops_the_run_and_says_why(tmp_pa
         assert bus.torque() == {1: False, 2: False}
 
 
+class DeadPortTracker(FakeTracker):
+    """From frame ``dead_from`` on every frame request fails at once as ndicapi fails it (a port whose
+    unit is gone), and stopping waits until ``release`` is set (a unit that never answers TSTOP)."""
+
+    def __init__(self, settings, dead_from=5):
+        super().__init__(settings)
+        self.dead_from = dead_from
+        self.release = threading.Event()
+
+    def get_frame(self):
+        if self.frame_number >= self.dead_from:
+            raise OSError("Error 0x0103: Device->host communication timeout")
+        return super().get_frame()
+
+    def stop_tracking(self):
+        self.release.wait(30.0)
+        super().stop_tracking()
+
+
+def test_a_tracker_that_stops_answering_is_named_and_let_go_of_without_raising(tmp_path, caplog):
+    # the reader asks again after each failed request; after max_lost_s with no frame at all the run stops
+    # naming the tracker and the driver's last error; the close waits CLOSE_TIMEOUT_S for TSTOP, no longer
+    import logging
+    import time
+
+    with emulated_backend(tmp_path, tracker=DeadPortTracker) as (backend, bus, trackers):
+        path = Path(backend.config.source)
+        path.write_text(path.read_text().replace("detect_timeout_s = 0.5", "detect_timeout_s = 0.5\nmax_lost_s = 0.2"))
+        made = []
+        backend = HardwareBackend(HardwareConfig.from_toml(path), TEE,
+                                  tracker_factory=lambda settings: made.append(DeadPortTracker(settings)) or made[-1])
+        backend.open()
+        with pytest.raises(HardwareError, match=r"^NDI Aurora: the tracker stopped answering: no frame from either "
+                                                r"sensor for [\d.]+ s \(tracker.max_lost_s = 0.2; the driver: Error "
+                                                r"0x0103: Device->host communication timeout; serial port auto\): check "
+                                                r"the System Control Unit's power"):
+            backend.execute(*sine_chunk(n=300))
+        with caplog.at_level(logging.WARNING, logger="endocal.backends.aurora"):
+            began = time.monotonic()
+            backend.close()  # the tracker's TSTOP never returns: not raised, not waited for
+            closed_in = time.monotonic() - began
+        assert bus.torque() == {1: False, 2: False}
+        assert closed_in < 2.0
+        assert backend.close_notes == ["NDI Aurora: no answer within 1 s of closing (stopping tracking, then the port "
+                                       "auto): left to the driver's timeouts in the background"]
+        assert [r.getMessage().split(" (after")[0] for r in caplog.records] == backend.close_notes
+        dead = made[0]
+        assert dead.closed == 0  # still waiting for the unit, in the background
+        dead.release.set()
+        deadline = time.monotonic() + 5.0
+        while dead.closed == 0 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert dead.stopped == 1 and dead.closed == 1  # once the unit answers, the port is closed
+
+
 # --- the chunk ----------------------------------------------------------------------------
 def test_chunk_columns_match_the_run_format(tmp_path):
     backend, bus, _ = make_backend(tmp_path, tracker_kwargs={"nan_base_every": 3})

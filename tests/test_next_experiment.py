@@ -312,3 +312,28 @@ def test_the_summary_points_at_next_only_where_next_can_design(loop):
     model = make_model("linear", axis="piezo").fit(axis_data([piezo], "piezo"))
     with pytest.raises(EndocalError):  # the summary then says each experiment in words
         check_next(model, [piezo], "tee")
+
+
+def test_the_load_segment_records_the_same_motion_at_the_earlier_value_and_a_new_one(loop, tmp_path):
+    """Issue 32: a condition changed only between records is confounded with them (their motion, their start);
+    --next asks for the same motion at the earlier value and at a new one, and with both recorded the
+    estimation data can show a load term (before, with differing motions only, they cannot)."""
+    from endocal.validation.data import axis_data
+    from endocal.validation.identifiability import untestable_reason
+
+    tmp, _ = loop
+    proto = read_protocol_file(tmp / "next.toml")
+    instruction = proto.conditions["sheath_wrap_deg"]["instruction"]
+    assert "the same motion at two values" in instruction and "(180)" in instruction, instruction
+    nx = json.loads((tmp / "v.json").read_text())["next"]
+    earlier = ["endocal", "excite", str(tmp / "next.toml"), "--out", str(tmp / "next-fit-earlier"), "--set",
+               "sheath_wrap_deg=180"]
+    assert nx["excite"][2] == earlier
+    for name, value in (("old", 180), ("new", 120)):
+        proc = endocal("excite", tmp / "next.toml", "--out", tmp_path / name, "--set", f"sheath_wrap_deg={value}", "-q")
+        assert proc.returncode == 0, proc.stderr
+    records = [load_aligned(tmp / n) for n in ("est1", "est2")]
+    differing = axis_data(records + [load_aligned(tmp_path / "new")], "ap")
+    assert "constant within each record" in untestable_reason("load:sheath_wrap_deg", differing)
+    same = axis_data(records + [load_aligned(tmp_path / n) for n in ("old", "new")], "ap")
+    assert untestable_reason("load:sheath_wrap_deg", same) is None

@@ -10,12 +10,23 @@
 - ``<!-- endocal:effects -->`` on a page becomes the effect catalogue: for each entry of
   :func:`endocal.models.effects.catalog`, its cause, signature, excitation, parameters and the
   physics its module's docstring writes down.
+- ``<!-- endocal:notebook PATH -->`` becomes the jupytext script at PATH as a page: its markdown
+  cells as text, its code cells as Python blocks, each followed by what it showed when it ran
+  (its repr or printout as text, its figures as images). The outputs are not computed here: the
+  test that executes the notebook (``tests/test_tutorial_notebook.py``) writes them beside the
+  script with :func:`write_notebook_outputs` (``PATH-stem_outputs/``: ``outputs.json`` and one PNG a
+  figure), so building the site stays quick and the page shows what the suite ran. A code cell
+  whose source differs from the one that was run shows no output (the page says so), never
+  another cell's.
 """
 
 from __future__ import annotations
 
+import base64
 import functools
 import importlib.util
+import json
+import os
 import re
 import sys
 import textwrap
@@ -37,8 +48,109 @@ def on_page_markdown(markdown, page, config, files):
     return markdown
 
 
+REPOSITORY = Path(__file__).resolve().parents[2]
+#: The outputs of a notebook ``X.py``: ``X_outputs/outputs.json`` and the figures beside it
+OUTPUTS_INDEX = "outputs.json"
+
+
+def outputs_dir(path: Path) -> Path:
+    """Where the outputs of the jupytext script ``path`` are kept (``notebook.py`` -> ``notebook_outputs/``)."""
+    return path.with_name(f"{path.stem}_outputs")
+
+
+def relative_paths(text: str, bases: list[tuple[Path, str]]) -> str:
+    """``text`` with every machine path under one of ``bases`` written relative to it.
+
+    ``bases`` holds ``(folder, written as)`` pairs: ``""`` writes a path under the folder relative
+    to it (the folder itself as ``.``), ``"~"`` as ``~/...``. The longest folder is replaced first,
+    each also as its resolved path (``/tmp`` may be ``/private/tmp``).
+    """
+    pairs = {(form.rstrip("/"), label) for base, label in bases for form in (str(base), str(Path(base).resolve()))}
+    for form, label in sorted(pairs, key=lambda p: -len(p[0])):
+        if not form:  # the file system's root: nothing to make relative
+            continue
+        text = text.replace(form + "/", f"{label}/" if label else "")
+        text = re.sub(re.escape(form) + r"(?![\w.-])", label or ".", text)
+    return text
+
+
+def write_notebook_outputs(nb, path: Path, ran_in: Path) -> Path:
+    """Keep what each code cell of an executed notebook showed, for the page of its script.
+
+    Parameters
+    ----------
+    nb : nbformat.NotebookNode
+        The notebook of the jupytext script ``path``, executed (every output in place).
+    path : Path
+        The script.
+    ran_in : Path
+        The folder it ran in: paths under it (and under the repository and the home folder)
+        are written relative, so no machine's path reaches the page.
+
+    Returns
+    -------
+    Path
+        ``outputs.json``: per code cell its source and outputs, each ``{"text": ...}`` (a repr,
+        a printout) or ``{"image": "cell-NN-K.png"}`` (a figure, written beside it). Files are
+        rewritten only when their content changed, each atomically.
+
+    Raises
+    ------
+    ValueError
+        A cell raised: a failing notebook's outputs are not kept.
+    """
+    folder = outputs_dir(path)
+    folder.mkdir(exist_ok=True)
+    bases = [(Path(ran_in), ""), (REPOSITORY, ""), (Path.home(), "~")]
+    cells, images = [], {}
+    for k, cell in enumerate(c for c in nb.cells if c.cell_type == "code"):
+        shown = []
+        for j, out in enumerate(cell.get("outputs", [])):
+            kind = out.get("output_type")
+            if kind == "error":
+                raise ValueError(f"{path}: code cell {k} raised {out.get('ename')}: {out.get('evalue')}; "
+                                 "its outputs are not kept")
+            data = out.get("data", {})
+            if kind == "stream":
+                shown.append({"text": relative_paths(out["text"], bases)})
+            elif "image/png" in data:
+                name = f"cell-{k:02d}-{j}.png"
+                images[name] = base64.b64decode(data["image/png"])
+                shown.append({"image": name})
+            elif "text/plain" in data:
+                shown.append({"text": relative_paths(data["text/plain"], bases)})
+        cells.append({"source": cell.source.strip("\n"), "outputs": shown})
+    for name, png in images.items():
+        _write_if_changed(folder / name, png)
+    for old in folder.glob("cell-*.png"):
+        if old.name not in images:
+            old.unlink()
+    index = json.dumps({"notebook": path.name, "cells": cells}, indent=1, ensure_ascii=False) + "\n"
+    _write_if_changed(folder / OUTPUTS_INDEX, index.encode())
+    return folder / OUTPUTS_INDEX
+
+
+def _write_if_changed(path: Path, data: bytes) -> None:
+    if path.is_file() and path.read_bytes() == data:
+        return
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)  # a site built meanwhile reads the old file or the new one, never half of one
+
+
+def _outputs_markdown(outputs: list[dict], folder: str) -> list[str]:
+    out = []
+    for o in outputs:
+        if "image" in o:
+            out += [f"![A figure the cell above drew]({folder}/{o['image']})", ""]
+        elif o.get("text", "").strip():
+            out += ["```text", o["text"].rstrip("\n"), "```", ""]
+    return out
+
+
 def notebook_markdown(path: Path, shown: str) -> str:
-    """A jupytext percent script as Markdown: markdown cells as text, code cells as Python blocks."""
+    """A jupytext percent script as Markdown: markdown cells as text, code cells as Python blocks,
+    each followed by the outputs :func:`write_notebook_outputs` kept for it."""
     if not path.is_file():
         return (f"!!! note \"Not in this checkout\"\n    The notebook `{shown}` is not in this checkout of the "
                 "repository; this page shows it once it is.")
@@ -54,15 +166,28 @@ def notebook_markdown(path: Path, shown: str) -> str:
             cells[-1][1].append(line)
         elif line.strip():
             cells.append(("code", [line]))
+    index = outputs_dir(path) / OUTPUTS_INDEX
+    kept = json.loads(index.read_text())["cells"] if index.is_file() else []
     out: list[str] = []
+    k, unmatched = 0, 0
     for kind, body in cells:
         text = "\n".join(body).strip("\n")
         if not text.strip():
             continue
         if kind == "markdown":
             out += [re.sub(r"^# ?", "", ln) for ln in text.splitlines()] + [""]
+            continue
+        out += ["```python", text, "```", ""]
+        if k < len(kept) and kept[k]["source"] == text:
+            out += _outputs_markdown(kept[k]["outputs"], outputs_dir(path).name)
         else:
-            out += ["```python", text, "```", ""]
+            unmatched += 1
+        k += 1
+    if unmatched:
+        note = ("no outputs were kept for this notebook" if not kept else
+                f"{unmatched} of its {k} code cells differ from the ones that ran, and show no output")
+        out = [f"!!! note \"Outputs\"\n    {note}: `pytest tests/test_tutorial_notebook.py` runs `{shown}` and "
+               "keeps them.", ""] + out
     return "\n".join(out)
 
 
@@ -148,6 +273,8 @@ def effects_markdown() -> str:
             f"| parameters | {params} |",
             f"| needs | {', '.join(info.needs) or 'command and measurement only'} |",
             f"| streaming compensation | {'yes' if info.streamable else 'no'} |",
+            f"| the records must hold | {'; '.join(info.requires) or 'nothing beyond a reversal'} |",
+            f"| looks like | {'; '.join(f'`{k}`: {v}' for k, v in info.lookalikes.items()) or 'none declared'} |",
             "",
             "**Physics** (from `" + cls.__module__ + "`):",
             "",

@@ -23,8 +23,10 @@
 # minute; `make demo` records the full-length protocols.
 #
 # This page is kept as a [jupytext](https://jupytext.readthedocs.io) script
-# (`docs/tutorial/notebook.py`) and executed by the test suite, so what it shows is what the
-# code does. Open it in Jupyter with `jupytext --to ipynb docs/tutorial/notebook.py`.
+# (`docs/tutorial/notebook.py`) and executed by the test suite, which keeps what each cell
+# shows (its repr, its figure) for this page: what you see under a cell is what the code did
+# when the suite last ran it, so your own run should match it. Open it in Jupyter with
+# `jupytext --to ipynb docs/tutorial/notebook.py`.
 
 # %%
 from pathlib import Path

@@ -20,10 +20,20 @@ partly out of it), which scikit-surgerynditracker leaves out of its frames and
 Out of volume the Aurora still sends a transform (scikit-surgerynditracker asks for those,
 reply option ``0800``), degraded; only ``ok`` rows are ``valid``, every other row is kept
 in the stream, flagged, and left out of the aligned table.
+
+A tracker that stops answering altogether (the System Control Unit loses power, a cable comes
+out) is told apart from a lost sensor: no frame at all, from either sensor, for
+``tracker.max_lost_s`` stops the run naming the tracker, not a sensor. ndicapi waits 5 s for
+each reply before it gives up (``Error 0x0103: Device->host communication timeout``), so a dead
+unit would hold :meth:`AuroraTracker.close` for a reply per command it sends (14 s were
+measured); the close is run in a daemon thread and waited for :data:`CLOSE_TIMEOUT_S` only, and
+what it could not finish is logged (logger ``endocal.backends.aurora``) and kept in
+:attr:`AuroraTracker.close_notes`, never raised.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 import time
@@ -51,6 +61,15 @@ STATUS_MISSING, STATUS_OUT, STATUS_PARTLY = DROPOUT_STATUSES
 STATUS_REASONS = {STATUS_MISSING: "missing: no transform", STATUS_OUT: "out of the field generator's volume",
                   STATUS_PARTLY: "partly out of the field generator's volume",
                   STATUS_OK: "no frame read since its last valid pose"}
+#: How long :meth:`AuroraTracker.close` waits for the tracker to stop and its port to close (s); a unit
+#: that does not answer is left to ndicapi's own timeouts in a daemon thread
+CLOSE_TIMEOUT_S = 1.0
+#: What to check when the tracker stops answering (the NDI Aurora's user guide: the System Control
+#: Unit's power switch and its USB/serial link to the host)
+SILENT_ADVICE = ("check the System Control Unit's power (is it switched on, its lights lit?) and the USB or serial "
+                 "cable between it and this computer")
+_log = logging.getLogger(__name__)
+_log.addHandler(logging.NullHandler())  # a library logs; the application decides where it goes
 TRACKER_KEYS = {"serial_port", "tip_port_handle", "base_port_handle", "rom_files", "rate_hz", "detect_timeout_s",
                 "max_lost_s"}
 
@@ -202,6 +221,10 @@ class AuroraConfig:
             raise ConfigError(f"{where} [tracker]: {exc}") from None
 
 
+#: How scikit-surgerynditracker (1.0) begins the error of a port on which ndiProbe got no NDI reply
+_NO_ANSWER = ("Could not connect to an NDI device on", "Could not find any NDI device in")
+
+
 def default_tracker_factory(settings: dict) -> Any:
     """Import ``scikit-surgerynditracker`` lazily and connect an ``NDITracker``.
 
@@ -222,6 +245,11 @@ def default_tracker_factory(settings: dict) -> Any:
     except (OSError, ValueError, KeyError) as exc:
         port = settings.get("serial port", "any serial port (auto)")
         msg = " ".join(str(exc).split())
+        if msg.startswith(_NO_ANSWER):  # the driver's probe got no reply: its own advice list follows
+            raise HardwareError(
+                f"NDI Aurora: no answer on {port}: the tracker did not reply to the driver's probe; "
+                f"{SILENT_ADVICE}, and that [tracker] serial_port names its port (Linux: the 'dialout' group)"
+            ) from None
         raise HardwareError(
             f"cannot connect to the NDI Aurora on {port}: {msg}; check the System Control Unit is on, "
             "the USB/serial cable, and the port (Linux: 'dialout' group)"
@@ -276,6 +304,27 @@ class PortStatusTracker:
         status = {int(d["port handle"]): _port_status_bits(self._status(t._device, d["c_str port handle"]))
                   for d in t._tool_descriptors}
         return (*frame, status)
+
+    def shutdown(self) -> None:
+        """Stop tracking and close the port, the port exactly once whatever the unit answers.
+
+        ``NDITracker.close`` stops tracking first and closes the port only if that succeeded: on a
+        unit that does not answer, ``TSTOP`` times out (5 s), the port stays open, and each later
+        ``close`` sends ``TSTOP`` again. Here ``TSTOP`` is sent once (its failure ignored: the
+        unit is being let go) and ``ndiClose`` always follows.
+        """
+        import ndicapy
+
+        t = self._tracker
+        device, t._device = t._device, None
+        if device is None:
+            return
+        try:
+            if t._state == "tracking":
+                ndicapy.ndiCommand(device, "TSTOP:")
+        finally:
+            t._state = None
+            ndicapy.ndiClose(device)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._tracker, name)
@@ -371,7 +420,12 @@ class AuroraTracker:
         self._last_status: dict[str, str] = {}  # sensor -> status of its last frame
         self._error: BaseException | None = None
         self._last_numbers: tuple | None = None
+        self._last_reply = 0.0  # monotonic time of the last frame the tracker answered with
+        self._asked_at: float | None = None  # monotonic time of the frame request in flight, if any
+        self._driver_error = ""  # the last communication error of a frame request, in words
         self.info: dict = {}
+        #: What closing could not do (a unit that did not answer), in words; also logged
+        self.close_notes: list[str] = []
 
     def open(self) -> None:
         """Connect, start tracking and wait until both sensors report a valid pose.
@@ -397,15 +451,23 @@ class AuroraTracker:
                     f"(tools seen: {listed}); check the sensor is plugged into the Sensor Interface Unit "
                     f"and set tracker.{sensor}_port_handle"
                 )
+        asked = time.monotonic()
         try:
             self._tracker.start_tracking()
+        except OSError as exc:  # ndicapi: no reply (or none it could read) within its timeout
+            raise self._silent_error(time.monotonic() - asked, f"TSTART unanswered: {_words(exc)}") from None
         except Exception as exc:  # noqa: BLE001
             raise HardwareError(f"NDI Aurora: cannot start tracking ({exc})") from None
         self._tracking = True
         seen_valid = {s: False for s in SENSORS}
         deadline = time.monotonic() + self.config.detect_timeout_s
         while not all(seen_valid.values()):
-            rows, _ = _frame_rows(self._tracker.get_frame(), self.config.handles, 0.0)
+            asked = time.monotonic()
+            try:
+                frame = self._tracker.get_frame()
+            except OSError as exc:
+                raise self._silent_error(time.monotonic() - asked, f"frame request unanswered: {_words(exc)}") from None
+            rows, _ = _frame_rows(frame, self.config.handles, 0.0)
             for row in rows:
                 seen_valid[row[1]] = seen_valid[row[1]] or row[9]
                 self._last_status[row[1]] = row[10]
@@ -427,6 +489,7 @@ class AuroraTracker:
             return
         self._stop.clear()
         self._last_valid = {s: time.monotonic() for s in SENSORS}  # both were seen at open
+        self._last_reply = time.monotonic()
         self._thread = threading.Thread(target=self._run, args=(clock,), name="endocal-aurora", daemon=True)
         self._thread.start()
 
@@ -436,7 +499,18 @@ class AuroraTracker:
         try:
             while not self._stop.is_set():
                 t_before = clock()
-                frame = self._tracker.get_frame()
+                self._asked_at = time.monotonic()
+                try:
+                    frame = self._tracker.get_frame()
+                except OSError as exc:
+                    # ndicapi found no reply, or none it could read (timeout, bad CRC, a port gone):
+                    # ask again; check() names the tracker once nothing has come for max_lost_s
+                    self._driver_error = _words(exc)
+                    self._asked_at = None
+                    self._stop.wait(period)
+                    continue
+                self._asked_at = None
+                self._last_reply = time.monotonic()
                 t_after = clock()
                 t_s = 0.5 * (t_before + t_after)
                 self._round_trips.append(t_after - t_before)
@@ -459,14 +533,24 @@ class AuroraTracker:
             self._error = exc
 
     def check(self) -> None:
-        """Raise :class:`HardwareError` if the reader thread died or a sensor is lost.
+        """Raise :class:`HardwareError` if the tracker stopped answering, the reader thread died or a
+        sensor is lost.
 
-        A sensor is lost when it has reported no valid pose for ``max_lost_s``: missing, out
-        of the field generator's volume or partly out of it (the message says which).
+        The tracker stopped answering when no frame at all, from either sensor, has come for
+        ``max_lost_s`` (a request still waiting for its reply, or requests that failed): the
+        message names the tracker and what to check, not a sensor. A sensor is lost when the
+        tracker answers but that sensor has reported no valid pose for ``max_lost_s``: missing,
+        out of the field generator's volume or partly out of it (the message says which).
         """
-        if self._error is not None:
+        if self._error is not None:  # not a communication error (those are retried): the reader died
             raise HardwareError(f"NDI Aurora: reading frames failed ({self._error}); check the tracker cable and power")
         now = time.monotonic()
+        silent_s = now - self._last_reply
+        if self._thread is not None and silent_s > self.config.max_lost_s:
+            asked = self._asked_at
+            detail = (f"a frame request has waited {now - asked:.1f} s for its reply" if asked is not None
+                      else f"the driver: {self._driver_error}" if self._driver_error else "")
+            raise self._silent_error(silent_s, detail)
         for sensor, last in self._last_valid.items():
             if now - last > self.config.max_lost_s:
                 handle = self.config.handles[sensor]
@@ -483,21 +567,45 @@ class AuroraTracker:
             rows, self._rows = self._rows, []
         return rows_to_columns(rows)
 
+    def _silent_error(self, silent_s: float, detail: str) -> HardwareError:
+        """The tracker stopped answering: no frame from either sensor for ``silent_s``."""
+        port = self.config.serial_port
+        return HardwareError(
+            f"NDI Aurora: the tracker stopped answering: no frame from either sensor for {silent_s:.1f} s "
+            f"(tracker.max_lost_s = {self.config.max_lost_s:g}; {detail + '; ' if detail else ''}serial port "
+            f"{port}): {SILENT_ADVICE}"
+        )
+
     def close(self) -> None:
-        """Stop the thread, stop tracking, close the tracker. Idempotent."""
+        """Stop the thread, stop tracking, close the tracker; return within :data:`CLOSE_TIMEOUT_S`. Idempotent.
+
+        The reader thread is joined, tracking stopped and the port closed in a daemon thread, in
+        that order (one request at a time on the port: the reader's may still be waiting for its
+        reply), which is waited for :data:`CLOSE_TIMEOUT_S`. A tracker that does not answer
+        keeps that thread in ndicapi's timeouts (5 s a command) after this returns; it ends with
+        them, or with the process. What could not be done is logged and added to
+        :attr:`close_notes`; closing never raises for the device, so a run's own error is the
+        one that reaches the user.
+        """
         self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
+        thread, self._thread = self._thread, None
         tracker, self._tracker = self._tracker, None
-        if tracker is None:
+        tracking, self._tracking = self._tracking, False
+        if tracker is None and thread is None:
             return
-        try:
-            if self._tracking:
-                tracker.stop_tracking()
-        finally:
-            self._tracking = False
-            tracker.close()
+        failures: list[str] = []
+        closer = threading.Thread(target=_shut_down, args=(tracker, thread, tracking, failures),
+                                  name="endocal-aurora-close", daemon=True)
+        started = time.monotonic()
+        closer.start()
+        closer.join(CLOSE_TIMEOUT_S)
+        if closer.is_alive():
+            failures.append(f"no answer within {CLOSE_TIMEOUT_S:g} s of closing (stopping tracking, then the "
+                            f"port {self.config.serial_port}): left to the driver's timeouts in the background")
+        for text in list(failures):
+            note = f"NDI Aurora: {text}"
+            _log.warning("%s (after %.2f s)", note, time.monotonic() - started)
+            self.close_notes.append(note)
 
     def alignment(self) -> dict:
         """How well frames sit on the motor clock: each is stamped at the middle of its
@@ -520,6 +628,32 @@ class AuroraTracker:
             **self.alignment(),
             "scikit-surgerynditracker": tracker_package_version(),
         }
+
+
+def _words(exc: BaseException) -> str:
+    """An exception's message on one line."""
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def _shut_down(tracker: Any, reader: threading.Thread | None, tracking: bool, failures: list[str]) -> None:
+    """Join the reader, stop tracking, close the port (in :meth:`AuroraTracker.close`'s daemon thread);
+    every failure is appended to ``failures`` in words."""
+    if reader is not None:
+        reader.join()  # its request in flight ends with a reply or ndicapi's timeout
+    if tracker is None:
+        return
+    try:
+        shutdown = getattr(tracker, "shutdown", None)
+        if shutdown is not None:  # PortStatusTracker: TSTOP once, the port closed whatever happens
+            shutdown()
+            return
+        try:
+            if tracking:
+                tracker.stop_tracking()
+        finally:
+            tracker.close()
+    except Exception as exc:  # noqa: BLE001 - let go of the tracker, say what failed
+        failures.append(f"closing failed ({_words(exc)})")
 
 
 _TEXT_COLUMNS = ("sensor", "status")

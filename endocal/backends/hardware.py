@@ -786,6 +786,10 @@ class HardwareBackend:
     def close(self) -> None:
         """Torque off, stop the stage and the tracker, remove the safety net. Safe to call any number of times.
 
+        Torque goes off first, whatever state the other devices are in. The tracker's part
+        returns within :data:`endocal.backends.aurora.CLOSE_TIMEOUT_S` even when the Aurora does
+        not answer, and never raises: what it could not do is in :attr:`close_notes`.
+
         Raises
         ------
         HardwareError
@@ -812,6 +816,11 @@ class HardwareBackend:
             if isinstance(first, HardwareError) or not isinstance(first, Exception):
                 raise first
             raise HardwareError(f"closing the hardware backend: {first}") from first
+
+    @property
+    def close_notes(self) -> list[str]:
+        """What closing could not do without failing the run (an Aurora that did not answer), in words."""
+        return list(self.tracker.close_notes)
 
     def __enter__(self) -> HardwareBackend:
         self.open()

@@ -54,7 +54,7 @@ def _hardware_errors(items: list[str]) -> dict[int, str]:
 
 
 def _aurora_faults(missing, missing_after, silent_after, out_of_volume, partly_out_of_volume, out_of_volume_after,
-                   out_of_volume_for):
+                   out_of_volume_for, silent_flag="--silent-after"):
     """The Aurora's fault options as :class:`~endocal.emulate.aurora.AuroraFaults`; sensors named tip or base."""
     from endocal.emulate.aurora import AuroraFaults
     from endocal.errors import ConfigError
@@ -64,6 +64,8 @@ def _aurora_faults(missing, missing_after, silent_after, out_of_volume, partly_o
         bad = [m for m in sensors if m not in ("tip", "base")]
         if bad:
             raise ConfigError(f"{flag} {bad[0]!r}: name a sensor, tip or base")
+    if silent_after is not None and silent_after < 0:
+        raise ConfigError(f"{silent_flag} {silent_after:g}: give 0 s (never answers) or more")
     if out_of_volume_after < 0 or (out_of_volume_for is not None and not out_of_volume_for > 0):
         raise ConfigError("--out-of-volume-after must be 0 s or more and --out-of-volume-for more than 0 s")
     return AuroraFaults(missing=tuple(missing), missing_after_s=missing_after, silent_after_s=silent_after,
@@ -127,6 +129,7 @@ def rig(
     partly_out_of_volume: list[str] = typer.Option([], "--partly-out-of-volume", help="Fault: ...or partly out of it (bit 7)..."),
     out_of_volume_after: float = typer.Option(0.0, "--out-of-volume-after", help="...from this many seconds after tracking starts..."),
     out_of_volume_for: Optional[float] = typer.Option(None, "--out-of-volume-for", help="...for this many seconds (default: to the end)."),
+    tracker_silent_after: Optional[float] = typer.Option(None, "--tracker-silent-after", help="Fault: the Aurora stops answering this many seconds after tracking starts, for good (its control unit lost power; 0: it never answers)."),
     stage: bool = typer.Option(False, "--stage", help="Also emulate the UDP translation/rotation stage (the probe follows it)."),
     stage_silent_after: Optional[float] = typer.Option(None, "--stage-silent-after", help="Fault: the stage stops answering this many seconds after its first request."),
 ) -> None:
@@ -142,8 +145,8 @@ def rig(
     from endocal.sim import SimConfig
 
     errors = _hardware_errors(hardware_error)
-    aurora_faults = _aurora_faults(missing, missing_after, None, out_of_volume, partly_out_of_volume,
-                                   out_of_volume_after, out_of_volume_for)
+    aurora_faults = _aurora_faults(missing, missing_after, tracker_silent_after, out_of_volume, partly_out_of_volume,
+                                   out_of_volume_after, out_of_volume_for, "--tracker-silent-after")
     check_parent(config_out)
     cfg = SimConfig.from_toml(sim_config) if sim_config is not None else None
     rig_ = EmulatedRig(load_probe(probe), cfg, seed=seed, on_event=_event,
@@ -165,7 +168,7 @@ def aurora(
     base_port_handle: int = typer.Option(0x0B, "--base-port-handle", help="Port handle of the base sensor."),
     missing: list[str] = typer.Option([], "--missing", help="Fault: report this sensor (tip or base) MISSING (repeatable)..."),
     missing_after: float = typer.Option(0.0, "--missing-after", help="...from this many seconds after TSTART (0: always)."),
-    silent_after: Optional[float] = typer.Option(None, "--silent-after", help="Fault: stop answering this many seconds after TSTART."),
+    silent_after: Optional[float] = typer.Option(None, "--silent-after", help="Fault: stop answering this many seconds after TSTART, for good (the control unit lost power; 0: never answers)."),
     out_of_volume: list[str] = typer.Option([], "--out-of-volume", help="Fault: a sensor (tip or base) out of the field generator's volume (port status bit 6; repeatable)..."),
     partly_out_of_volume: list[str] = typer.Option([], "--partly-out-of-volume", help="Fault: ...or partly out of it (bit 7)..."),
     out_of_volume_after: float = typer.Option(0.0, "--out-of-volume-after", help="...from this many seconds after TSTART..."),

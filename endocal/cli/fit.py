@@ -10,6 +10,7 @@ from typing import Optional
 import typer
 
 from endocal.cli._common import cli_errors, err, out, refuse_input_as_output, slow_clock_warning
+from endocal.cli._effects_file import effects_file_option, use_effects_files
 from endocal.cli.messages import EXPLAIN_HELP, keyed, keyed_lines
 from endocal.errors import OutputExistsError
 
@@ -75,6 +76,7 @@ def hysteresis(
     sets: list[str] = typer.Option([], "--set", help="A base-model setting, e.g. --set n_knots=3 (bspline: n_knots, degree; pi: n_operators, weights, offset); repeatable."),
     start_from: Optional[Path] = typer.Option(None, "--start-from", help="A fitted model (same axis and base) to start from: the effects it has start at its values. validate's refit commands use it."),
     explain: bool = typer.Option(False, "--explain", "-v", help=EXPLAIN_HELP),
+    effects_files: list[Path] = effects_file_option(),
 ) -> None:
     """Fit a hysteresis model (knob command -> bending angle) of one axis.
 
@@ -89,7 +91,8 @@ def hysteresis(
     from endocal.fitting import fit_hysteresis, fit_provenance
     from endocal.models import model_to_dict, save_model
 
-    refuse_input_as_output("--out", out_path, [*data, planes_file, start_from])
+    use_effects_files(effects_files)
+    refuse_input_as_output("--out", out_path, [*data, planes_file, start_from, *effects_files])
     if out_path.exists() and not force:
         raise OutputExistsError(f"{out_path} already exists: choose another --out or pass --force")
     planes = None

@@ -19,6 +19,7 @@ from endocal.cli._common import (
     refuse_input_as_output,
     warnings_as_lines,
 )
+from endocal.cli._effects_file import effects_file_option, use_effects_files
 from endocal.cli.messages import EXPLAIN_HELP
 from endocal.errors import ModelError
 from endocal.views import SUMMARY_MAX_LINES  # noqa: F401  (the summary's budget, as tests and docs quote it)
@@ -190,6 +191,7 @@ def validate(
     max_force_n: Optional[float] = typer.Option(None, "--max-force-n", help="With --force-model: stop bending into the load at this predicted tip force (N)."),
     explain: bool = typer.Option(False, "--explain", "-v", help=EXPLAIN_HELP + " Offline: the metrics table, the worst regimes, the residual tests, every candidate with its physics, the untested suspects with why and how to test them."),
     next_path: Optional[Path] = typer.Option(None, "--next", help="Offline: write the protocol that would settle what this validation could not (suspects it could not confirm, effects the data cannot test) to this .toml, sized from the effects seen, for the probe the records were made on (else --probe); prints the excite commands that record it (with --json or --json-out: the object's `next`: the file, the suspects, each one's half-cycles needed at the gain seen, the excite commands)."),
+    effects_files: list[Path] = effects_file_option(),
 ) -> None:
     """Compare a model with measurements: how far off, where it fails, which physical effect is missing.
 
@@ -203,6 +205,7 @@ def validate(
     """
     from endocal.models import load_model
 
+    use_effects_files(effects_files)  # before the model that may need them
     if folds < 2:
         raise ModelError(f"--folds must be 2 or more (held-out blocks of the rolling-origin scan), got {folds}")
     refuse_input_as_output("--json-out", json_out, [model_path, *(data or []), *train, *compare, planes, force_model,

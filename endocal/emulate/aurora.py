@@ -92,7 +92,11 @@ class AuroraFaults:
     missing_after_s : float
         ...from this long after ``TSTART`` on (0: from the start, even before tracking).
     silent_after_s : float or None
-        Stop answering this long after ``TSTART`` (a pulled cable, a crashed unit).
+        Stop answering this long after ``TSTART``, for good: the System Control Unit lost power,
+        or the cable came out at its end. Commands still arrive and none is answered, from either
+        sensor's frame to ``TSTOP`` and a new session's ``INIT``, so the host's driver times out
+        on each (ndicapi: 5 s). 0: silent from power-on, not even the probe at connection is
+        answered. None: always answers.
     out_of_volume, partly_out_of_volume : tuple of str
         Sensors out of the field generator's volume (port status bit 6), or partly out of it
         (bit 7)...
@@ -130,6 +134,7 @@ class _Unit:
         self.shared = shared
         self.faults = faults
         self.rate_hz = rate_hz
+        self.dead = False
         self.reset()
 
     def reset(self) -> None:
@@ -235,7 +240,13 @@ class _Unit:
 
     def silent(self) -> bool:
         f = self.faults.silent_after_s
-        return f is not None and self.t_start is not None and time.monotonic() - self.t_start >= f
+        if f is None:
+            return False
+        if f <= 0:  # off from power-on: not even INIT is answered
+            return True
+        if self.t_start is not None and time.monotonic() - self.t_start >= f:
+            self.dead = True  # it stays off: no later command (TSTOP, INIT) brings it back
+        return self.dead
 
 
 def _reply_option(arg: str) -> int:

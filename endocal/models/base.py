@@ -841,7 +841,7 @@ class HysteresisModel(ABC):
         v = grid
         probe = HysteresisData(cmd_deg=grid, t_s=np.arange(grid.size, dtype=float))
         for e in self.effects_:
-            if isinstance(e, InputEffect) and e.name == "envelope":
+            if isinstance(e, InputEffect) and e.position_map:  # a static map of the position: its image
                 v = e.apply(eff_p[id(e)], v, probe)
         return (float(v.min()), float(v.max()))
 

@@ -11,6 +11,11 @@ Layout (``format: endocal-model``, ``version: 2``)::
      "correlation": {"names": [...], "matrix": [[...]]},
      "fit": {...FitReport...}, "training_data": [{"sha256": "...", "n_samples": 1400}]}
 
+A user's effect (``--effects-file``, :mod:`endocal.models.userfile`) carries its source in its
+entry, ``{"name": "wear", "settings": {}, "source": {"path": ..., "module": ..., "sha256": ...}}``,
+and a user's base in ``base_source``; loading the model without that file, or with the file
+changed and not given again, is refused (:func:`~endocal.models.userfile.check_model_sources`).
+
 ``drive_unit`` is the unit of the command the model was fitted on: ``deg`` for a knob, ``mm``
 for a linear stage pulling the tendon. The parameters keep their names in either unit
 (``deadzone_slack_deg``, ``cmd_range_deg``), and hold the drive's unit: a model of a linear drive
@@ -44,7 +49,7 @@ FORMAT = "endocal-model"
 VERSION = 2
 #: Optional top-level fields: who made the file, from what (endocal version, data files and hashes, command);
 #: the drive's unit (deg when absent).
-_OPTIONAL = {"provenance", "drive_unit"}
+_OPTIONAL = {"provenance", "drive_unit", "base_source"}
 #: Units a model's command may be in (endocal.runs.aligned.DRIVE_UNITS).
 _DRIVE_UNITS = ("deg", "mm")
 _KEYS = {"format", "version", "axis", "base", "settings", "out_of_range", "fixed", "effects", "structure",
@@ -62,10 +67,13 @@ def _from_num(x, default: float) -> float:
 
 def model_to_dict(model: HysteresisModel) -> dict:
     """A fitted model as a JSON-able dict (see the module docstring for the layout)."""
+    from endocal.models.userfile import sources_of_model
+
     model._require_fitted()
     fixed = getattr(model, "fixed_", {})
     corr = model.correlation_
-    return {
+    sources, base_source = sources_of_model(model)
+    d = {
         "format": FORMAT,
         "version": VERSION,
         "axis": model.axis,
@@ -73,7 +81,8 @@ def model_to_dict(model: HysteresisModel) -> dict:
         "settings": model.get_settings(),
         "out_of_range": model.out_of_range,
         "fixed": None if model.fixed is None else {k: float(v) for k, v in model.fixed.items()},
-        "effects": [{"name": e.name, "settings": e.settings()} for e in model.effects_],
+        "effects": [{"name": e.name, "settings": e.settings(), **({"source": s.to_dict()} if s else {})}
+                    for e, s in zip(model.effects_, sources)],
         "structure": model.structure_,
         "parameters": {n: {"value": float(v), "stderr": _num(model.stderr_[n]), "fixed": n in fixed}
                        for n, v in model.params_.items()},
@@ -84,6 +93,9 @@ def model_to_dict(model: HysteresisModel) -> dict:
         "fit": None if model.fit_report_ is None else model.fit_report_.to_dict(),
         "training_data": list(model.training_data_),
     }
+    if base_source is not None:
+        d["base_source"] = base_source.to_dict()
+    return d
 
 
 def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
@@ -108,6 +120,9 @@ def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
         raise ModelError(f"{where}: wrong fields for a version-{VERSION} model file (unknown {sorted(unknown)}, "
                          f"missing {sorted(missing)})")
     _check_shape(d, where)
+    from endocal.models.userfile import check_model_sources
+
+    check_model_sources(d, where)  # a user's effect or base: registered from the file the model was fitted with
     base = d["base"]
     if not isinstance(base, str) or base not in BASES:
         raise ModelError(f"{where}: unknown base model '{base}' (known: {', '.join(BASES)})")

@@ -336,7 +336,8 @@ def _motor(pos, vel, goal, tau, vmax, dt):
 @njit(cache=True)
 def simulate_ticks(dt_s, goal, wrap_rad, w, tau_s, vmax, r_p, r_t, e0, mu, rate_gain_s_per_rad, coupling,
                    k_bend, inv_bs2, m_fric, wall_axis, wall_rad, wall_sign, k_wall, w_force,
-                   held, pos, vel, prof, d_mm, beta_qs, out_pos, out_vel, out_t0, out_beta, out_mwall):
+                   held, pos, vel, prof, d_mm, beta_qs, out_pos, out_vel, out_t0, out_beta, out_mwall,
+                   rate_linear=False, band_center_rad=0.0):
     """Run a chunk of motor ticks; every state array is updated in place.
 
     Parameters
@@ -355,6 +356,12 @@ def simulate_ticks(dt_s, goal, wrap_rad, w, tau_s, vmax, r_p, r_t, e0, mu, rate_
         Pulley radius, tendon offset, ``e_pre - slack`` (mm), friction coefficient.
     rate_gain_s_per_rad : float
         ``[rate]``: relative friction increase per rad/s of knob speed (0 = off).
+    rate_linear : bool
+        ``[rate] law = "linear"``: the slip thresholds, not the friction coefficient, grow linearly
+        with speed: the capstan's bound ``e^{mu Theta}`` becomes ``1 + (e^{mu Theta} - 1)(1 + g |v|)``.
+    band_center_rad : float
+        ``[deadzone] center_deg``: the knob angle at which the two tendons are equally slack (the
+        agonist has ``r_p * center`` less slack than the antagonist): a dead band not centred at 0.
     coupling : (2,) array
         Coupling ratios of axis 1 (from axis 2) and axis 2 (from axis 1).
     k_bend, inv_bs2 : float
@@ -392,25 +399,34 @@ def simulate_ticks(dt_s, goal, wrap_rad, w, tau_s, vmax, r_p, r_t, e0, mu, rate_
     hi_d = np.empty(n_nodes)
     mid = np.empty((2, n_nodes))
     last_mu_theta = -1.0
+    last_factor = -1.0
     for i in range(dt_s.size):
         for dof in range(4):
             pos[dof], vel[dof] = _motor(pos[dof], vel[dof], held[dof], tau_s[dof], vmax[dof], dt_s[i])
             held[dof] = goal[i, dof]
         m_wall_tick = 0.0
         for ax in range(2):
-            mu_theta = mu * wrap_rad[i] * (1.0 + rate_gain_s_per_rad * abs(vel[ax]))  # [rate]: mu_eff
-            if mu_theta != last_mu_theta:
+            speed_factor = 1.0 + rate_gain_s_per_rad * abs(vel[ax])
+            mu_theta = mu * wrap_rad[i] * (1.0 if rate_linear else speed_factor)  # [rate]: mu_eff
+            factor = speed_factor if rate_linear else 1.0
+            if mu_theta != last_mu_theta or factor != last_factor:
                 for j in range(n_nodes):
                     th = mu_theta * j / n_seg
-                    lo_p[j] = math.exp(-th)
-                    hi_p[j] = math.exp(th)
+                    if rate_linear:  # [rate] law "linear": the thresholds scale with speed
+                        hi_p[j] = 1.0 + (math.exp(th) - 1.0) * factor
+                        lo_p[j] = 1.0 / hi_p[j]
+                    else:
+                        lo_p[j] = math.exp(-th)
+                        hi_p[j] = math.exp(th)
                 for j in range(n_nodes):
                     lo_d[j] = lo_p[n_seg - j]
                     hi_d[j] = hi_p[n_seg - j]
                 last_mu_theta = mu_theta
+                last_factor = factor
             other = beta_qs[1 - ax]
             has_wall = wall_axis == ax
-            b, d_new, m_wall = axis_step(prof[ax], mid, w, lo_p, hi_p, lo_d, hi_d, pos[ax], d_mm[ax], beta_qs[ax],
+            b, d_new, m_wall = axis_step(prof[ax], mid, w, lo_p, hi_p, lo_d, hi_d, pos[ax] - band_center_rad, d_mm[ax],
+                                         beta_qs[ax],
                                          other, r_p, r_t, e0, coupling[ax], k_bend, inv_bs2, m_fric,
                                          wall_rad if has_wall else 0.0, wall_sign, k_wall if has_wall else 0.0,
                                          w_force if has_wall else 0.0)

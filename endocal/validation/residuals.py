@@ -240,7 +240,8 @@ def unexplained_shape(data: HysteresisData, resid: ResidualTests, frac: float = 
         return ""
     return (f"the residual is not noise: it stays correlated for {w.correlation_time_s:.3g} s, "
             f"{100 * w.correlation_time_s / half:.0f} % of a half-cycle ({half:.3g} s), so the model misses a shape that "
-            "follows the loop; look at the loop (endocal report) and at another base (--model)")
+            "follows the loop; look at the loop (endocal report), at another base (--model), or add your own "
+            "effect (docs/how-to/add-effect.md)")
 
 
 

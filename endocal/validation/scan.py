@@ -33,10 +33,10 @@ from endocal.errors import ModelError
 from endocal.messages import Message
 from endocal.models import EFFECTS, HysteresisData
 from endocal.models.base import HysteresisModel
-from endocal.validation.ambiguity import ambiguities, demoted
+from endocal.validation.ambiguity import ambiguities, demoted, settle_lookalikes
 from endocal.validation.candidates import candidate_effects
 from endocal.validation.folds import check_cv_data, fold_bounds, fold_errors, fold_split, still_blocks
-from endocal.validation.identifiability import creep_reason
+from endocal.validation.identifiability import unheld_cautions
 from endocal.validation.paired import holm, min_units_for, paired_test, unit_test
 from endocal.validation.parallel import map_jobs, one_blas_thread
 from endocal.validation.power import estimate_power, evidence_phrase
@@ -90,13 +90,8 @@ def _split_candidate(model: HysteresisModel, effects: Sequence[str], train: Hyst
     cautions = [w for w in m.fit_report_.warnings if prefixes and w.startswith(prefixes)
                 and (b := _AT_BOUND.search(w)) and float(b.group(1)) != 0.0]
     cautions += [c for e in new if (c := e.implausible(m.effect_params(e), train))]
-    if any(e.name == "creep" for e in new) and creep_reason(train) and creep_reason(val):
-        # creep shows itself where the knob rests after a move; fitted and scored on motion alone
-        # its slow memory takes up smoother reversals, a lag or how the records start, and its
-        # refits failed on other records of the same plant (red-team runs, README known gaps)
-        cautions.append("no record holds the knob still after a move, where creep shows itself (the tip still "
-                        "moving after the knob stops): fitted on motion alone it may stand for smoother reversals, a "
-                        "lag or how the records start; record a `staircase` to confirm it")
+    # an effect fitted on records that lack what shows it (creep without a hold) may stand for something else
+    cautions += [c for e in new for c in unheld_cautions(e, train, val)]
     return predict_errors(m, val), cautions
 
 
@@ -227,6 +222,9 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     suspects = [s for s in tested if s.significant] or [s for s in tested if s.gain_pct >= min_gain_pct]
     # a candidate with a caution (a delay at its -0.5 s bound, a drift too fast to be one) ranks after the others
     suspects.sort(key=lambda s: bool(s.caution))
+    # the first suggestion against the look-alikes it declares, on records that separate them
+    suspects, settled = settle_lookalikes(suspects, tested, errs, dt, val, units, alpha, min_gain_pct,
+                                          lambda effects: _split_candidate(model, effects, dt, val)[0], have)
     if stride > 1 and suspects:
         ranges = expected_ranges(model, [s.effect for s in suspects], train, val, stride,
                                  [s.rmse_heldout_deg for s in suspects], jobs)
@@ -237,6 +235,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     notes = [Message(n, "demoted") for n in demoted(suspects)] + (
         [Message(n, "alike") for n in ambiguities(suspects, errs, alpha)] if any(s.significant for s in suspects)
         else [])
+    notes += [Message(x.words(), "alike") for x in settled]
     notes += [Message(f"{k}: {v}", "untestable") for k, v in untestable.items()]
     if thin and fitted:
         notes.append(Message(f"the validation data holds {units.n} {units.kind}s; with {len(fitted)} candidates at "
@@ -254,7 +253,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
                              f"validation RMSE differs from the candidate's{expect}", "subsampled"))
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), 0, stride,
                       dt.n_samples, alpha, min_gain_pct, scheme="estimation/validation", scheme_reason=scheme_reason,
-                      units=units.to_dict(), min_units=need)
+                      units=units.to_dict(), min_units=need, lookalikes=tuple(settled))
 
 
 def expected_ranges(model: HysteresisModel, effects: Sequence[str], train: HysteresisData, val: HysteresisData,

@@ -121,6 +121,9 @@ class ScanResult:
         Fewest units with which the best candidate could reach significance.
     still_blocks : int
         Rolling-origin held-out blocks in which this axis's knob rests (:func:`still_blocks`).
+    lookalikes : tuple of Settlement
+        The first suggestion against each of its declared look-alikes
+        (:func:`~endocal.validation.ambiguity.settle_lookalikes`).
     """
 
     suspects: tuple[Suspect, ...]
@@ -138,6 +141,7 @@ class ScanResult:
     units: dict | None = None
     min_units: int = 0
     still_blocks: int = 0
+    lookalikes: tuple = ()
 
     @property
     def thin_evidence(self) -> bool:
@@ -158,4 +162,5 @@ class ScanResult:
                    "n_samples": self.n_samples, "alpha": self.alpha, "min_gain_pct": self.min_gain_pct,
                    "units": self.units, "min_units": self.min_units, "test": test,
                    "still_blocks": self.still_blocks},
+            "lookalikes": [x.to_dict() for x in self.lookalikes],
         }
