@@ -197,7 +197,8 @@ def test_a_fitted_range_too_narrow_is_refused_naming_it():
 # ---------------------------------------------------------------------------- what --json and the API carry
 #: The keys `validate --json` had before --next added its own (issue 27: add, never rename)
 JSON_KEYS = {"axis", "model", "data", "metrics", "heldout_rmse_deg", "regimes", "residuals", "suspects", "scan",
-             "scheme", "estimation", "pointers", "shift", "clean", "unexplained", "beyond_samples", "notes", "compare"}
+             "scheme", "estimation", "pointers", "shift", "clean", "unexplained", "beyond_samples", "notes", "note_keys",
+             "compare"}
 
 
 def test_the_json_says_what_was_designed_and_how_to_record_it(loop):
@@ -278,7 +279,7 @@ def test_the_summary_points_at_next_when_only_untested_effects_remain(loop, monk
     is this validation with --next, within the summary's 15 lines."""
     import dataclasses
 
-    from endocal.cli.validate import SUMMARY_MAX_LINES
+    from endocal.views import SUMMARY_MAX_LINES
     from endocal.validation import offline
 
     tmp, _ = loop
@@ -301,16 +302,16 @@ def test_the_summary_points_at_next_when_only_untested_effects_remain(loop, monk
 def test_the_summary_points_at_next_only_where_next_can_design(loop):
     """The pointer is a command that works: for a model --next would refuse (an axis no knob of the
     probe drives: the real piezo stack's), the summary says each experiment in words instead."""
-    from endocal.cli.validate import _next_command
+    from endocal.errors import EndocalError
     from endocal.validation.data import axis_data
+    from endocal.validation.next_experiment import check_next
 
     tmp, _ = loop
-    knob = _next_command(load_model(tmp / "m.json"), [load_aligned(tmp / "val")], tmp / "m.json", [tmp / "val"], [],
-                         "auto", None, "tee")
-    assert knob is not None and knob.endswith("--next next.toml"), knob
+    check_next(load_model(tmp / "m.json"), [load_aligned(tmp / "val")], "tee")  # validate_records: next_possible
     piezo = load_aligned(ROOT / "data_samples" / "piezo" / "piezo_aligned.csv")
     model = make_model("linear", axis="piezo").fit(axis_data([piezo], "piezo"))
-    assert _next_command(model, [piezo], Path("m.json"), [Path("check.csv")], [], "auto", None, "tee") is None
+    with pytest.raises(EndocalError):  # the summary then says each experiment in words
+        check_next(model, [piezo], "tee")
 
 
 def test_the_load_segment_records_the_same_motion_at_the_earlier_value_and_a_new_one(loop, tmp_path):

@@ -521,8 +521,8 @@ def test_next_designs_the_users_segment_or_says_its_experiment_in_words(tmp_path
 
 
 def test_the_commands_validate_prints_give_the_users_file_again():
-    from endocal.cli._effects_file import effects_file_args
-    from endocal.cli.refit import refit_command
+    from endocal.shell import effects_file_args
+    from endocal.shell import refit_command
     from endocal.validation.refit import Refit
 
     load_effects_files([WEAR])

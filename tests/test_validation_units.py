@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from endocal.cli.refit import refit_command
+from endocal.shell import refit_command
 from endocal.errors import ModelError
 from endocal.models import HysteresisData
 from endocal.runs.aligned import AlignedData
@@ -158,11 +158,11 @@ def test_refit_command_and_path():
                               start_from="lab data/m 0.json"))
     assert shlex.split(cmd) == ["endocal", "fit", "hysteresis", "lab data/run 1.csv", "--axis", "ap", "--model", "pi",
                                 "--effects", "load:wrap", "--start-from", "lab data/m 0.json", "--out", "m.json"]
-    # the planes and the base's settings, in the order `fit hysteresis` documents them, values as JSON
+    # the planes and the base's settings, in the order `fit hysteresis` documents them, values as --set reads them
     cmd = refit_command(Refit(("a",), None, "bspline", ("delay",), "m.json", settings={"n_knots": 3, "knots": "auto"},
                               planes_path="pl.json"))
     assert shlex.split(cmd)[3:] == ["a", "--model", "bspline", "--effects", "delay", "--planes", "pl.json",
-                                    "--set", "n_knots=3", "--set", 'knots="auto"', "--out", "m.json"]
+                                    "--set", "n_knots=3", "--set", "knots=auto", "--out", "m.json"]
 
 
 def test_folds_of_several_runs_take_the_same_share_of_every_run():

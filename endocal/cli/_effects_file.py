@@ -45,12 +45,3 @@ def use_effects_files(paths: list[Path]) -> None:
         show.endocal_effects_file = True
         warnings.showwarning = show
     load_effects_files(paths)
-
-
-def effects_file_args(base: str | None = None, effects=None) -> list[str]:
-    """``--effects-file PATH`` for each user's file a refit of ``base`` + ``effects`` needs; without them,
-    for every file this command was given (a command that repeats this one)."""
-    from endocal.models.userfile import files_for, given_files
-
-    paths = given_files() if base is None else files_for(base, effects or ())
-    return [a for path in paths for a in ("--effects-file", path)]

@@ -167,7 +167,8 @@ def _fit_summary(result) -> None:
               + ("converged" if rep.status > 0 else "not converged"), markup=False)
     lines = []
     if rep.status <= 0:
-        lines.append(keyed(f"stopped before converging ({rep.message})", key="not-converged"))
+        lines.append(keyed(f"stopped before converging ({rep.message}), refit with --start-from the model just "
+                           "written to go on from its values", key="not-converged"))
     slow = slow_clock_warning(result.samples, result.duration_s)
     lines += keyed_lines([slow, *rep.warnings, result.glitches])
     if result.cut_start:

@@ -159,7 +159,7 @@ def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
         model.correlation_ = corr.reshape(len(names), len(names))
         se = np.array([model.stderr_[n] for n in names])
         model.covariance_ = model.correlation_ * np.outer(se, se)
-        model.fit_report_ = None if d["fit"] is None else FitReport(**d["fit"])
+        model.fit_report_ = None if d["fit"] is None else FitReport.from_dict(d["fit"])
         model.training_data_ = list(d["training_data"])
         model.provenance_ = dict(d.get("provenance") or {})
         _check_works(model, where)

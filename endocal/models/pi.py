@@ -26,6 +26,7 @@ import numpy as np
 from scipy.optimize import least_squares, lsq_linear
 
 from endocal.errors import ModelError
+from endocal.messages import Message
 from endocal.models._kernels import (_EXP_MAX, pi_exp_forward_jac, pi_free_forward_jac, play_bank_forward,
                                      play_bank_states, play_bank_step)
 from endocal.models.base import HysteresisModel
@@ -188,9 +189,9 @@ class PIModel(HysteresisModel):
             self.__dict__.update(fitted_first)
             return self
         words = {"exponential": "the paper's weight law (eq. 8)", "free": "free weights"}
-        self.fit_report_.warnings.insert(0, (
+        self.fit_report_.warnings.insert(0, Message(
             f"{words[chosen]} fitted worse ({first:.3g} deg RMSE) than a straight line per direction of motion "
-            f"({line:.3g} deg): {words[other]} taken ({self.fit_report_.rmse_deg:.3g} deg)"))
+            f"({line:.3g} deg): {words[other]} taken ({self.fit_report_.rmse_deg:.3g} deg)", "pi-weights"))
         return self
 
     # ------------------------------------------------------------------ structure

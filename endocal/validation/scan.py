@@ -25,10 +25,12 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
 from endocal.errors import ModelError
+from endocal.messages import Message
 from endocal.models import EFFECTS, HysteresisData
 from endocal.models.base import HysteresisModel
 from endocal.validation.ambiguity import ambiguities, demoted, settle_lookalikes
@@ -223,20 +225,60 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     # the first suggestion against the look-alikes it declares, on records that separate them
     suspects, settled = settle_lookalikes(suspects, tested, errs, dt, val, units, alpha, min_gain_pct,
                                           lambda effects: _split_candidate(model, effects, dt, val)[0], have)
-    notes = demoted(suspects) + (ambiguities(suspects, errs, alpha) if any(s.significant for s in suspects) else [])
-    notes += [x.words() for x in settled]
-    notes += [f"{k}: {v}" for k, v in untestable.items()]
+    if stride > 1 and suspects:
+        ranges = expected_ranges(model, [s.effect for s in suspects], train, val, stride,
+                                 [s.rmse_heldout_deg for s in suspects], jobs)
+        suspects = [replace(s, refit=replace(s.refit, scan_stride=stride, expected_rmse_deg=r))
+                    for s, r in zip(suspects, ranges)]
+        tested = [next((x for x in suspects if x.effect == s.effect), s) for s in tested]
+    # ambiguity.py words these notes, one kind per function: each gets its key as it enters the result
+    notes = [Message(n, "demoted") for n in demoted(suspects)] + (
+        [Message(n, "alike") for n in ambiguities(suspects, errs, alpha)] if any(s.significant for s in suspects)
+        else [])
+    notes += [Message(x.words(), "alike") for x in settled]
+    notes += [Message(f"{k}: {v}", "untestable") for k, v in untestable.items()]
     if thin and fitted:
-        notes.append(f"the validation data holds {units.n} {units.kind}s; with {len(fitted)} candidates at least "
-                     f"{need} are needed before any can be significant at {alpha:g}: candidates are ranked by their "
-                     "validation gain alone; validate on a longer record (or more records) to test them")
+        notes.append(Message(f"the validation data holds {units.n} {units.kind}s; with {len(fitted)} candidates at "
+                             f"least {need} are needed before any can be significant at {alpha:g}: candidates are "
+                             "ranked by their validation gain alone; validate on a longer record (or more records) to "
+                             "test them", "few-units"))
     if stride > 1:
-        notes.append(f"candidates fitted on 1 estimation sample in {stride} ({dt.n_samples} of {train.n_samples}) to "
-                     "keep the scan quick; the printed refit fits every sample, so its validation RMSE can differ "
-                     "from the candidate's by a few per cent")
+        expect = ""
+        if suspects and suspects[0].refit.expected_rmse_deg is not None:
+            lo, hi = suspects[0].refit.expected_rmse_deg
+            expect = (f"; expect {suspects[0].effect}'s refit at {lo:.3g} .. {hi:.3g} deg validation RMSE (the "
+                      "candidate fitted on two interleaved subsamples)")
+        notes.append(Message(f"candidates fitted on 1 estimation sample in {stride} ({dt.n_samples} of "
+                             f"{train.n_samples}) to keep the scan quick; the printed refit fits every sample, so its "
+                             f"validation RMSE differs from the candidate's{expect}", "subsampled"))
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), 0, stride,
                       dt.n_samples, alpha, min_gain_pct, scheme="estimation/validation", scheme_reason=scheme_reason,
                       units=units.to_dict(), min_units=need, lookalikes=tuple(settled))
+
+
+def expected_ranges(model: HysteresisModel, effects: Sequence[str], train: HysteresisData, val: HysteresisData,
+                    stride: int, rmse_scanned: Sequence[float], jobs: int | None = None) -> list[tuple[float, float]]:
+    """The validation RMSE (deg) to expect of each refit ``base + effects + effect`` on every sample of ``train``,
+    when the scan fitted it on 1 sample in ``stride``.
+
+    The scan fitted each candidate on the samples ``0, stride, 2 stride, ...``; this fits it once more on the
+    samples halfway between (``stride // 2, ...``) and scores it on ``val``. A refit on every sample sees both
+    subsamples, so its RMSE is expected between the two: the range is theirs (``rmse_scanned`` the first), widened
+    by half their gap on each side, as two draws pin a spread only roughly. A candidate the second subsample cannot
+    fit keeps the scanned RMSE alone.
+    """
+    phase = stride // 2
+    dt2 = train.take([np.arange(sl.start + phase, sl.stop, stride) for sl in train.run_slices()])
+    have = effect_labels(model)
+    with one_blas_thread():
+        again = map_jobs(lambda e: _split_candidate(model, have + [e], dt2, val)[0], list(effects), jobs)
+    out = []
+    for r0, err in zip(rmse_scanned, again):
+        r1 = r0 if isinstance(err, Exception) else float(np.sqrt(np.mean(err**2)))
+        lo, hi = min(r0, r1), max(r0, r1)
+        pad = 0.5 * (hi - lo)
+        out.append((max(lo - pad, 0.0), hi + pad))
+    return out
 
 
 def check_fit_data(data: HysteresisData, what: str = "data") -> None:
@@ -367,16 +409,16 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
             errs[c] = err
     tested.sort(key=lambda s: -s.gain_pct)
     suspects = [s for s in tested if s.significant]
-    notes = ambiguities(suspects, errs, alpha)
-    notes += [f"{k}: {v}" for k, v in untestable.items()]
+    notes = [Message(n, "alike") for n in ambiguities(suspects, errs, alpha)]
+    notes += [Message(f"{k}: {v}", "untestable") for k, v in untestable.items()]
     if stride > 1:
-        notes.append(f"scanned 1 sample in {stride} ({d.n_samples} of {data.n_samples})")
+        notes.append(Message(f"scanned 1 sample in {stride} ({d.n_samples} of {data.n_samples})", "subsampled"))
     still = still_blocks(d, bounds)
     if still:
         where = (f"all {folds} held-out blocks hold" if still == folds else f"{still} of the {folds} held-out blocks hold")
-        notes.insert(0, f"{where} no motion of this axis (its knob rests while the record goes on): there the scan "
-                        "scores only where the model puts the resting bend, not its hysteresis; validate on a record "
-                        "where this axis moves throughout")
+        notes.insert(0, Message(f"{where} no motion of this axis (its knob rests while the record goes on): there the "
+                                "scan scores only where the model puts the resting bend, not its hysteresis; validate "
+                                "on a record where this axis moves throughout", "still-blocks"))
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), folds, stride,
                       d.n_samples, alpha, min_gain_pct, scheme="rolling-origin", scheme_reason=scheme_reason,
                       still_blocks=still)
