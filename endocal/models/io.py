@@ -244,8 +244,9 @@ def _check_shape(d: dict, where: str) -> None:
 #: report format: a text where a number is printed with :.3f stops them, not the loader).
 _FIT_FIELDS = {"success": "bool", "status": "int", "message": "str", "nfev": "count", "njev": "count",
                "cost": "number", "rmse_deg": "number", "n_samples": "count", "n_runs": "count", "n_free": "count",
-               "rank_deficient": "bool", "method": "str", "warnings": "texts", "estimated_starts": "objects"}
-_FIT_REQUIRED = set(_FIT_FIELDS) - {"method", "warnings", "estimated_starts"}
+               "rank_deficient": "bool", "method": "str", "warnings": "texts", "estimated_starts": "objects",
+               "warning_keys": "texts"}
+_FIT_REQUIRED = set(_FIT_FIELDS) - {"method", "warnings", "estimated_starts", "warning_keys"}
 
 
 def _is_count(x) -> bool:
