@@ -42,8 +42,9 @@ def promise(suspect, what: str) -> str:
     line = (f"-{suspect.gain_pct:.0f} % {what} RMSE ({suspect.base_rmse_heldout_deg:.3g} -> "
             f"{suspect.rmse_heldout_deg:.3g} deg)")
     r = suspect.refit.expected_rmse_deg
-    if r is not None:
-        line += f", its refit on every sample expected at {r[0]:.3g} .. {r[1]:.3g} deg"
+    if r is not None:  # a range that rounds to one number prints as that number
+        lo, hi = f"{r[0]:.3g}", f"{r[1]:.3g}"
+        line += f", its refit on every sample expected at {lo if lo == hi else f'{lo} .. {hi}'} deg"
     return line
 
 
