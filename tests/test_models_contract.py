@@ -9,7 +9,7 @@ from endocal.errors import ModelError
 from endocal.models import BASES, HysteresisData, load_model, make_model, save_model
 from tests._models_signals import PAPER_TABLE1, damped_sine
 
-CASES = [(b, e) for b in ("linear", "bspline", "pi") for e in ((), ("envelope",))]
+CASES = [(b, e) for b in ("linear", "bspline", "pi", "bouc-wen", "dahl") for e in ((), ("envelope",))]
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +44,8 @@ def test_contract(case, data, fitted, tmp_path):
     pred = m.predict([r.cmd_deg for r in runs])
     assert isinstance(pred, list) and len(pred) == 2
     rmse = np.sqrt(np.mean(np.concatenate([p - r.meas_deg for p, r in zip(pred, runs)]) ** 2))
-    assert rmse == pytest.approx(m.fit_report_.rmse_deg, rel=1e-9)
+    if not m.fit_report_.estimated_starts:  # a run fitted from an estimated start is scored from it (models.start)
+        assert rmse == pytest.approx(m.fit_report_.rmse_deg, rel=1e-9)
     assert rmse < 0.15 * np.std(np.concatenate([r.meas_deg for r in runs]))
     # inverse: predict(inverse(y)) == y for a reachable y (the model's own output of a smaller motion)
     y_des = m.predict(0.8 * runs[0].cmd_deg)

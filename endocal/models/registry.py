@@ -4,11 +4,14 @@ from __future__ import annotations
 
 from endocal.errors import ModelError
 from endocal.models.base import HysteresisModel
+from endocal.models.boucwen import BoucWenModel
 from endocal.models.bspline import BSplineModel
+from endocal.models.dahl import DahlModel
 from endocal.models.linear import LinearModel
 from endocal.models.pi import PIModel
 
-BASES: dict[str, type[HysteresisModel]] = {"linear": LinearModel, "bspline": BSplineModel, "pi": PIModel}
+BASES: dict[str, type[HysteresisModel]] = {"linear": LinearModel, "bspline": BSplineModel, "pi": PIModel,
+                                            "bouc-wen": BoucWenModel, "dahl": DahlModel}
 
 
 def make_model(base: str, effects=(), **settings) -> HysteresisModel:
@@ -16,7 +19,7 @@ def make_model(base: str, effects=(), **settings) -> HysteresisModel:
 
     Parameters
     ----------
-    base : {"linear", "bspline", "pi"}
+    base : {"linear", "bspline", "pi", "bouc-wen", "dahl"}
     effects : sequence of str or Effect
         E.g. ``["envelope"]`` (``pi`` + ``envelope`` is the paper's modified PI),
         ``["delay", "load:sheath_wrap_deg"]``; a comma-separated string is accepted.
