@@ -28,7 +28,7 @@ from typing import ClassVar
 import numpy as np
 from scipy.optimize import lsq_linear
 
-from endocal.errors import ModelError
+from endocal.errors import CompensationRefusedError, ModelError
 from endocal.models._smooth_friction import first_input, friction_inverse, friction_states, inverse_step
 from endocal.models.base import HysteresisModel
 from endocal.models.data import HysteresisData
@@ -74,7 +74,7 @@ class _Stepper:
             self.v, self.w, miss = inverse_step(family, y, self.v, self.w, k_lin, k_hys, rho, sigma, expo,
                                                 self.v_lo, self.v_hi)
         if miss > INVERSE_TOL * max(1.0, abs(y)):
-            raise ModelError(self.model._unreachable(miss))
+            raise CompensationRefusedError(self.model._unreachable(miss))
         return self.v
 
 
@@ -164,7 +164,7 @@ class SmoothFrictionModel(HysteresisModel):
 
         Raises
         ------
-        ModelError
+        CompensationRefusedError
             One line naming the base: compensation refused.
         """
         self._require_fitted()
@@ -187,7 +187,7 @@ class SmoothFrictionModel(HysteresisModel):
         back, _ = friction_inverse(family, y, k_lin, k_hys, rho, sigma, expo, lo, hi, starts)
         err = float(np.max(np.abs(back - v)))
         if not err <= INVERSE_TOL * max(half, 1e-9):
-            raise ModelError(f"the {self.base_name} base's inverse does not converge on a sweep of its fitted range "
+            raise CompensationRefusedError(f"the {self.base_name} base's inverse does not converge on a sweep of its fitted range "
                              f"(the command comes back {err:.3g} {self.drive_unit_} off: after a reversal its tip stands "
                              "still or moves back while the knob moves on, so the command cannot be told from the "
                              "angle): compensation refused; use a base with an exact inverse (--model pi) for "
@@ -200,7 +200,7 @@ class SmoothFrictionModel(HysteresisModel):
         v, worst = friction_inverse(family, np.ascontiguousarray(y, dtype=float) - offset, k_lin, k_hys, rho, sigma,
                                     expo, float(v_range[0]), float(v_range[1]), run_starts)
         if worst > INVERSE_TOL * max(1.0, float(np.max(np.abs(y))) if y.size else 1.0):
-            raise ModelError(self._unreachable(worst))
+            raise CompensationRefusedError(self._unreachable(worst))
         return v
 
     def _base_stepper(self, structure: dict, p: dict, v_range):
