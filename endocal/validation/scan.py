@@ -12,7 +12,8 @@ data. Two schemes make the held-out data:
   (:mod:`endocal.validation.folds`), block by block
   (:func:`~endocal.validation.paired.paired_test`).
 
-The p-values of all candidates are Holm-corrected. A candidate is a *suspect* when its
+The p-values of all candidates are Holm-corrected. The other bases of the catalogue are scored the
+same way, with the model's effects (:mod:`endocal.validation.bases`). A candidate is a *suspect* when its
 corrected p-value is below ``alpha`` *and* it cuts the held-out RMSE by at least
 ``min_gain_pct``: with thousands of samples, statistics alone would flag a term that absorbs
 a sliver of a model's structural mismatch; the effect size keeps a model that already
@@ -32,6 +33,7 @@ from endocal.errors import ModelError
 from endocal.models import EFFECTS, HysteresisData
 from endocal.models.base import HysteresisModel
 from endocal.validation.ambiguity import ambiguities, demoted
+from endocal.validation.bases import scan_bases_rolling, scan_bases_split
 from endocal.validation.candidates import candidate_effects
 from endocal.validation.folds import check_cv_data, fold_bounds, fold_errors, fold_split, still_blocks
 from endocal.validation.identifiability import creep_reason
@@ -235,9 +237,12 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
         notes.append(f"candidates fitted on 1 estimation sample in {stride} ({dt.n_samples} of {train.n_samples}) to "
                      "keep the scan quick; the printed refit fits every sample, so its validation RMSE can differ "
                      "from the candidate's by a few per cent")
+    bases = () if candidates is not None else scan_bases_split(
+        model, dt, val, err_base, units, alpha=alpha, min_gain_pct=min_gain_pct, data_paths=data_paths,
+        model_path=model_path, planes_path=planes_path, suffix=refit_suffix, jobs=jobs)
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), 0, stride,
                       dt.n_samples, alpha, min_gain_pct, scheme="estimation/validation", scheme_reason=scheme_reason,
-                      units=units.to_dict(), min_units=need)
+                      units=units.to_dict(), min_units=need, bases=bases)
 
 
 def check_fit_data(data: HysteresisData, what: str = "data") -> None:
@@ -378,6 +383,9 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
         notes.insert(0, f"{where} no motion of this axis (its knob rests while the record goes on): there the scan "
                         "scores only where the model puts the resting bend, not its hysteresis; validate on a record "
                         "where this axis moves throughout")
+    bases = () if candidates is not None else scan_bases_rolling(
+        model, d, bounds, err_base, base_train_rmse, alpha=alpha, min_gain_pct=min_gain_pct, screen_pct=screen_pct,
+        data_paths=data_paths, model_path=model_path, planes_path=planes_path, jobs=jobs)
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), folds, stride,
                       d.n_samples, alpha, min_gain_pct, scheme="rolling-origin", scheme_reason=scheme_reason,
-                      still_blocks=still)
+                      still_blocks=still, bases=bases)
