@@ -84,6 +84,9 @@ def run_loop(hidden: str | None) -> BaseLoop:
     for _ in range(14):  # a bound the loop never reaches: two recordings, a refit per effect, a base change or two
         res = validate_offline(model, val, train=est, model_path=str(tmp / "m.json"), max_scan_samples=SCAN_SAMPLES)
         out.steps.append((model.base_name, [e.label for e in model.effects_], res.scan.baseline_rmse_heldout_deg))
+        print(f"loop {hidden or 'control'} step: {out.steps[-1]}, bases suggested "
+              f"{[(b.base, round(b.gain_pct)) for b in res.scan.base_suggestions]}, effects suggested "
+              f"{[(s.effect, round(s.gain_pct)) for s in res.suspects]}", flush=True)
         change = res.scan.base_suggestions[0] if res.scan.base_suggestions else None
         if change is not None and (not res.suspects or change.gain_pct > res.suspects[0].gain_pct):
             out.bases.append(change.base)

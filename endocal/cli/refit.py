@@ -49,4 +49,6 @@ def with_refit_commands(d: dict, scan) -> dict:
             items = list(sd.items())
             at = [k for k, _ in items].index("refit") + 1
             dicts[i] = dict([*items[:at], ("command", refit_command(s.refit)), *items[at:]])
+    for bd, b in zip(scan_d.get("bases", []), getattr(scan, "bases", ()), strict=True):  # the base candidates too
+        bd["command"] = refit_command(b.refit)
     return d

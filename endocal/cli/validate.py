@@ -178,6 +178,13 @@ def render(result, folded: bool = False) -> None:
                  "this says little (see the notes)." if scan.still_blocks else "")
         out.print(f"[bold]Which effect is missing:[/] nothing: no catalog effect lowers the {what} RMSE by "
                   f"{scan.min_gain_pct:g} % or more, and the residual points at nothing the scan could not test.{rests}")
+    if scan.bases:
+        out.print(f"[bold]Which base[/] (the other bases with this model's effects, {what} gain, Holm-corrected p):")
+        for b in scan.bases:
+            out.print(f"  {b.line(what)}: {b.evidence}"
+                      + ("" if b.return_point_memory else "; no return-point memory"), markup=False)
+        for b in scan.base_suggestions[:1]:
+            out.print("  " + refit_command(b.refit), markup=False)
     if result.pointers:
         out.print("[bold]Untested suspects[/] (the data point at them; the scan did not confirm them):")
         for p in result.pointers:
@@ -226,6 +233,13 @@ def render_summary(result, *, folded: bool = False, model_path: Path, data: list
                     f"overall), {100 * r.fraction:.0f} % of samples")
     verdict, then = _verdict(result, folded, model_path, data, old_path, next_command)
     head.append(verdict)
+    change = scan.base_suggestions[:1]  # another base, the same paired test (validation.bases)
+    if change:
+        head.append(change[0].line(what))
+        first = result.suspects[0].gain_pct if result.suspects else -float("inf")
+        then = ([f"next: refit with the {change[0].base} base, then validate the new model:",
+                 "  " + refit_command(change[0].refit)] if change[0].gain_pct > first else
+                then + [f"or refit with the {change[0].base} base: " + refit_command(change[0].refit)])
     if result.pointers:
         head.append("untested suspects: " + ", ".join(dict.fromkeys(p.effect for p in result.pointers)))
     tail = [*then, "details: --explain (every metric with its interval, regime, residual test, candidate and note)"]

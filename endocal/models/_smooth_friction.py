@@ -19,7 +19,7 @@ only. Written with ``u = s w`` (the state measured in the direction of motion) a
 
 For ``n = 1`` (Bouc-Wen) and ``i = 1`` (Dahl) the equation is linear on each sign of ``u`` and is
 solved exactly (an exponential in ``l``); other exponents are integrated by classical Runge-Kutta
-in sub-steps of at most ``MAX_RHO_L`` in ``rho * l``. Each run starts at ``w = 0`` (the
+in sub-steps of at most ``MAX_RHO_L`` in ``rho * l`` times the law's steepest slope. Each run starts at ``w = 0`` (the
 relaxed state, as the play operators start at 0). A small reversal inside the loop does not
 return to the branch it left (no return-point memory): the state after a minor loop is not the
 state before it, unlike a bank of plays.
@@ -77,7 +77,8 @@ def _advance(family, u, ell, rho, sigma, expo):
             ell = ell - ell0
             u = 0.0
         return 1.0 - (1.0 - u) * math.exp(-rho * ell)
-    m = int(math.ceil(rho * ell / MAX_RHO_L))
+    steep = 1.0 if family == DAHL else max(1.0, 2.0 * sigma)  # the largest |du/dl| / rho on the way
+    m = int(math.ceil(steep * rho * ell / MAX_RHO_L))
     if m < 1:
         m = 1
     h = ell / m
