@@ -19,7 +19,7 @@ would make every effect harder to find). A base is *suggested* when its correcte
 its refit (``--model BASE`` with the model's effects) is printed.
 
 :func:`minor_loops` measures where the error sits: on the samples after a small reversal inside
-the loop (a half-cycle shorter than half the record's span, and the leg that returns from it),
+the loop (a half-cycle shorter than ``MINOR_FRAC`` of the record's span, and the leg that returns from it),
 against the rest. A model whose base has return-point memory and whose error there is at least
 ``MINOR_RATIO`` times the rest's gets a note: its memory rule misses the plant's minor loops.
 """
@@ -45,11 +45,15 @@ from endocal.validation.structure import effect_labels
 from endocal.validation.units import Units
 
 #: A half-cycle shorter than this share of its record's span is a small reversal inside the loop.
-MINOR_FRAC = 0.5
+MINOR_FRAC = 0.4
 #: The minor-loop note needs at least this many small reversals ...
 MINOR_MIN_LOOPS = 3
-#: ... and the error after them at least this many times the rest's (RMSE ratio).
-MINOR_RATIO = 1.5
+#: ... and the error after them at least this many times the rest's (RMSE ratio). On the random validation
+#: run of the closed-loop tests (60 deg, 18 small reversals, 63 % of its samples), `bspline` + `delay` and
+#: `pi` + `delay` fitted on the damped sine and the chirp reach 1.0 and 1.1 on the capstan plant (return-point
+#: memory: their rule is the plant's), 1.46 and 1.72 on the Bouc-Wen plant (the records of
+#: tests/test_validation_closed_loop_bases.py; a bank of plays and its `pi`: tests/test_validation_bases.py).
+MINOR_RATIO = 1.3
 
 
 @dataclass(frozen=True)
