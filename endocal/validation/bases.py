@@ -96,14 +96,17 @@ class BaseCandidate:
 
     def line(self, what: str = "validation") -> str:
         """``base: bouc-wen lowers the validation RMSE by 55 %, p = 0.001 (1.28 -> 0.58 deg)``."""
+        if not np.isfinite(self.gain_pct):
+            return f"base: {self.base}: {self.evidence}"
         verb = f"lowers the {what} RMSE by {self.gain_pct:.0f} %" if self.gain_pct >= 0 else \
             f"raises the {what} RMSE by {-self.gain_pct:.0f} %"
         return (f"base: {self.base} {verb}, p = {self.p_value:.2g} ({self.base_rmse_heldout_deg:.3g} -> "
                 f"{self.rmse_heldout_deg:.3g} deg)")
 
     def to_dict(self) -> dict:
-        return {k: (v.to_dict() if k == "refit" else v) for k in self.__dataclass_fields__
-                for v in (getattr(self, k),)}
+        """JSON-able; a base that could not be fitted has ``null`` gain and RMSE."""
+        return {k: (v.to_dict() if k == "refit" else None if isinstance(v, float) and not np.isfinite(v) else v)
+                for k in self.__dataclass_fields__ for v in (getattr(self, k),)}
 
 
 @dataclass(frozen=True)
