@@ -237,9 +237,9 @@ def render_summary(result, *, folded: bool = False, model_path: Path, data: list
     if change:
         head.append(change[0].line(what))
         first = result.suspects[0].gain_pct if result.suspects else -float("inf")
-        then = ([f"next: refit with the {change[0].base} base, then validate the new model:",
-                 "  " + refit_command(change[0].refit)] if change[0].gain_pct > first else
-                then + [f"or refit with the {change[0].base} base: " + refit_command(change[0].refit)])
+        if change[0].gain_pct > first:  # the base first; an effect that gains more keeps its refit (--explain: both)
+            then = [f"next: refit with the {change[0].base} base, then validate the new model:",
+                    "  " + refit_command(change[0].refit)]
     if result.pointers:
         head.append("untested suspects: " + ", ".join(dict.fromkeys(p.effect for p in result.pointers)))
     tail = [*then, "details: --explain (every metric with its interval, regime, residual test, candidate and note)"]
