@@ -146,24 +146,33 @@ NOISE_GAPS = {
     None: "ends at 0.48 deg, 1.47x the noise (0.36 deg, 1.10x, before the --next records)",
     "drift": "ends at 0.51 deg, 1.57x the noise (0.36 deg, 1.10x, before the --next records)",
     "delay": "ends at 0.47 deg, 1.44x the noise (0.36 deg, 1.10x, before the --next records)",
+    "rate": "ends at 1.08 deg, 3.3x the noise: the catalogue's rate term is not found (below)",
 }
+#: Cases that miss the hidden effect or add one the plant lacks (2026-11-28, seed 0).
+RATE_GAP = ("after the base change (0.69 deg on the first records) nothing is suggested until the second --next record, "
+            "where creep (-15 %) ranks before rate (-11 %): creep is added, rate never is")
+NAME_GAPS = {"rate": RATE_GAP}
+EXTRA_GAPS = {"rate": RATE_GAP}
 
 
-@pytest.mark.parametrize("hidden", [pytest.param(h, marks=pytest.mark.xfail(strict=True, raises=AssertionError,
-                                                                            reason=NOISE_GAPS[h]))
-                                    if h in NOISE_GAPS else h for h in CASES], ids=lambda h: h or "control")
+def _gaps(gaps: dict, cases) -> list:
+    return [pytest.param(h, marks=pytest.mark.xfail(strict=True, raises=AssertionError, reason=gaps[h]))
+            if h in gaps else h for h in cases]
+
+
+@pytest.mark.parametrize("hidden", _gaps(NOISE_GAPS, CASES), ids=lambda h: h or "control")
 def test_the_loop_ends_within_the_bar_of_the_noise(hidden):
     loop = run_loop(hidden)
     assert loop.end_deg <= NOISE_BAR * loop.noise_deg, _summary(loop)
 
 
-@pytest.mark.parametrize("hidden", CASES, ids=lambda h: h or "control")
+@pytest.mark.parametrize("hidden", _gaps(EXTRA_GAPS, CASES), ids=lambda h: h or "control")
 def test_the_loop_adds_nothing_the_plant_lacks(hidden):
     loop = run_loop(hidden)
     assert _names(loop) <= PLANT_HAS | ({hidden} if hidden else set()), _summary(loop)
 
 
-@pytest.mark.parametrize("hidden", list(HIDDEN))
+@pytest.mark.parametrize("hidden", _gaps(NAME_GAPS, HIDDEN))
 def test_the_loop_names_the_hidden_effect(hidden):
     loop = run_loop(hidden)
     assert hidden in _names(loop) | {e for _, effects, _ in loop.steps for e in effects}, _summary(loop)
