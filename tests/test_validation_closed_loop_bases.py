@@ -140,8 +140,8 @@ def test_the_loop_names_the_base_change(hidden):
 #: Cases measured above the 1.2x bar (2026-11-28, seed 0), with the numbers. The end is scored on the second
 #: record `--next` asks for (both knobs, the sheath's wrap changed): there the capstan loop of
 #: tests/test_validation_closed_loop.py ends at 0.45 deg as well (1.36x its noise), while on the first records the
-#: base change and `envelope` bring every case measured to 0.36 deg (1.10x). What is left is the `coupling` and
-#: `load` terms' share on those records, not the base.
+#: base change and `envelope` bring the control, drift and delay to 0.36 deg (1.10x). What is left is the
+#: `coupling` and `load` terms' share on those records, not the base.
 NOISE_GAPS = {
     None: "ends at 0.48 deg, 1.47x the noise (0.36 deg, 1.10x, before the --next records)",
     "drift": "ends at 0.51 deg, 1.57x the noise (0.36 deg, 1.10x, before the --next records)",
