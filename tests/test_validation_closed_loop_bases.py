@@ -128,15 +128,6 @@ def _names(loop: BaseLoop) -> set[str]:
     return {e.partition(":")[0] for e in loop.named}
 
 
-CASES = [None, *HIDDEN]
-
-
-@pytest.mark.parametrize("hidden", CASES, ids=lambda h: h or "control")
-def test_the_loop_names_the_base_change(hidden):
-    loop = run_loop(hidden)
-    assert loop.bases and not BASES[loop.bases[-1]].return_point_memory, _summary(loop)
-
-
 #: Cases measured above the 1.2x bar (2026-11-28, seed 0), with the numbers. The end is scored on the second
 #: record `--next` asks for (both knobs, the sheath's wrap changed): there the capstan loop of
 #: tests/test_validation_closed_loop.py ends at 0.45 deg as well (1.36x its noise), while on the first records the
@@ -149,17 +140,29 @@ NOISE_GAPS = {
     "rate": "ends at 1.08 deg, 3.3x the noise: the catalogue's rate term is not found (below)",
     "creep": "ends at 0.48 deg, 1.48x the noise (0.35 deg, 1.07x, before the --next records)",
     "load": "ends at 0.81 deg, 2.5x the noise (1.10 deg before the --next records: load and the wrap it varies)",
+    "deadzone": "0.79 deg, 2.4x the noise, at its last validate",
 }
 #: Cases that miss the hidden effect or add one the plant lacks (2026-11-28, seed 0).
 RATE_GAP = ("after the base change (0.69 deg on the first records) nothing is suggested until the second --next record, "
             "where creep (-15 %) ranks before rate (-11 %): creep is added, rate never is")
-NAME_GAPS = {"rate": RATE_GAP}
+DEADZONE_GAP = ("no base is ever suggested (the slack's flat band is what the B-spline's branches draw) and deadzone "
+                "(-10 %) never ranks first: bspline+delay+load+envelope+coupling at 0.79 deg")
+NAME_GAPS = {"rate": RATE_GAP, "deadzone": DEADZONE_GAP}
 EXTRA_GAPS = {"rate": RATE_GAP}
 
 
 def _gaps(gaps: dict, cases) -> list:
     return [pytest.param(h, marks=pytest.mark.xfail(strict=True, raises=AssertionError, reason=gaps[h]))
             if h in gaps else h for h in cases]
+
+
+CASES = [None, *HIDDEN]
+
+
+@pytest.mark.parametrize("hidden", _gaps({"deadzone": DEADZONE_GAP}, CASES), ids=lambda h: h or "control")
+def test_the_loop_names_the_base_change(hidden):
+    loop = run_loop(hidden)
+    assert loop.bases and not BASES[loop.bases[-1]].return_point_memory, _summary(loop)
 
 
 @pytest.mark.parametrize("hidden", _gaps(NOISE_GAPS, CASES), ids=lambda h: h or "control")
