@@ -46,7 +46,7 @@ def fit_hysteresis(
         (:func:`~endocal.runs.aligned.load_aligned`).
     axis : str
         Bending axis to model (must be in every table).
-    base : {"linear", "bspline", "pi"}
+    base : {"linear", "bspline", "pi", "bouc-wen", "dahl"}
     effects : list of str
         Effect names (see ``endocal effects``), e.g. ``["envelope"]`` for the paper's modified PI.
     planes : PlanesCalibration, optional

@@ -65,6 +65,9 @@ KEYS: dict[str, str] = {
     "demoted": "A candidate lowers the error more than the first suggestion but ranks after it, for a caution (a "
                "parameter at a bound, no hold where creep would show): it may stand in for something it does not "
                "model.",
+    "minor-loops": "The error concentrates after small reversals inside the loop: the base's memory rule (return-point "
+                   "memory: a small reversal returns to the branch it left) misses the plant's minor loops. Try a base "
+                   "without it (`--model bouc-wen` or `--model dahl`); validate scores them as candidates.",
     "still-blocks": "Some held-out blocks of the rolling-origin scan hold no motion of the axis: there the scan says "
                     "little. Validate on a record where the axis moves throughout.",
     # ---- fit planes, fit force

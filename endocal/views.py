@@ -65,6 +65,8 @@ def validation_dict(result) -> dict:
     d["suspects"] = [suspect_dict(s) for s in result.scan.suspects]
     d["scan"]["suspects"] = [suspect_dict(s) for s in result.scan.suspects]
     d["scan"]["tested"] = [suspect_dict(s) for s in result.scan.tested]
+    for bd, b in zip(d["scan"].get("bases", []), result.scan.bases, strict=True):  # the base candidates too
+        bd["command"] = refit_command(b.refit)
     if result.next is not None:
         d["next"] = {**d["next"], "excite_commands": excite_commands(result.next.excite)}
     return d
@@ -103,6 +105,13 @@ def validation_summary(result) -> list[str]:
                     f"overall), {100 * r.fraction:.0f} % of samples")
     verdict, then = _verdict(result)
     head.append(verdict)
+    change = scan.base_suggestions[:1]  # another base, the same paired test (validation.bases)
+    if change:
+        head.append(change[0].line(what))
+        first = result.suspects[0].gain_pct if result.suspects else -float("inf")
+        if change[0].gain_pct > first:  # the base first; an effect that gains more keeps its refit (--explain: both)
+            then = [f"next: refit with the {change[0].base} base, then validate the new model:",
+                    "  " + refit_command(change[0].refit)]
     if result.pointers:
         head.append("untested suspects: " + ", ".join(dict.fromkeys(p.effect for p in result.pointers)))
     tail = [*then, "details: --explain (every metric with its interval, regime, residual test, candidate and note)"]

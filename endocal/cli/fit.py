@@ -67,7 +67,7 @@ def planes(
 def hysteresis(
     data: list[Path] = typer.Argument(..., help="Run folders or aligned tables (.parquet / .csv); fitted together."),
     axis: str = typer.Option(..., "--axis", "-a", help="Bending axis to model, e.g. ap, ml, ud, lr."),
-    model: str = typer.Option("pi", "--model", "-m", help="Base model: linear, bspline or pi."),
+    model: str = typer.Option("pi", "--model", "-m", help="Base model: linear, bspline, pi (return-point memory), bouc-wen or dahl (smooth friction without it)."),
     effects: str = typer.Option("", "--effects", "-e", help="Comma-separated effects, e.g. envelope,delay (see `endocal effects`)."),
     planes_file: Optional[Path] = typer.Option(None, "--planes", help="planes.json: fit against the twisted planes the knob drives."),
     out_path: Path = typer.Option(..., "--out", "-o", help="Model file to write (versioned JSON)."),

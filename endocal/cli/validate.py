@@ -154,6 +154,13 @@ def render(result) -> None:
                  "this says little (see the notes)." if scan.still_blocks else "")
         out.print(f"[bold]Which effect is missing:[/] nothing: no catalog effect lowers the {what} RMSE by "
                   f"{scan.min_gain_pct:g} % or more, and the residual points at nothing the scan could not test.{rests}")
+    if scan.bases:
+        out.print(f"[bold]Which base[/] (the other bases with this model's effects, {what} gain, Holm-corrected p):")
+        for b in scan.bases:
+            out.print(f"  {b.line(what)}: {b.evidence}"
+                      + ("" if b.return_point_memory else "; no return-point memory"), markup=False)
+        for b in scan.base_suggestions[:1]:
+            out.print("  " + refit_command(b.refit), markup=False)
     if result.pointers:
         out.print("[bold]Untested suspects[/] (the data point at them; the scan did not confirm them):")
         for p in result.pointers:

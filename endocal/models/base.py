@@ -234,6 +234,9 @@ class HysteresisModel(ABC):
         return {}
 
     inverse_kind: ClassVar[str] = "numerical"
+    #: A small reversal inside the loop returns to the branch it left (a bank of plays, a backlash between
+    #: two branches); the smooth friction bases (``bouc-wen``, ``dahl``) have no such memory.
+    return_point_memory: ClassVar[bool] = True
 
     # ------------------------------------------------------------------ helpers
     def _require_fitted(self) -> None:

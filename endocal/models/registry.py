@@ -4,12 +4,15 @@ from __future__ import annotations
 
 from endocal.errors import ModelError
 from endocal.models.base import HysteresisModel
+from endocal.models.boucwen import BoucWenModel
 from endocal.models.bspline import BSplineModel
+from endocal.models.dahl import DahlModel
 from endocal.models.linear import LinearModel
 from endocal.models.pi import PIModel
 
 #: Base name -> class; a user's bases join it from their files (:mod:`endocal.models.userfile`).
-BASES: dict[str, type[HysteresisModel]] = {"linear": LinearModel, "bspline": BSplineModel, "pi": PIModel}
+BASES: dict[str, type[HysteresisModel]] = {"linear": LinearModel, "bspline": BSplineModel, "pi": PIModel,
+                                            "bouc-wen": BoucWenModel, "dahl": DahlModel}
 
 
 def register_base(cls: type[HysteresisModel]) -> type[HysteresisModel]:
@@ -32,7 +35,7 @@ def make_model(base: str, effects=(), **settings) -> HysteresisModel:
     Parameters
     ----------
     base : str
-        ``linear``, ``bspline``, ``pi``, or a base registered from a user's file.
+        ``linear``, ``bspline``, ``pi``, ``bouc-wen``, ``dahl``, or a base registered from a user's file.
     effects : sequence of str or Effect
         E.g. ``["envelope"]`` (``pi`` + ``envelope`` is the paper's modified PI),
         ``["delay", "load:sheath_wrap_deg"]``; a comma-separated string is accepted.

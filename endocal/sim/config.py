@@ -71,6 +71,14 @@ class TendonConfig:
     mu: float = _p(0.2, "Coulomb friction coefficient tendon/sheath (capstan)", 0.0, 2.0)
     wrap_deg: float = _p(180.0, "total wrap angle of the sheath along the insertion tube (deg)", 0.0, 1080.0)
     pretension_n: float = _p(4.0, "tendon pretension at the neutral knob without slack (N)", 0.0, 200.0)
+    friction: str = _p("capstan", "friction law of the tendons in the sheath: 'capstan' (Coulomb friction distributed "
+                       "along the sheath: a small reversal returns to the branch it left) or 'bouc-wen' (one smooth "
+                       "Bouc-Wen element at the knob, frictionless sheath: no return-point memory)",
+                       choices=("capstan", "bouc-wen"))
+    bouc_wen_lag_deg: float = _p(20.0, "friction = 'bouc-wen': knob lag (deg) at which the element saturates, per unit "
+                                 "of the capstan exponent mu * wrap (mu * (1 + rate) * wrap_rad with [rate])", 0.0)
+    bouc_wen_sigma: float = _p(1.0, "friction = 'bouc-wen': sigma of the normalised Bouc-Wen law (>= 0.5; the tip "
+                               "holds at a reversal from saturation, then picks up along an exponential)", 0.5, 50.0)
 
 
 @dataclass(frozen=True)

@@ -3,8 +3,9 @@
 Signal path of one motor tick (all in :mod:`endocal.sim.tendon`, compiled):
 
 1. each servo's position loop moves its DoF towards the goal (critically damped, speed-limited);
-2. per bending axis, the tendon pair slides through the sheath with capstan friction, and the
-   bend ``beta`` settles where the distal tendon tensions balance the bending section's
+2. per bending axis, the tendon pair slides through the sheath with capstan friction (or, with
+   ``[tendon] friction = "bouc-wen"``, freely, its pull held back by one Bouc-Wen element at the
+   knob, a friction without return-point memory), and the bend ``beta`` settles where the distal tendon tensions balance the bending section's
    moment (and a wall's, with ``[contact]``);
 3. ``[creep]`` relaxes the bend (standard linear solid); a user's effects hidden with
    ``[user_effects]`` change the goals the tendons are pulled by, or the bend
@@ -93,6 +94,7 @@ class Simulator:
             self._prof[:] = self._e0 / self._w.sum()  # uniform pretension, no friction history yet
         self._d_mm = np.zeros(2)
         self._beta_qs = np.zeros(2)
+        self._bw_state = np.zeros((2, 2))  # [tendon] friction = "bouc-wen": per axis, the lag and the last knob (rad)
         self._creep_slow = np.zeros(2)
         self._creep_slow2 = np.zeros(2)
         self._t_last: float | None = None
@@ -117,6 +119,8 @@ class Simulator:
         self._vmax = np.array([math.radians(m.knob_max_speed_dps), math.radians(m.knob_max_speed_dps),
                                m.translation_max_speed_mmps, math.radians(m.rotation_max_speed_dps)])
         self._rate_gain = math.degrees(c.rate.gain_s_per_deg) if c.rate.enabled else 0.0  # s/rad
+        # [tendon] friction = "bouc-wen": the lag's limit per unit of the capstan exponent (rad); 0 = capstan
+        self._bw_lag_per_mu = math.radians(ten.bouc_wen_lag_deg) if ten.friction == "bouc-wen" else 0.0
         cp = c.coupling
         self._coupling = np.array([cp.first_from_second, cp.second_from_first]) if cp.enabled else np.zeros(2)
         self._inv_bs2 = 1.0 / math.radians(c.envelope.stiffening_bend_deg) ** 2 if c.envelope.enabled else 0.0
@@ -289,6 +293,7 @@ class Simulator:
             self._held_goal, self._pos, self._vel, self._prof, self._d_mm, self._beta_qs,
             *outs, self.config.rate.enabled and self.config.rate.law == "linear",
             math.radians(self.config.deadzone.center_deg) if self.config.deadzone.enabled else 0.0,
+            self._bw_lag_per_mu, ten.bouc_wen_sigma, self._bw_state,
         )
 
     def _guarded_ticks(self, t, dt, g, goal_int, wrap_rad, outs, noise_ma, guard) -> np.ndarray:

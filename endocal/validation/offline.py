@@ -17,6 +17,7 @@ from endocal.messages import Message, key_of
 from endocal.models import HysteresisData
 from endocal.models.base import HysteresisModel
 from endocal.runs.aligned import AlignedData
+from endocal.validation.bases import minor_loops
 from endocal.validation.data import axis_data, check_columns, glitch_note, load_candidates, min_cmd_span
 from endocal.validation.metrics import ErrorMetrics, error_metrics
 from endocal.validation.regimes import RegimeBreakdown, error_by_regime
@@ -158,9 +159,10 @@ class ValidationResult:
     @property
     def clean(self) -> bool:
         """True when nothing is missing: the scan ran on blocks where the axis moves, found no
-        suspect and no candidate that clears the gain bar, and the residual points at no effect."""
+        suspect, no candidate that clears the gain bar and no other base to suggest, and the residual
+        points at no effect."""
         unsettled = any(s.gain_pct >= self.scan.min_gain_pct for s in self.scan.tested)
-        return (not self.suspects and not self.pointers and not unsettled and self.scan.scheme != "none"
+        return (not self.suspects and not self.scan.base_suggestions and not self.pointers and not unsettled and self.scan.scheme != "none"
                 and not self.scan.still_blocks and not self.unexplained)
 
     def to_dict(self) -> dict:
@@ -516,8 +518,10 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     regimes = error_by_regime(data, pred, seed=seed)
     load_cols = list(dict.fromkeys([*(load_columns or []), *load_candidates(data, axes_all)[0]]))
     resid = residual_tests(data, data.meas_deg - pred, alpha=alpha, load_columns=load_cols)
+    loops = minor_loops(model, data, data.meas_deg - pred)
     notes = [slow_clock(sum(d["n_samples"] for d in info), sum(d.get("duration_s") or 0.0 for d in info)),
-             val_glitches, cut_start(data, data.meas_deg - pred, starts=starts)]
+             val_glitches, cut_start(data, data.meas_deg - pred, starts=starts),
+             Message(loops.note, "minor-loops") if loops and loops.note else ""]
     if est is not None:
         same = {d["sha256"] for d in est_info if d["sha256"]} & {d["sha256"] for d in info if d["sha256"]}
         if same:

@@ -12,7 +12,8 @@ data. Two schemes make the held-out data:
   (:mod:`endocal.validation.folds`), block by block
   (:func:`~endocal.validation.paired.paired_test`).
 
-The p-values of all candidates are Holm-corrected. A candidate is a *suspect* when its
+The p-values of all candidates are Holm-corrected. The other bases of the catalogue are scored the
+same way, with the model's effects (:mod:`endocal.validation.bases`). A candidate is a *suspect* when its
 corrected p-value is below ``alpha`` *and* it cuts the held-out RMSE by at least
 ``min_gain_pct``: with thousands of samples, statistics alone would flag a term that absorbs
 a sliver of a model's structural mismatch; the effect size keeps a model that already
@@ -34,6 +35,7 @@ from endocal.messages import Message
 from endocal.models import EFFECTS, HysteresisData
 from endocal.models.base import HysteresisModel
 from endocal.validation.ambiguity import ambiguities, demoted, settle_lookalikes
+from endocal.validation.bases import scan_bases_rolling, scan_bases_split
 from endocal.validation.candidates import candidate_effects
 from endocal.validation.folds import check_cv_data, fold_bounds, fold_errors, fold_split, still_blocks
 from endocal.validation.identifiability import unheld_cautions
@@ -251,9 +253,12 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
         notes.append(Message(f"candidates fitted on 1 estimation sample in {stride} ({dt.n_samples} of "
                              f"{train.n_samples}) to keep the scan quick; the printed refit fits every sample, so its "
                              f"validation RMSE differs from the candidate's{expect}", "subsampled"))
+    bases = () if candidates is not None else scan_bases_split(
+        model, dt, val, err_base, units, alpha=alpha, min_gain_pct=min_gain_pct, data_paths=data_paths,
+        model_path=model_path, planes_path=planes_path, suffix=refit_suffix, jobs=jobs)
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), 0, stride,
                       dt.n_samples, alpha, min_gain_pct, scheme="estimation/validation", scheme_reason=scheme_reason,
-                      units=units.to_dict(), min_units=need, lookalikes=tuple(settled))
+                      units=units.to_dict(), min_units=need, lookalikes=tuple(settled), bases=bases)
 
 
 def expected_ranges(model: HysteresisModel, effects: Sequence[str], train: HysteresisData, val: HysteresisData,
@@ -419,6 +424,9 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
         notes.insert(0, Message(f"{where} no motion of this axis (its knob rests while the record goes on): there the "
                                 "scan scores only where the model puts the resting bend, not its hysteresis; validate "
                                 "on a record where this axis moves throughout", "still-blocks"))
+    bases = () if candidates is not None else scan_bases_rolling(
+        model, d, bounds, err_base, base_train_rmse, alpha=alpha, min_gain_pct=min_gain_pct, screen_pct=screen_pct,
+        data_paths=data_paths, model_path=model_path, planes_path=planes_path, jobs=jobs)
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), folds, stride,
                       d.n_samples, alpha, min_gain_pct, scheme="rolling-origin", scheme_reason=scheme_reason,
-                      still_blocks=still)
+                      still_blocks=still, bases=bases)
