@@ -301,3 +301,73 @@ def as_data(data=None, meas_deg=None, *, t_s=None, extras=None) -> tuple[Hystere
     if data is None:
         raise ModelError("no data given")
     return HysteresisData(cmd_deg=data, meas_deg=meas_deg, t_s=t_s, extras=extras or {}), False
+
+
+# ---- what a record holds (reversals, holds, speeds, constant columns): asked by the effects'
+# requirements (models.effects.requirements) and by validation alike
+def is_constant(values: np.ndarray) -> bool:
+    """True when a column carries no variation a fit could use (spread below 1e-9 of its scale)."""
+    v = np.asarray(values, dtype=float)
+    scale = max(float(np.max(np.abs(v))), 1.0) if v.size else 1.0
+    return v.size == 0 or float(np.ptp(v)) <= 1e-9 * scale
+
+
+def speed_dps(data: HysteresisData) -> np.ndarray:
+    """Command speed (deg/s, signed) per sample, per run; per sample when there is no time."""
+    out = np.zeros(data.n_samples)
+    for sl in data.run_slices():
+        u = data.cmd_deg[sl]
+        if u.size < 2:
+            continue
+        x = data.t_s[sl] if data.t_s is not None else np.arange(u.size, dtype=float)
+        out[sl] = np.gradient(u, x)
+    return out
+
+
+def turning_points(data: HysteresisData, tol_frac: float = 0.01) -> np.ndarray:
+    """Indices (into the concatenated samples) of the command's direction reversals.
+
+    A reversal is a turning point of the command that it then leaves by more than
+    ``tol_frac`` of its run's span (wiggles below that, or below
+    :data:`~endocal.models.data.REVERSAL_TOL_MIN_DEG`, are ignored).
+    """
+    out = []
+    for sl in data.run_slices():
+        u = data.cmd_deg[sl]
+        if not np.ptp(u) > 0:
+            continue
+        tol = max(tol_frac * float(np.ptp(u)), REVERSAL_TOL_MIN_DEG)
+        ext_i, direction = 0, 0
+        for k in range(1, u.size):
+            if direction == 0:
+                if abs(u[k] - u[0]) > tol:
+                    direction, ext_i = (1 if u[k] > u[0] else -1), k
+            elif (u[k] - u[ext_i]) * direction > 0:
+                ext_i = k  # further in the current direction
+            elif abs(u[k] - u[ext_i]) > tol:
+                out.append(sl.start + ext_i)
+                direction, ext_i = -direction, k
+    return np.asarray(out, dtype=np.int64)
+
+
+def hold_mask(data: HysteresisData, hold_min_s: float = 0.5) -> np.ndarray:
+    """Samples where the command stands still for at least ``hold_min_s`` (or 5 samples without time)."""
+    v = np.abs(speed_dps(data))
+    still = v <= 1e-6 * max(float(v.max()), 1e-12)
+    out = np.zeros(data.n_samples, dtype=bool)
+    for sl in data.run_slices():
+        s = still[sl]
+        t = data.t_s[sl] if data.t_s is not None else None
+        k = 0
+        while k < s.size:
+            if not s[k]:
+                k += 1
+                continue
+            j = k
+            while j < s.size and s[j]:
+                j += 1
+            long_enough = (t[j - 1] - t[k] >= hold_min_s) if t is not None else (j - k >= 5)
+            if long_enough:
+                out[sl.start + k: sl.start + j] = True
+            k = j
+    return out

@@ -29,7 +29,7 @@ from scipy.ndimage import median_filter
 
 from endocal.errors import ModelError
 from endocal.messages import Message
-from endocal.models.data import OTHER_CMD, HysteresisData, common_drive_unit
+from endocal.models.data import OTHER_CMD, HysteresisData, common_drive_unit, is_constant, speed_dps
 from endocal.runs.aligned import AlignedData
 
 #: Extra column holding the other bending axis's measured angle (deg).
@@ -225,12 +225,6 @@ def _through_planes(data: AlignedData, axis: str, planes) -> AlignedData:
     return replace(data, table=table)
 
 
-def is_constant(values: np.ndarray) -> bool:
-    """True when a column carries no variation a fit could use (spread below 1e-9 of its scale)."""
-    v = np.asarray(values, dtype=float)
-    scale = max(float(np.max(np.abs(v))), 1.0) if v.size else 1.0
-    return v.size == 0 or float(np.ptp(v)) <= 1e-9 * scale
-
 
 def load_candidates(data: HysteresisData, bending_axes: Sequence[str] = ()) -> tuple[list[str], list[str]]:
     """Extra columns that may carry a load (``load:COLUMN``), and the constant ones skipped.
@@ -315,13 +309,3 @@ def prefix(data: HysteresisData, n: int) -> HysteresisData:
     )
 
 
-def speed_dps(data: HysteresisData) -> np.ndarray:
-    """Command speed (deg/s, signed) per sample, per run; per sample when there is no time."""
-    out = np.zeros(data.n_samples)
-    for sl in data.run_slices():
-        u = data.cmd_deg[sl]
-        if u.size < 2:
-            continue
-        x = data.t_s[sl] if data.t_s is not None else np.arange(u.size, dtype=float)
-        out[sl] = np.gradient(u, x)
-    return out

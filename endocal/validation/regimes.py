@@ -26,8 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from endocal.models.data import OTHER_CMD, REVERSAL_TOL_MIN_DEG, HysteresisData
-from endocal.validation.data import is_constant, speed_dps
+from endocal.models.data import OTHER_CMD, HysteresisData, hold_mask, is_constant, speed_dps, turning_points
 from endocal.validation.metrics import ErrorMetrics, error_metrics
 
 
@@ -75,31 +74,6 @@ class RegimeBreakdown:
         return [r.to_dict() for r in self.regimes]
 
 
-def turning_points(data: HysteresisData, tol_frac: float = 0.01) -> np.ndarray:
-    """Indices (into the concatenated samples) of the command's direction reversals.
-
-    A reversal is a turning point of the command that it then leaves by more than
-    ``tol_frac`` of its run's span (wiggles below that, or below
-    :data:`~endocal.models.data.REVERSAL_TOL_MIN_DEG`, are ignored).
-    """
-    out = []
-    for sl in data.run_slices():
-        u = data.cmd_deg[sl]
-        if not np.ptp(u) > 0:
-            continue
-        tol = max(tol_frac * float(np.ptp(u)), REVERSAL_TOL_MIN_DEG)
-        ext_i, direction = 0, 0
-        for k in range(1, u.size):
-            if direction == 0:
-                if abs(u[k] - u[0]) > tol:
-                    direction, ext_i = (1 if u[k] > u[0] else -1), k
-            elif (u[k] - u[ext_i]) * direction > 0:
-                ext_i = k  # further in the current direction
-            elif abs(u[k] - u[ext_i]) > tol:
-                out.append(sl.start + ext_i)
-                direction, ext_i = -direction, k
-    return np.asarray(out, dtype=np.int64)
-
 
 def reversal_distance_deg(data: HysteresisData, tol_frac: float = 0.01) -> np.ndarray:
     """Command travel (deg) since the last direction reversal, per sample (inf before the first).
@@ -114,28 +88,6 @@ def reversal_distance_deg(data: HysteresisData, tol_frac: float = 0.01) -> np.nd
             out[a:b] = np.abs(data.cmd_deg[a:b] - data.cmd_deg[a])
     return out
 
-
-def hold_mask(data: HysteresisData, hold_min_s: float = 0.5) -> np.ndarray:
-    """Samples where the command stands still for at least ``hold_min_s`` (or 5 samples without time)."""
-    v = np.abs(speed_dps(data))
-    still = v <= 1e-6 * max(float(v.max()), 1e-12)
-    out = np.zeros(data.n_samples, dtype=bool)
-    for sl in data.run_slices():
-        s = still[sl]
-        t = data.t_s[sl] if data.t_s is not None else None
-        k = 0
-        while k < s.size:
-            if not s[k]:
-                k += 1
-                continue
-            j = k
-            while j < s.size and s[j]:
-                j += 1
-            long_enough = (t[j - 1] - t[k] >= hold_min_s) if t is not None else (j - k >= 5)
-            if long_enough:
-                out[sl.start + k: sl.start + j] = True
-            k = j
-    return out
 
 
 def _bands(x: np.ndarray, mask: np.ndarray, fmt: str, unit: str, labels=("low", "mid", "high")):

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from endocal.models.data import OTHER_CMD, HysteresisData
+from endocal.models.data import OTHER_CMD, HysteresisData, hold_mask, is_constant, turning_points
 
 #: The purposes a requirement serves (see the module docstring).
 PURPOSES = ("fit", "test", "next")
@@ -141,7 +141,6 @@ TIME_STAMPS = Requirement("time", "time stamps", _has_time, to="fit")
 def one_frequency(data: HysteresisData) -> str | None:
     """Why the data has a single frequency of motion (None when it has several): the half-cycles'
     durations (within a record) span less than 1.5 : 1 between their 10th and 90th percentiles."""
-    from endocal.validation.regimes import turning_points
 
     turns = turning_points(data)
     t = data.t_s if data.t_s is not None else np.arange(data.n_samples, dtype=float)
@@ -163,7 +162,6 @@ def speeds_spanning(remedy: str, to: str = "test") -> Requirement:
 def no_hold_after_move(data: HysteresisData) -> bool:
     """True when no record holds the knob still (1 s or more) after it moved by 5 % of the span
     within the 2 s before the hold."""
-    from endocal.validation.regimes import hold_mask
 
     hold = hold_mask(data, 1.0)
     span = float(np.ptp(data.cmd_deg))
@@ -193,8 +191,7 @@ class _OtherKnob(Requirement):
     (``where``) says where to record it."""
 
     def reason(self, data: HysteresisData, name: str = "", where: str = "", **context) -> str | None:
-        from endocal.validation.data import is_constant
-
+    
         if OTHER_CMD not in data.extras:
             return f"one axis only: {name} cannot be identified (drive both knobs: run `lissajous` or `circle`)"
         if is_constant(data.extras[OTHER_CMD]):
@@ -207,7 +204,6 @@ class _OtherKnob(Requirement):
 
 
 def _other_moves(data: HysteresisData):
-    from endocal.validation.data import is_constant
 
     return OTHER_CMD in data.extras and not is_constant(data.extras[OTHER_CMD])
 
@@ -220,7 +216,6 @@ def other_knob_moving(to: str = "fit") -> Requirement:
 def condition_varies_within(data: HysteresisData, column: str) -> str | None:
     """Why ``column`` cannot separate a condition from the records (None: it varies within a record,
     or the same motion was recorded at two of its values)."""
-    from endocal.validation.data import is_constant
 
     if column not in data.extras:
         return f"no column '{column}'"
