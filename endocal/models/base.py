@@ -415,19 +415,17 @@ class HysteresisModel(ABC):
         stride = d.n_samples // 20000
         dd = d.decimate(stride) if stride >= 2 else d
         initials: dict = {}  # the output effects' start values on dd, the same for every start tried below
-        start, structure, owners = self._start(dd, effects, fixed, {}, initials)
         # Effects whose nonlinear parameters (a delay, a time constant, a play width) need a
         # good start offer a few candidates: each is tried with the base re-started on the
         # command it produces, and the one with the lowest start cost is kept (greedy, in
-        # chain order).
+        # chain order). An effect whose every free parameter the warm start gives starts there.
         overrides: dict[str, float] = {}
         warm = warm_start or {}
         for e in effects:
             known = [n for n in e.full_names() if n not in fixed]
             if known and all(n in warm for n in known):
                 overrides.update({n: float(warm[n]) for n in known})
-        if overrides:
-            start, structure, owners = self._start(dd, effects, fixed, overrides, initials)
+        start, structure, owners = self._start(dd, effects, fixed, overrides, initials)
         ds = _subsample(dd)
         for e in effects:
             if not hasattr(e, "start_candidates") or all(n in overrides for n in e.full_names() if n not in fixed):
@@ -617,9 +615,16 @@ class HysteresisModel(ABC):
         initials = {} if initials is None else initials
         start: dict[str, Parameter] = {}
         u = dd.cmd_deg
+        unmeasured = None
         for e in effects:
             if isinstance(e, InputEffect):
-                for prm in e.initial(dd, u):
+                # an effect whose every free parameter is given needs only its bounds: it sees the data
+                # without the measured angle, so it skips its start search (an envelope's hinge grid,
+                # a fifth of a warm-started scan candidate's time); an effect's bounds never depend on it
+                given = all(n in overrides for n in e.full_names() if n not in fixed)
+                if given and unmeasured is None:
+                    unmeasured = dd.with_cmd(dd.cmd_deg)
+                for prm in e.initial(unmeasured if given else dd, u):
                     start[prm.name] = prm
                 e.adapt_start(start, fixed)
                 self._apply_fixed(start, fixed, e)
