@@ -10,7 +10,7 @@ DEMO   := demo-out
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test,ros,aurora,docs]'
+	$(BIN)/python -m pip install --quiet -e '.[test,ros,aurora,docs,mcap,fleet]'
 	touch $(STAMP)
 
 install: $(STAMP)

@@ -15,9 +15,9 @@ from endocal._version import __version__  # one source for the package and pypro
 
 #: What ``import endocal as ec`` offers besides ``__version__`` (defined in :mod:`endocal.api`).
 _API = (
-    "ForceModel", "Model", "Planes", "Report", "Run", "Suggestion", "Validation",
-    "fit", "fit_force", "fit_planes", "load_model", "load_planes", "load_run", "make_report", "run_protocol",
-    "validate",
+    "Check", "ForceModel", "History", "Model", "Planes", "Report", "Run", "Suggestion", "Validation",
+    "check_probe", "fit", "fit_force", "fit_planes", "history", "load_model", "load_planes", "load_run", "make_report",
+    "run_protocol", "validate",
 )
 
 __all__ = ["__version__", *_API]

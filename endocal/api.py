@@ -36,9 +36,11 @@ one line: what was wrong, where, what to do.
 | `fit_planes`     | `Planes`     | `endocal fit planes`       |
 | `load_planes`    | `Planes`     | (a planes file)            |
 | `fit_force`      | `ForceModel` | `endocal fit force`        |
+| `check_probe`    | `Check`      | `endocal check`            |
+| `history`        | `History`    | `endocal history DIR`      |
 
-Why `make_report` and `run_protocol` rather than `report` and `excite`: those names are
-subpackages of `endocal` (`endocal.report`, `endocal.excite`), and Python binds a
+Why `make_report`, `run_protocol` and `check_probe` rather than `report`, `excite` and `check`: those
+names are subpackages of `endocal` (`endocal.report`, `endocal.excite`, `endocal.check`), and Python binds a
 subpackage to its parent's attribute once anything imports it, so `ec.report` would stop
 being the function halfway through a session.
 """
@@ -53,9 +55,9 @@ from pathlib import Path
 from endocal.errors import ModelError, OutputExistsError
 
 __all__ = [
-    "ForceModel", "Model", "Planes", "Report", "Run", "Suggestion", "Validation",
-    "fit", "fit_force", "fit_planes", "load_model", "load_planes", "load_run", "make_report", "run_protocol",
-    "validate",
+    "Check", "ForceModel", "History", "Model", "Planes", "Report", "Run", "Suggestion", "Validation",
+    "check_probe", "fit", "fit_force", "fit_planes", "history", "load_model", "load_planes", "load_run", "make_report",
+    "run_protocol", "validate",
 ]
 
 
@@ -953,7 +955,8 @@ class Report(_Result):
 
 
 def make_report(models, data, *, planes=None, out: str | Path | None = None, force: bool = False,
-                bootstrap: int = 400, seed: int = 0) -> Report:
+                bootstrap: int = 400, seed: int = 0, history: str | Path | None = None,
+                probe_id: str | None = None) -> Report:
     """Compare hysteresis models on records (`endocal report`).
 
     Every model is scored on every record of its axis; models are compared on per-half-cycle
@@ -974,6 +977,11 @@ def make_report(models, data, *, planes=None, out: str | Path | None = None, for
         Overwrite those files.
     bootstrap, seed : int
         Block-bootstrap replicates and seed of the 95 % intervals (`validate`'s defaults).
+    history : str or Path, optional
+        A probe-check history (`check_probe`): adds the control charts of the probe checked
+        against these models (`report --history`).
+    probe_id : str, optional
+        With `history`: the probe to chart, when its checks used other model files.
 
     Returns
     -------
@@ -998,7 +1006,8 @@ def make_report(models, data, *, planes=None, out: str | Path | None = None, for
     if isinstance(planes, Planes):  # the figure only: each model reads its data through the planes it records
         planes = planes.path if planes.path is not None else planes.calibration
     rep = build_report(ms, _aligned(data), planes=planes, out=out, force=force, n_boot=bootstrap, seed=seed,
-                       command=_call("make_report", names, out=None if out is None else str(out)), keep_figures=True)
+                       command=_call("make_report", names, out=None if out is None else str(out)), keep_figures=True,
+                       history=history, history_probe=probe_id)
     return Report(rep, None if out is None else side_files(out))
 
 
@@ -1166,3 +1175,187 @@ def fit_force(runs, *, axis: str | None = None, torque_constant_nm_per_a: float 
     model = _fit(paths, axis=axis, torque_constant_nm_per_a=torque_constant_nm_per_a)
     prov = force_provenance(paths, _call("fit_force", [str(p) for p in paths], axis=axis))
     return ForceModel(model, provenance=prov)
+
+
+# ---------------------------------------------------------------------------- probe checks
+class Check(_Result):
+    """One probe check: its figures, the probe's state, what to do (`endocal check`).
+
+    Attributes
+    ----------
+    result : endocal.check.run.CheckResult
+        The library's result, which the command prints.
+    state : str
+        `baseline`, `in control`, `drifting` or `out of control`.
+    figures : dict
+        The check's figures (`ap_rmse_deg`, `ap_loop_width_deg`, `ap_dead_band_deg`,
+        `ap_bend_pos_deg`, `ap_bend_neg_deg`, per axis).
+    recalibrate : list of str
+        The commands that recalibrate the probe (when it is not in control).
+    """
+
+    def __init__(self, result) -> None:
+        self.result = result
+
+    state = property(lambda self: self.result.state)
+    figures = property(lambda self: self.result.figures)
+    recalibrate = property(lambda self: self.result.recalibrate)
+
+    def to_dict(self) -> dict:
+        """What `endocal check --json` prints."""
+        return self.result.to_dict()
+
+    def __repr__(self) -> str:
+        lines = [self.result.line(), *(f"  {c}" for c in self.recalibrate)]
+        return "\n".join(lines)
+
+    def plot(self):
+        """The probe's control charts since its calibration, this check the last point.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from endocal.report.checks import charts_figure
+
+        return charts_figure(self.result.charts)
+
+
+def check_probe(models, probe_id: str, history: str | Path, *, run: str | Path | None = None, backend: str = "sim",
+                probe: str = "tee", seed: int = 0, sim_config: str | Path | None = None,
+                hardware_config: str | Path | None = None, realtime: bool = False) -> Check:
+    """Check a probe's calibration: run the built-in check protocol, score it, append it to the history.
+
+    What `endocal check --model ... --probe-id ID --history DIR` does.
+
+    Parameters
+    ----------
+    models : path or Model, or a sequence of them
+        The probe's hysteresis models (saved files: the history records them by path and
+        SHA-256), one per bending axis.
+    probe_id : str
+        The probe's own ID (serial number): its partition `probe=ID` of the history.
+    history : str or Path
+        The fleet's history folder (created on the first check).
+    run : str or Path, optional
+        A check recorded earlier or imported, scored instead of running one.
+    backend, probe, seed, sim_config, hardware_config, realtime
+        As for `run_protocol`.
+
+    Returns
+    -------
+    Check
+
+    Raises
+    ------
+    HistoryError, ModelError, RunFormatError
+        A bad probe ID, a history folder with foreign files or an unreadable month file of this
+        probe, a model of another probe, a run of another probe: nothing is appended.
+    """
+    from endocal.check.run import check_probe as _check
+
+    items = [models] if isinstance(models, (str, Path, Model)) else list(models)
+    paths = []
+    for m in map(_model, items):
+        if m.path is None:
+            raise ModelError(f"the {m.axis} model is not saved: save it (model.save('{m.axis}.json')) and pass it, "
+                             "the history records each check's models by file and SHA-256")
+        paths.append(m.path)
+    return Check(_check(paths, probe_id, history, run=run, backend=backend, probe=probe, seed=seed,
+                        sim_config=sim_config, hardware_config=hardware_config, realtime=realtime))
+
+
+class History(_Result):
+    """A fleet's check history (`endocal history DIR`): the rows, every probe's state and its control charts.
+
+    Attributes
+    ----------
+    rows : pandas.DataFrame
+        Every check of every probe (`probe`, `month`, `checked_utc`, `state`, the figures...).
+    table : pandas.DataFrame
+        Every probe's last check and state, one row per probe.
+    charts : dict of str -> endocal.check.charts.ProbeCharts
+        Each probe's control charts since its calibration (`.charts[ID].charts[FIGURE]`:
+        the individuals, moving-range and EWMA series with their limits).
+    corrupt : list of (Path, str)
+        Month files that could not be read (their rows are missing; the rest is read).
+    """
+
+    def __init__(self, fleet) -> None:
+        self.fleet = fleet
+        self.rows = fleet.rows
+        self.table = fleet.table()
+        self.charts = {p: fleet.charts(p) for p in fleet.probes}
+        self.corrupt = list(fleet.corrupt)
+
+    def to_dict(self) -> dict:
+        """The table (`endocal history DIR --json`) and the unreadable files."""
+        return {"probes": self.table.to_dict(orient="records"),
+                "corrupt": [{"path": str(p), "error": why} for p, why in self.corrupt]}
+
+    def __repr__(self) -> str:
+        states = self.table["state"].value_counts().to_dict() if len(self.table) else {}
+        head = (f"History {self.fleet.root}: {len(self.table)} probe(s), {len(self.rows)} check(s)"
+                + "".join(f", {n} {s}" for s, n in states.items()))
+        lines = [head, *(f"  {r.probe}: {r.state}, {r.checks_since_calibration} checks since calibration"
+                         for r in self.table.itertuples())]
+        if self.corrupt:
+            lines.append(f"  unreadable: {self.fleet.corrupt_line()}")
+        return "\n".join(lines)
+
+    def sql(self, query: str):
+        """One read-only SELECT over the view `checks` (DuckDB; `endocal history DIR --sql`).
+
+        Returns
+        -------
+        pandas.DataFrame
+        """
+        from endocal.check.sql import query as _query
+
+        return _query(self.fleet.root, query).rows
+
+    def plot(self, probe_id: str | None = None):
+        """A probe's control charts (`endocal history DIR --probe ID --plot FILE.png`).
+
+        Parameters
+        ----------
+        probe_id : str, optional
+            Default: the only probe.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from endocal.report.checks import charts_figure
+
+        if probe_id is None:
+            if len(self.charts) != 1:
+                raise ModelError(f"the history holds {len(self.charts)} probes: name one ({', '.join(self.charts)})")
+            probe_id = next(iter(self.charts))
+        if probe_id not in self.charts:
+            self.fleet.probe_rows(probe_id)  # raises, naming the probes there are
+        return charts_figure(self.charts[probe_id])
+
+
+def history(path: str | Path) -> History:
+    """Read a fleet's check history (`endocal history DIR`).
+
+    Parameters
+    ----------
+    path : str or Path
+        The history folder (`endocal check --history DIR`).
+
+    Returns
+    -------
+    History
+        `.rows` (a DataFrame of every check), `.table`, `.charts`, `.plot(ID)`, `.sql(...)`.
+
+    Raises
+    ------
+    HistoryError
+        No such folder, or foreign files in it. An unreadable month file is not raised:
+        `History.corrupt` names it, and the rest is read.
+    """
+    from endocal.check.summary import read_history
+
+    return History(read_history(path))

@@ -26,7 +26,11 @@ FORBIDDEN = {
     "report": ("endocal.cli",),
     "protocols": ("endocal.backends", "endocal.cli", "endocal.sim"),
     "force": ("endocal.cli",),
+    # probe checks sit beside validate: the report draws their charts (report --history), not the reverse
+    "check": ("endocal.cli", "endocal.report"),
     "backends": ("endocal.cli",),
+    # exports read runs and models, and never reach into the backends or the command line
+    "export": ("endocal.backends", "endocal.cli", "endocal.report"),
 }
 
 

@@ -93,6 +93,11 @@ KEYS: dict[str, str] = {
                      "planes were fitted on).",
     "no-tip-path": "A record has no tracker stream, so the report draws no task-space tip trajectory for it.",
     "force-stop": "The contact-force guard stopped a playback: the predicted tip force reached its threshold.",
+    # ---- export c
+    "float-holds": "A float compensator whose inverse jumps (a play: deadzone, tension, rate; a linear or B-spline "
+                   "base's backlash) decides on the sign of each step of the desired angle, and float cannot see a "
+                   "step below its resolution: there it can turn the knob by a play's width a tick later than double, "
+                   "or stay apart after holds. Generate double (the default) where the target has a double FPU.",
     # ---- anything else
     "other": "A message without a key of its own; `--explain` prints it in full.",
 }

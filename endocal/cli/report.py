@@ -43,6 +43,10 @@ def report(
                                   "(the default matches `endocal validate`)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the bootstrap."),
     force: bool = typer.Option(False, "--force", help="Overwrite the report files."),
+    history: Optional[Path] = typer.Option(None, "--history", help="A probe-check history (endocal check --history "
+                                           "DIR): adds the control charts of the probe checked against these models."),
+    history_probe: Optional[str] = typer.Option(None, "--probe", help="With --history: the probe to chart (default: "
+                                                "the one whose checks used these model files)."),
     as_json: bool = typer.Option(False, "--json", help="Print the summary and metrics as one JSON object."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
     explain: bool = typer.Option(False, "--explain", "-v", help=EXPLAIN_HELP + " Adds each finding's test, the ladder "
@@ -60,6 +64,10 @@ def report(
     from endocal.report.result import side_files
 
     models, records = split_paths(paths, data)
+    if history_probe is not None and history is None:
+        from endocal.errors import ModelError
+
+        raise ModelError("--probe names a probe of a check history: give --history DIR with it")
     for kind, written in side_files(out_path).items():
         refuse_input_as_output("--out" if kind == "html" else f"--out (its {kind} file)", written,
                                [*paths, *data, planes])
@@ -74,7 +82,8 @@ def report(
             bar.update(task, description=step[:60], completed=done, total=total)
 
         rep = build_report(models, records, planes=planes, out=out_path, force=force, n_boot=bootstrap, seed=seed,
-                           progress=progress, command="endocal " + " ".join(sys.argv[1:]))
+                           progress=progress, command="endocal " + " ".join(sys.argv[1:]), history=history,
+                           history_probe=history_probe)
     if as_json:
         d = json.loads(rep.to_json())
         out.print_json(json.dumps({k: d[k] for k in ("summary", "not_evaluated", "metrics", "ladder", "notes")} |

@@ -205,6 +205,8 @@ def build_report(
     folds: int = 5,
     planes_runs: Sequence[str | Path] = (),
     keep_figures: bool = False,
+    history: str | Path | None = None,
+    history_probe: str | None = None,
 ) -> Report:
     """Evaluate and compare models on records and build the report (optionally writing it).
 
@@ -238,6 +240,11 @@ def build_report(
     keep_figures : bool
         Keep each drawn :class:`matplotlib.figure.Figure` as ``ReportFigure.figure`` (for a
         notebook); otherwise only its PNG is kept.
+    history : path, optional
+        A probe-check history (``endocal check --history DIR``): adds the control charts of the
+        probe checked against these models (:func:`endocal.check.summary.report_pages`).
+    history_probe : str, optional
+        With ``history``: the probe to show, when its checks used other model files.
 
     Returns
     -------
@@ -254,6 +261,11 @@ def build_report(
     if out is not None:
         check_output(out, force=force)  # refuse before minutes of work, not after
     model_entries, data_entries = load_inputs(models, datas)
+    check_pages, check_notes = [], []
+    if history is not None:  # read before minutes of work: a bad history is refused at once
+        from endocal.check.summary import report_pages
+
+        check_pages, check_notes = report_pages(history, [m.sha256 for m in model_entries], history_probe)
     cal, planes_path = None, None
     if planes is not None:
         if isinstance(planes, PlanesCalibration):
@@ -289,7 +301,7 @@ def build_report(
     colors = F.palette([m.label for m in model_entries])
     data_colors = F.palette([d.label for d in data_entries])
     figs: list[ReportFigure] = []
-    notes: list[str] = []
+    notes: list[str] = list(check_notes)
     view: PlanesView | None = None
     if cal is not None:
         places = [Path(d.aligned.source).parent for d in data_entries] + [Path(p) for p in planes_runs]
@@ -349,6 +361,17 @@ def build_report(
                                   "Measured tip position in the base sensor's frame (EM tracker), per record.", b""),
                      lambda: F.tip_paths(paths, "Tip trajectories in the base frame")))
 
+    for pid, pc in check_pages:
+        from endocal.report.checks import charts_figure
+
+        jobs.append((ReportFigure(f"checks-{_slug(pid)}", "checks", f"Probe {pid}: {pc.state}, {pc.n_checks} checks "
+                                  "since calibration",
+                                  "Control charts of the probe's checks since its calibration (endocal check): per "
+                                  "figure, the individuals chart (limits mu +- 3 sigma from the first 10 checks, shaded), "
+                                  "the moving ranges (UCL 3.267 MR-bar) and the EWMA (lambda 0.2, exact limits). Red: "
+                                  "a point beyond 3 sigma (out of control); orange: the EWMA beyond its limit "
+                                  "(drifting).", b""),
+                     lambda pc=pc: charts_figure(pc)))
     total = n_done + len(jobs)
     for k, (fig, draw) in enumerate(jobs, start=1):
         if progress:

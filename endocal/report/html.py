@@ -220,11 +220,14 @@ def render_html(report) -> str:
     ladder_figs = "".join(_img(f) for f in report.figures if f.section == "ladder")
     planes = "".join(_img(f) for f in report.figures if f.section == "planes")
     task = "".join(_img(f) for f in report.figures if f.section == "task-space")
+    checks = "".join(_img(f) for f in report.figures if f.section == "checks")
     nav = ["summary", "metrics", "tests", "records", "ladder", "models"]
     if planes:
         nav.append("planes")
     if task:
         nav.append("task-space")
+    if checks:
+        nav.append("checks")
     nav.append("provenance")
     p = report.provenance
     sections = [
@@ -257,6 +260,10 @@ def render_html(report) -> str:
         sections.append('<h2 id="planes">Bending planes</h2>' + pnotes + planes)
     if task:
         sections.append('<h2 id="task-space">Task space</h2>' + task)
+    if checks:
+        sections.append('<h2 id="checks">Probe checks</h2><p class="muted">Is the probe still within its calibration? '
+                        "Its checks since calibration (<code>endocal check</code>), charted as radiotherapy QA charts "
+                        "its machines (Pawlicki et al., Med Phys 2005).</p>" + checks)
     sections.append('<h2 id="provenance">Provenance</h2>' + _provenance(report))
     nav_links = "".join(f'<a href="#{n}">{n}</a>' for n in nav)
     title = "endocal report: " + ", ".join(dict.fromkeys(m.label for m in report.models))

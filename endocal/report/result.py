@@ -39,7 +39,7 @@ class ReportFigure:
     id : str
         Stable identifier (``loops-ds-ap``), the HTML anchor.
     section : str
-        ``records``, ``ladder``, ``models``, ``planes`` or ``task-space``.
+        ``records``, ``ladder``, ``models``, ``planes``, ``task-space`` or ``checks`` (``report --history``).
     title, caption : str
     png : bytes
     group : str or None
