@@ -33,7 +33,7 @@ from dataclasses import asdict, dataclass, field
 from typing import ClassVar
 
 import numpy as np
-from scipy.optimize import OptimizeResult, least_squares
+from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
 from endocal.errors import ModelError, OutOfRangeWarning
@@ -60,12 +60,6 @@ HISTORY_NFEV_PER_PARAMETER = 10
 SUBSAMPLE_SAMPLES = 4000
 #: relative cost decrease per step under which every fit stops (:func:`_solve`)
 FTOL = 1e-7
-#: accepted steps over which a fit with ``stall_rtol`` judges its progress (:func:`_solve`)
-STALL_WINDOW = 10
-#: the stall tolerance of validate's scan (:func:`endocal.validation.structure.split_fit`): a candidate's fit
-#: stops when ten accepted steps lowered its cost by less than 1e-4 of itself (its RMSE by 5e-5), a
-#: thousand times under the scan's 10 % gain bar
-SCAN_STALL_RTOL = 1e-4
 
 
 #: What drives each command unit names, for messages.
@@ -227,11 +221,6 @@ class HysteresisModel(ABC):
     inverse_kind: ClassVar[str] = "numerical"
 
     # ------------------------------------------------------------------ helpers
-    @property
-    def _stall(self) -> float | None:
-        """The stall tolerance of the fit under way (:meth:`fit`'s ``stall_rtol``)."""
-        return getattr(self, "_stall_rtol", None)
-
     def _require_fitted(self) -> None:
         if not hasattr(self, "params_"):
             raise ModelError(f"this {type(self).__name__} is not fitted yet: call fit(...) or set_parameters(...) first")
@@ -327,7 +316,7 @@ class HysteresisModel(ABC):
 
     # ------------------------------------------------------------------ fit
     def fit(self, data, meas_deg=None, *, t_s=None, extras=None, max_nfev: int | None = None,
-            warm_start: dict | None = None, stall_rtol: float | None = None):
+            warm_start: dict | None = None):
         """Fit the base and all effect terms jointly by least squares.
 
         Parameters
@@ -349,10 +338,6 @@ class HysteresisModel(ABC):
             parameters all appear starts from them and skips its start-candidate search;
             the fit itself is unchanged. ``validate`` uses it to refit many candidate
             structures that share the model's effects.
-        stall_rtol : float, optional
-            Also stop every least-squares run of this fit when its last :data:`STALL_WINDOW`
-            evaluations lowered the cost by less than this fraction of it (:func:`_solve`). None
-            (the default): run to FTOL. ``validate``'s scan passes :data:`SCAN_STALL_RTOL`.
 
         Returns
         -------
@@ -367,15 +352,10 @@ class HysteresisModel(ABC):
         """
         # The fit's linear algebra is on thin matrices (n × a few parameters): BLAS threads
         # only contend with each other there (10-20x slower on a loaded machine), so one.
-        self._stall_rtol = stall_rtol  # read by every _solve of this fit (pi's _fit runs the machinery twice)
-        try:
-            with threadpool_limits(limits=1, user_api="blas"):
-                return self._fit(data, meas_deg, t_s=t_s, extras=extras, max_nfev=max_nfev, warm_start=warm_start)
-        finally:
-            del self._stall_rtol
+        with threadpool_limits(limits=1, user_api="blas"):
+            return self._fit(data, meas_deg, t_s=t_s, extras=extras, max_nfev=max_nfev, warm_start=warm_start)
 
-    def fit_from(self, start: HysteresisModel, data, *, max_nfev: int | None = None,
-                 stall_rtol: float | None = None):
+    def fit_from(self, start: HysteresisModel, data, *, max_nfev: int | None = None):
         """Fit starting from ``start``, a fitted model with some of these effects (``--start-from``).
 
         The effects ``start`` has begin at its values (:meth:`fit`'s ``warm_start``). When this model
@@ -392,11 +372,9 @@ class HysteresisModel(ABC):
             A fitted model of the same base (validate's model, when it scans candidates).
         data : HysteresisData or list of them
             What to fit, as :meth:`fit` takes it.
-        max_nfev, stall_rtol : optional
-            As :meth:`fit` takes them.
         """
         start.check_drive_unit(as_data(data)[0], "the data to fit")
-        self.fit(data, max_nfev=max_nfev, warm_start=dict(start.params_), stall_rtol=stall_rtol)
+        self.fit(data, max_nfev=max_nfev, warm_start=dict(start.params_))
         if not {e.label for e in start.effects_} <= {e.label for e in self.effects_}:
             return self  # an effect dropped: this model does not nest start, and may well fit worse
         d, _ = as_data(data)
@@ -410,7 +388,7 @@ class HysteresisModel(ABC):
         if not warm_rmse > start_rmse * (1.0 + NESTED_TOL):
             return self
         warm = dict(self.__dict__)
-        self.fit(data, max_nfev=max_nfev, stall_rtol=stall_rtol)
+        self.fit(data, max_nfev=max_nfev)
         if not self.fit_report_.rmse_deg < warm_rmse:
             self.__dict__.update(warm)
             return self
@@ -501,10 +479,10 @@ class HysteresisModel(ABC):
         nfev = njev = 0
         if stride >= 2:
             residual_d, jac_d = self._residual_fns(dd, values, free, structure, effects)
-            pre = _solve(residual_d, x0, jac_d, (lo, hi), max_nfev, self._stall)
+            pre = _solve(residual_d, x0, jac_d, (lo, hi), max_nfev)
             x0 = np.clip(pre.x, lo, hi)
             nfev, njev = pre.nfev, int(pre.njev or 0)
-        res = _solve(residual, x0, jac, (lo, hi), max_nfev, self._stall)
+        res = _solve(residual, x0, jac, (lo, hi), max_nfev)
         # A run that starts where a longer motion left the knob is fitted from its estimated start
         # (models.start): else its stretch before the first reversal pulls the parameters.
         starts = self._estimated_starts(d, values, free, res.x, structure, effects)
@@ -519,7 +497,7 @@ class HysteresisModel(ABC):
             nfev, njev = nfev + res.nfev, njev + int(res.njev or 0)
             led, keep = with_lead_ins(d, starts)
             residual, jac = self._residual_fns(led, values, free, structure, effects, keep)
-            res = _solve(residual, np.clip(x_from, lo, hi), jac, (lo, hi), max_nfev, self._stall)
+            res = _solve(residual, np.clip(x_from, lo, hi), jac, (lo, hi), max_nfev)
             final = {**values, **{n: float(v) for n, v in zip(free, res.x)}}
             starts = rescored(starts, d, self._forward(d, *self._grouped(final), structure, effects), res.fun)
         res.nfev += nfev
@@ -598,7 +576,7 @@ class HysteresisModel(ABC):
                 continue
             led, keep = with_lead_ins(ds, trial)
             residual, jac = self._residual_fns(led, values, free, structure, effects, keep)
-            fit = _solve(residual, np.clip(rest.x, *bounds), jac, bounds, max_nfev, self._stall)
+            fit = _solve(residual, np.clip(rest.x, *bounds), jac, bounds, max_nfev)
             spent = [spent[0] + fit.nfev, spent[1] + int(fit.njev or 0)]
             if fit.cost < (1.0 - START_GAIN_MIN) ** 2 * rest_cost and (best is None or fit.cost < best.cost):
                 best = fit
@@ -628,7 +606,7 @@ class HysteresisModel(ABC):
             return residual, "2-point"
         # where each free parameter's column sits: (block, column in it, column of the fit's Jacobian); the
         # Jacobian is assembled from the blocks directly (joining them first, then picking the free columns,
-        # copied every column twice: a tenth of a scan candidate's time)
+        # copied every column twice: several per cent of a scan candidate's time)
         where = [(b, c) for b, block in enumerate(analytic[1]) for c in range(_columns(block).shape[1])]
         col = {n: where[i] for i, n in enumerate(analytic[2])}
         picks: dict[int, tuple[list[int], list[int]]] = {}
@@ -718,7 +696,7 @@ class HysteresisModel(ABC):
 
         residual, jac = self._residual_fns(ds, values, free, structure, effects)
         try:
-            res = _solve(residual, x0, jac, (lo, hi), 8 * (1 + len(free)), self._stall)
+            res = _solve(residual, x0, jac, (lo, hi), 8 * (1 + len(free)))
         except (ValueError, FloatingPointError):
             return math.inf, start
         refined = dict(start)
@@ -1016,11 +994,7 @@ class HysteresisModel(ABC):
     __str__ = __repr__
 
 
-class _Stalled(Exception):
-    """Raised inside a least-squares run that stalled (:func:`_solve`); carries nothing, the caller holds the best point."""
-
-
-def _solve(residual, x0: np.ndarray, jac, bounds: tuple, max_nfev: int | None, stall_rtol: float | None = None):
+def _solve(residual, x0: np.ndarray, jac, bounds: tuple, max_nfev: int | None):
     """:func:`scipy.optimize.least_squares`, trust-region reflective within ``bounds``, as every fit here runs it.
 
     It stops when a step lowers the cost by less than FTOL of itself (scipy's default is 1e-8):
@@ -1028,49 +1002,9 @@ def _solve(residual, x0: np.ndarray, jac, bounds: tuple, max_nfev: int | None, s
     start gain, a 10 % candidate gain). At 1e-8 a parameter the data barely holds made fits crawl
     to their evaluation cap (a B-spline `coupling` candidate on the thesis's sine-set: 2 600
     evaluations, 15 s, to an RMSE 3e-5 lower than it reached in 11).
-
-    With ``stall_rtol`` (and an analytic ``jac``) it also stops when the last :data:`STALL_WINDOW`
-    accepted steps lowered the cost by less than ``stall_rtol`` of itself, and returns the best
-    point (status 2, as FTOL's stop). A PI model's exponential
-    weights (eq. 8) trade ``w`` against ``beta`` along a long shallow valley: the scan's
-    candidates crawled along it, each step lowering the cost by 1e-6 .. 1e-5 of itself, above
-    FTOL, for 100 .. 600 evaluations to an RMSE 0.05 % lower (the demo's `delay` candidate: 591
-    evaluations, the cost within 1e-3 of its end after 111).
     """
-    if not stall_rtol or not callable(jac):
-        return least_squares(residual, x0, jac=jac, bounds=bounds, method="trf", x_scale="jac", ftol=FTOL,
-                             max_nfev=max_nfev)
-    best: list = [math.inf, None, None]  # cost, x, residual
-    trail: list[float] = []  # the best cost at each accepted step (the solver asks for the Jacobian there)
-    nfev = [0]
-
-    def fun(x):
-        nfev[0] += 1
-        f = residual(x)
-        cost = 0.5 * float(f @ f)
-        if cost < best[0]:
-            best[:] = [cost, np.array(x, dtype=float), np.array(f, dtype=float)]
-        return f
-
-    def counted_jac(x):
-        # judged over accepted steps only: a run of rejected trial steps while the trust region
-        # shrinks is the solver at work, not a stall
-        trail.append(best[0])
-        if len(trail) > STALL_WINDOW and trail[-1 - STALL_WINDOW] - best[0] <= stall_rtol * best[0]:
-            raise _Stalled
-        return jac(x)
-
-    try:
-        return least_squares(fun, x0, jac=counted_jac, bounds=bounds, method="trf", x_scale="jac", ftol=FTOL,
-                             max_nfev=max_nfev)
-    except _Stalled:
-        pass
-    residual(best[1])  # the residual functions keep the trial values: leave them at the point returned
-    J = np.atleast_2d(jac(best[1]))
-    return OptimizeResult(x=best[1], cost=best[0], fun=best[2], jac=J, grad=J.T @ best[2], nfev=nfev[0],
-                          njev=len(trail), status=2, success=True, optimality=None, active_mask=None,
-                          message=f"the cost fell by less than {stall_rtol:g} of itself over the last "
-                                  f"{STALL_WINDOW} evaluations")
+    return least_squares(residual, x0, jac=jac, bounds=bounds, method="trf", x_scale="jac", ftol=FTOL,
+                         max_nfev=max_nfev)
 
 
 def _columns(block: np.ndarray) -> np.ndarray:

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from endocal.models import HysteresisData, make_model
-from endocal.models.base import SCAN_STALL_RTOL, HysteresisModel
+from endocal.models.base import HysteresisModel
 
 
 def template(model: HysteresisModel, effects: Sequence[str]) -> HysteresisModel:
@@ -57,9 +57,7 @@ def split_fit(model: HysteresisModel, effects: Sequence[str], train: HysteresisD
     """``base + effects`` (with ``model``'s settings) fitted on ``train``, every ``stride``-th sample.
 
     The effects ``model`` already has start from its fitted values (it was fitted on this
-    estimation data), so only a new effect searches its start candidates. Each least-squares run
-    stops when it stalls (:data:`~endocal.models.base.SCAN_STALL_RTOL`): a candidate is scored by
-    its validation error, which the last crawling steps of a fit to FTOL leave unchanged.
+    estimation data), so only a new effect searches its start candidates.
     """
     dt = train.decimate(stride) if stride > 1 else train
-    return template(model, effects).fit_from(model, dt, stall_rtol=SCAN_STALL_RTOL)
+    return template(model, effects).fit_from(model, dt)
