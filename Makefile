@@ -43,7 +43,7 @@ docs: $(STAMP)
 
 # Regenerates the small simulator runs in data_samples/ (see data_samples/README.md).
 data-samples: $(STAMP)
-	$(BIN)/python data_samples/make_samples.py
+	$(BIN)/python data_samples/make_samples.py data_samples
 
 clean:
 	rm -rf $(VENV) $(DEMO) .pytest_cache site

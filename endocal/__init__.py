@@ -17,7 +17,7 @@ from endocal._version import __version__  # one source for the package and pypro
 _API = (
     "Check", "ForceModel", "History", "Model", "Planes", "Report", "Run", "Suggestion", "Validation",
     "check_probe", "fit", "fit_force", "fit_planes", "history", "load_model", "load_planes", "load_run", "make_report",
-    "run_protocol", "validate",
+    "run_protocol", "use_effects", "validate",
 )
 
 __all__ = ["__version__", *_API]

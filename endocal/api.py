@@ -57,7 +57,7 @@ from endocal.errors import ModelError, OutputExistsError
 __all__ = [
     "Check", "ForceModel", "History", "Model", "Planes", "Report", "Run", "Suggestion", "Validation",
     "check_probe", "fit", "fit_force", "fit_planes", "history", "load_model", "load_planes", "load_run", "make_report",
-    "run_protocol", "validate",
+    "run_protocol", "use_effects", "validate",
 ]
 
 
@@ -280,7 +280,8 @@ def _aligned(data, what: str = "data") -> list:
 
 def run_protocol(protocol: str, out: str | Path, *, backend: str = "sim", probe: str = "tee", seed: int = 0,
                  sim_config: str | Path | None = None, hardware_config: str | Path | None = None,
-                 realtime: bool = False, tip_load_n: float | None = None, force: bool = False, **params) -> Run:
+                 realtime: bool = False, tip_load_n: float | None = None, force: bool = False, effects_file=None,
+                 **params) -> Run:
     """Play an excitation protocol on the simulator (or the rig) and load the run it logged.
 
     What `endocal excite PROTOCOL --out OUT` does (without `--planes`, `--model` and
@@ -306,6 +307,8 @@ def run_protocol(protocol: str, out: str | Path, *, backend: str = "sim", probe:
         A known load hung at the tip (N), for `fit_force`.
     force : bool
         Replace `out` if it exists.
+    effects_file : path or sequence of paths, optional
+        Python files of one's own effects that `sim_config` hides (`[user_effects.NAME]`, :func:`use_effects`).
     **params
         Protocol parameters, e.g. `amplitude_deg=85, period_s=10, sample_rate_hz=25`
         (`endocal protocols show NAME` lists them; an unknown one raises).
@@ -327,6 +330,7 @@ def run_protocol(protocol: str, out: str | Path, *, backend: str = "sim", probe:
     from endocal.probe import load_probe
     from endocal.protocols import load_protocol
 
+    use_effects(effects_file)
     probe_cfg = load_probe(probe)
     proto = load_protocol(protocol, overrides=dict(params) or None)
     trajectory = proto.trajectory(probe_cfg, seed=seed)
@@ -474,15 +478,50 @@ def _model(m, what: str = "model") -> Model:
     raise ModelError(f"{what}: expected a Model or a model file, got {type(m).__name__}")
 
 
-def load_model(path: str | Path) -> Model:
-    """Read a model file (`endocal fit hysteresis --out`, `Model.save`).
+def use_effects(effects_file=None, classes: Sequence = ()) -> list[str]:
+    """Load a user's effect files (`--effects-file`) and register effect or base classes given
+    themselves; the names to write them by.
+
+    Parameters
+    ----------
+    effects_file : path or sequence of paths, optional
+        Python files of one's own effects and bases (`docs/how-to/add-effect.md`). Loading one
+        runs it, as pytest runs a `conftest.py`.
+    classes : sequence
+        Effect names or classes (`effects=["delay", MyEffect]`); each class is checked and registered.
 
     Raises
     ------
     ModelError
-        Missing or unreadable file, not a model file, unknown version or fields.
+        A file or class that cannot be used (one line naming the file and the effect).
+    """
+    from endocal.models.userfile import load_effects_files, register_user_class
+
+    files = [] if effects_file is None else [effects_file] if isinstance(effects_file, (str, Path)) else list(effects_file)
+    load_effects_files(files)
+    out = []
+    for c in classes:
+        if isinstance(c, type):
+            register_user_class(c)
+            c = getattr(c, "name", None) or c.base_name
+        out.append(c)
+    return out
+
+
+def load_model(path: str | Path, *, effects_file=None) -> Model:
+    """Read a model file (`endocal fit hysteresis --out`, `Model.save`).
+
+    `effects_file`: the user's effect files the model was fitted with (`use_effects`).
+
+    Raises
+    ------
+    ModelError
+        Missing or unreadable file, not a model file, unknown version or fields; a user's
+        effect whose file is not given, or changed since the fit.
     """
     from endocal.models import load_model as _load
+
+    use_effects(effects_file)
 
     return Model(_load(path), path=path)
 
@@ -501,7 +540,7 @@ def _planes_path(planes) -> Path | None:
 
 
 def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = (), planes=None,
-        start_from: Model | str | Path | None = None, settings: Mapping | None = None) -> Model:
+        start_from: Model | str | Path | None = None, settings: Mapping | None = None, effects_file=None) -> Model:
     """Fit a hysteresis model of one axis to runs (`endocal fit hysteresis`).
 
     Parameters
@@ -514,9 +553,9 @@ def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = ()
         Base model: `pi` with `effects=["envelope"]` is the duodenoscope paper's modified
         Prandtl-Ishlinskii model (eqs. 5-8, analytic inverse eqs. 9-11); `bspline` the
         thesis's direction-dependent B-splines; `linear` a piecewise-linear model.
-    effects : sequence of str, or a comma-separated str
+    effects : sequence of str or effect classes, or a comma-separated str
         Effect terms (`endocal effects` lists the catalogue), e.g. `["envelope", "delay"]`,
-        `"load:sheath_wrap_deg"`.
+        `"load:sheath_wrap_deg"`, or a class of one's own (`[MyEffect]`, checked and registered).
     planes : Planes or path, optional
         Bending planes (`fit_planes`): measured angles are mapped into the twisted
         planes the knob drives first.
@@ -525,6 +564,8 @@ def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = ()
         (what `validate`'s refits do).
     settings : mapping, optional
         Base-model settings, e.g. `{"n_operators": 30}` (`--set` on the command line).
+    effects_file : path or sequence of paths, optional
+        Python files of one's own effects and bases (`--effects-file`, :func:`use_effects`).
 
     Returns
     -------
@@ -543,6 +584,9 @@ def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = ()
     """
     from endocal.fitting import fit_hysteresis, fit_provenance
 
+    model = use_effects(effects_file, [model])[0]
+    if not isinstance(effects, str):
+        effects = use_effects(None, list(effects))
     datas = _aligned(data)
     start = None if start_from is None else _model(start_from, "start_from")
     planes_path = _planes_path(planes)
@@ -551,7 +595,7 @@ def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = ()
         from endocal.planes import load_planes as _load
 
         cal = _load(planes_path)
-    result = fit_hysteresis(datas, axis, model, list(effects) if not isinstance(effects, str) else effects,
+    result = fit_hysteresis(datas, axis, model, effects,
                             planes=cal, start_from=None if start is None else start.estimator, **dict(settings or {}))
     command = _call("fit", [str(d.source) for d in datas], axis=axis, model=model,
                     effects=[e.label for e in result.model.effects_], **({"settings": dict(settings)} if settings else {}))
@@ -581,8 +625,11 @@ class Suggestion(_Result):
         Why it is (not) significant; the effect's physics and residual signature; what its
         fit left at a bound.
     plan : Refit
-        What to refit (`endocal.validation.refit.Refit`): the data, base, settings, effects
-        and planes of the fit the scan scored; `refit()` makes it.
+        What to refit (`endocal.validation.refit.Refit`): the data, base, resolved settings,
+        effects, planes and start of the fit the scan scored, and `expected_rmse_deg`, the
+        range to expect where the scan fitted a subsample; `refit()` makes it.
+    command : str
+        The same refit as the `endocal fit hysteresis` command line `validate` prints.
     suspect : Suspect
         The library's object (`endocal.validation.suspects.Suspect`).
     """
@@ -595,10 +642,18 @@ class Suggestion(_Result):
                   "evidence", "cause", "signature", "caution"):
             setattr(self, k, getattr(suspect, k))
 
+    @property
+    def command(self) -> str:
+        """The refit as the shell command `endocal validate` prints (`endocal.shell.refit_command`)."""
+        from endocal.shell import refit_command
+
+        return refit_command(self.plan)
+
     def to_dict(self) -> dict:
-        """One entry of `suspects` in `endocal validate --json` (without the shell `command` the
-        command line renders from `refit`)."""
-        return self.suspect.to_dict()
+        """One entry of `suspects` in `endocal validate --json`: the suspect, with its refit's `command`."""
+        from endocal.views import suspect_dict
+
+        return suspect_dict(self.suspect)
 
     @property
     def effects(self) -> list[str]:
@@ -610,8 +665,9 @@ class Suggestion(_Result):
 
         On the estimation data the validation used (with `refit_on="all"` the validation
         data too; under rolling-origin cross-validation the validation data), through the same
-        planes, with the same settings, starting from the validated model: the fit whose
-        command `endocal validate` prints.
+        planes, with the same resolved settings (a `weights="auto"` fitted as `exponential`
+        stays `exponential`), starting from the validated model: the fit whose command
+        `endocal validate` prints.
 
         Returns
         -------
@@ -639,17 +695,17 @@ _KINDS = {"time_series": "ts-", "loops": "loops-", "residuals": "resid-", "regim
 class Validation(_Result):
     """A model held against measurements: how far off, where, what is missing (`endocal validate`).
 
-    Made by `validate`. Its `repr` is the verdict: the RMSE with its interval, the
-    worst regime, the first suggestion or "nothing missing", the untested suspects, the
-    error beside the previous model's.
+    Made by `validate`, which runs the pipeline the command line runs
+    (`endocal.validation.offline.validate_records`) and renders its one result with the same
+    functions (`endocal.views`): its summary (`summary()`, also its `repr`) is what `endocal
+    validate` prints, line for line, and `to_dict()` what `--json` prints, key for key.
 
     Attributes
     ----------
     model : Model
         The model validated.
     result : ValidationResult
-        The library's object (`endocal.validation.offline.ValidationResult`), which the
-        command's terminal view and `--json` render too.
+        The library's object (`endocal.validation.offline.ValidationResult`), which every view renders.
     rmse_deg : float
         RMSE of the model on the validation data (deg); `metrics.ci["rmse_deg"]` its 95 %
         block-bootstrap interval.
@@ -664,8 +720,11 @@ class Validation(_Result):
         Effects the residual points at that the scan could not confirm, with the experiment
         that would (`endocal.validation.verdict.Pointer`).
     compare : Comparison or None
-        The previous model's error beside this one's.
+        The previous model's error beside this one's (`compare.old_path`: its file).
+    compare_found : bool
+        The previous model was not named but found: the model this one was refitted from.
     notes : list of str
+        Each a `endocal.messages.Message`: its text, and its `key`.
     clean : bool
         Nothing is missing.
     next : NextOutcome or None
@@ -673,14 +732,15 @@ class Validation(_Result):
         (`.experiment`: what it tests, each effect's half-cycles and what the paired test
         needs at the gain seen), the `excite` command lines that record it (`.excite`), or
         why nothing was written (`.reason`) (`endocal.validation.next_experiment.NextOutcome`).
+    request : ValidationRequest
+        What was asked: the model's file, the records, `train`, `cv`, `planes`, `probe`,
+        `refit_on`, and whether `next=` could design for this model (for the summary's next command).
     """
 
-    def __init__(self, result, model: Model, *, records: Sequence, compare_path=None, next=None) -> None:
+    def __init__(self, result, model: Model, *, records: Sequence) -> None:
         self.result = result
         self.model = model
-        self.next = next
         self._records = list(records)
-        self._compare_path = compare_path
         self.suggestions = [Suggestion(s, self) for s in result.suspects]
 
     axis = property(lambda self: self.result.axis)
@@ -693,55 +753,31 @@ class Validation(_Result):
     heldout_rmse_deg = property(lambda self: self.result.scan.baseline_rmse_heldout_deg)
     untested = property(lambda self: list(self.result.pointers))
     notes = property(lambda self: list(self.result.notes))
+    next = property(lambda self: self.result.next)
+    request = property(lambda self: self.result.request)
+    compare_found = property(lambda self: self.result.compare_found)
 
     def to_dict(self) -> dict:
-        """What `endocal validate MODEL DATA --json` prints."""
-        d = self.result.to_dict()
-        if self._compare_path is not None and d["compare"] is not None:
-            d["compare"]["path"] = str(self._compare_path)
-        if self.next is not None:
-            d["next"] = self.next.to_dict()
-        return d
+        """What `endocal validate MODEL DATA --json` prints, key for key (`endocal.views.validation_dict`)."""
+        from endocal.views import validation_dict
+
+        return validation_dict(self.result)
+
+    def summary(self) -> list[str]:
+        """The summary `endocal validate` prints, line for line (at most
+        `endocal.views.SUMMARY_MAX_LINES`): how far off, where, what is missing, one keyed line per
+        warning and note, the next command (`endocal.views.validation_summary`)."""
+        from endocal.views import validation_summary
+
+        return validation_summary(self.result)
 
     def __repr__(self) -> str:
-        r = self.result
-        scan = r.scan
-        n = sum(d["n_samples"] for d in r.data)
-        what = "in-sample" if r.in_sample else "validation" if scan.scheme == "estimation/validation" else "held-out"
-        lo, hi = r.metrics.ci.get("rmse_deg", (float("nan"), float("nan")))
-        unit = r.model.get("drive_unit") or "deg"  # the command's: a linear drive's in mm; the angles stay deg
-        drive = "" if unit == "deg" else f" (drive commanded in {unit})"
-        lines = [f"Validation of {r.model['label']} on axis {r.axis}{drive}: {len(r.data)} record(s), {n} samples",
-                 f"  RMSE {r.metrics.rmse_deg:.3g} deg (95 % CI {lo:.3g} .. {hi:.3g})"
-                 + (f"; {what} RMSE {scan.baseline_rmse_heldout_deg:.3g} deg" if scan.scheme != "none" else "")]
-        c = r.compare
-        if c is not None:
-            lines.append(f"  vs {c.old_label}: {what} RMSE {c.old_heldout_rmse_deg:.3g} -> {c.new_heldout_rmse_deg:.3g} "
-                         f"deg ({'fell' if c.change_pct < 0 else 'rose'} {abs(c.change_pct):.0f} %)")
-        worst = r.regimes.worst(1)
-        if worst:
-            w = worst[0]
-            lines.append(f"  worst regime: {w.group}: {w.name}: RMSE {w.metrics.rmse_deg:.3g} deg ({w.ratio:.2f}x)")
-        if self.suggestions:
-            more = f" (+{len(self.suggestions) - 1} more)" if len(self.suggestions) > 1 else ""
-            lines.append(f"  missing: {self.suggestions[0].summary()}{more}")
-            lines.append("  next: .suggestions[0].refit(), then validate the new model")
-        elif scan.scheme == "none":
-            lines.append(f"  missing: not tested: {scan.scheme_reason}")
-        elif r.clean:
-            lines.append(f"  missing: nothing (no catalog effect lowers the {what} RMSE by {scan.min_gain_pct:g} % or "
-                         "more, and the residual points at nothing untested)")
-        else:
-            lines.append("  missing: no catalog effect confirmed" + (f"; {r.unexplained}" if r.unexplained else ""))
-        if r.pointers:
-            lines.append("  untested suspects: " + ", ".join(p.effect for p in r.pointers) + " (see .untested)")
-        if r.notes:
-            lines.append(f"  {len(r.notes)} note(s) (see .notes)")
+        lines = self.summary()
         nx = None if self.next is None else self.next.experiment
-        if self.next is not None:
-            lines.append(f"  next: {self.next.path} written ({nx.duration_s:.0f} s on probe {nx.probe}), tests "
+        if self.next is not None:  # what the command line prints after the summary (endocal.cli.next_protocol)
+            lines.append(f"next: {self.next.path} written ({nx.duration_s:.0f} s on probe {nx.probe}), tests "
                          f"{', '.join(nx.suspects)}; .next.excite records it" if nx is not None else
-                         f"  next: {self.next.reason}")
+                         f"next: {self.next.reason}")
         return "\n".join(lines)
 
     def _record_figures(self):
@@ -778,7 +814,7 @@ class Validation(_Result):
 def validate(model: Model | str | Path, data, *, train=None, compare: Model | str | Path | bool | None = None,
              cv: str = "auto", refit_on: str = "estimation", folds: int = 5, seed: int = 0, planes=None,
              load_columns: Sequence[str] | None = None, next: str | Path | None = None,
-             probe: str | Path = "tee") -> Validation:
+             probe: str | Path = "tee", effects_file=None) -> Validation:
     """Hold a model against validation records: how far off, where it fails, which effect is missing.
 
     What `endocal validate MODEL DATA...` does offline: error metrics with 95 %
@@ -796,7 +832,8 @@ def validate(model: Model | str | Path, data, *, train=None, compare: Model | st
         Estimation data (`--train`); default: what the model was fitted on.
     compare : Model, path or bool, optional
         A previous model, shown beside this one under the same scheme. Default (None): the
-        model this one was refitted from (`Model.start_from`), if any; False: none.
+        model this one was refitted from (`Model.start_from`, else the file the refit
+        command's naming points at, `M.json` for `M-EFFECT.json`), if any; False: none.
     cv : {"auto", "rolling", "split"}
         How effects are tested: the estimation/validation split when there is estimation
         data (`auto`), rolling-origin cross-validation on `data` alone (`rolling`), or
@@ -820,6 +857,9 @@ def validate(model: Model | str | Path, data, *, train=None, compare: Model | st
         nothing is written when nothing is suspected (`Validation.next.reason` says so).
     probe : str or Path
         The probe the protocol is for when the records name none (`--probe`).
+    effects_file : path or sequence of paths, optional
+        Python files of one's own effects (`--effects-file`, :func:`use_effects`): the model's,
+        and candidates the scan tests beside the catalogue's.
 
     Returns
     -------
@@ -835,42 +875,19 @@ def validate(model: Model | str | Path, data, *, train=None, compare: Model | st
     RunFormatError
         A missing or malformed record, or a validation run of another probe than the model's.
     """
-    from endocal.validation.estimation import plan_estimation
-    from endocal.validation.offline import validate_offline
+    from endocal.validation.offline import validate_records
 
-    if folds < 2:
-        raise ModelError(f"folds must be 2 or more (held-out blocks of the rolling-origin scan), got {folds}")
-    if refit_on not in ("estimation", "all"):
-        raise ModelError(f"refit_on must be 'estimation' or 'all', got {refit_on!r}")
+    use_effects(effects_file)
     m = _model(model)
     tables = _aligned(data, "validation data")
-    if next is not None:
-        from endocal.validation.next_experiment import check_next
-
-        check_next(m.estimator, tables, probe)  # a fitted range no motion fits in: refused before the validation
     train_paths = [] if train is None else [str(a.source) for a in _aligned(train, "estimation data")]
-    plan = plan_estimation(m.estimator, tables, model_path=m.path, train_paths=train_paths, cv=cv,
-                           planes_path=_planes_path(planes))
     old = m.start_from if compare is None else None if compare is False else _model(compare, "compare")
-    if old is not None and old.axis != m.axis:
-        raise ModelError(f"compare: that model is of axis '{old.axis}', this one of axis '{m.axis}': compare with a "
-                         "model of the same axis")
-    data_paths = [str(a.source) for a in tables]
-    refit_paths, suffix = plan.train_paths, ""
-    if refit_on == "all" and plan.train is not None:  # asked for: the validation data folded into the refits
-        refit_paths, suffix = list(dict.fromkeys([*plan.train_paths, *data_paths])), "-all"
-    result = validate_offline(m.estimator, tables, train=plan.train, train_paths=refit_paths, planes=plan.planes,
-                              planes_path=plan.planes_path, scheme_reason=plan.reason, folds=folds, seed=seed,
-                              compare=None if old is None else old.estimator,
-                              model_path=None if m.path is None else str(m.path), data_paths=data_paths,
-                              load_columns=load_columns, refit_suffix=suffix)
-    outcome = None
-    if next is not None:
-        from endocal.validation.next_experiment import write_next
-
-        outcome = write_next(m.estimator, result, tables, plan.train, plan.planes, next, probe=probe,
-                             model_path=m.path)
-    return Validation(result, m, records=tables, compare_path=None if old is None else old.path, next=outcome)
+    result = validate_records(m.estimator, tables, model_path=m.path, train_paths=train_paths, cv=cv,
+                              planes_path=_planes_path(planes), compare=None if old is None else old.estimator,
+                              compare_path=None if old is None else old.path, find_previous=compare is None,
+                              refit_on=refit_on, folds=folds, seed=seed, load_columns=load_columns, next_path=next,
+                              probe=probe)
+    return Validation(result, m, records=tables)
 
 
 # ---------------------------------------------------------------------------- reports
@@ -956,7 +973,7 @@ class Report(_Result):
 
 def make_report(models, data, *, planes=None, out: str | Path | None = None, force: bool = False,
                 bootstrap: int = 400, seed: int = 0, history: str | Path | None = None,
-                probe_id: str | None = None) -> Report:
+                probe_id: str | None = None, effects_file=None) -> Report:
     """Compare hysteresis models on records (`endocal report`).
 
     Every model is scored on every record of its axis; models are compared on per-half-cycle
@@ -982,6 +999,8 @@ def make_report(models, data, *, planes=None, out: str | Path | None = None, for
         against these models (`report --history`).
     probe_id : str, optional
         With `history`: the probe to chart, when its checks used other model files.
+    effects_file : path or sequence of paths, optional
+        Python files of one's own effects the models were fitted with (:func:`use_effects`).
 
     Returns
     -------
@@ -998,6 +1017,7 @@ def make_report(models, data, *, planes=None, out: str | Path | None = None, for
     """
     from endocal.report import build_report, side_files
 
+    use_effects(effects_file)
     items = [models] if isinstance(models, (str, Path, Model)) else list(models)
     ms, names = [], []
     for m in map(_model, items):  # a saved model goes in by its file: named by its stem, its hash recorded

@@ -47,6 +47,10 @@ class ModelError(EndocalError, ValueError):
     """A model file or fit request is invalid (wrong version, fields, axis, or data)."""
 
 
+class CompensationRefusedError(ModelError):
+    """A fitted model predicts, but its base's inverse does not converge (checked on a sweep): no compensation."""
+
+
 class StopSignal(SystemExit):
     """A termination signal (SIGTERM, SIGHUP) stopped a hardware run, after torque was switched off.
 

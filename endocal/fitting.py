@@ -12,6 +12,7 @@ from endocal.models import make_model
 from endocal.models.base import HysteresisModel
 from endocal.models.start import RecordStart
 from endocal.runs.aligned import AlignedData, load_aligned
+from endocal.runs.format import sample_rate_hz
 from endocal.runs.probes import check_one_probe
 from endocal.validation.data import axis_data, glitch_note
 from endocal.validation.residuals import cut_start
@@ -29,11 +30,7 @@ class HysteresisFit:
     cut_start: str = ""  # how records that did not start at rest were fitted (validation.residuals.cut_start)
     glitches: str = ""  # samples left out as glitches (validation.data.glitch_note)
     probe: dict | None = None  # name and bending axes of the probe the runs were recorded on (None: bare tables)
-
-    @property
-    def rate_hz(self) -> float:
-        """Mean sample rate over the records (0 when they span no time)."""
-        return self.samples / self.duration_s if self.duration_s > 0 else 0.0
+    rate_hz: float = 0.0  # the records' sample rate (endocal.runs.format.sample_rate_hz; 0: no two samples)
 
 
 def fit_hysteresis(
@@ -49,7 +46,7 @@ def fit_hysteresis(
         (:func:`~endocal.runs.aligned.load_aligned`).
     axis : str
         Bending axis to model (must be in every table).
-    base : {"linear", "bspline", "pi"}
+    base : {"linear", "bspline", "pi", "bouc-wen", "dahl"}
     effects : list of str
         Effect names (see ``endocal effects``), e.g. ``["envelope"]`` for the paper's modified PI.
     planes : PlanesCalibration, optional
@@ -91,7 +88,7 @@ def fit_hysteresis(
     starts = [RecordStart.from_dict(s) for s in model.fit_report_.estimated_starts]
     cut = cut_start(data, model.predict(data) - data.meas_deg, "fitted record", starts)
     return HysteresisFit(model, [d.source for d in datas], [d.sha256 for d in datas], len(data.cmd_deg), span, cut,
-                         glitch_note(dropped, axis), probe)
+                         glitch_note(dropped, axis), probe, sample_rate_hz(*(d.table["t_s"] for d in datas)) or 0.0)
 
 
 def fit_provenance(fit: HysteresisFit, *, command: str | None, planes_path: str | Path | None = None,

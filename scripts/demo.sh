@@ -4,8 +4,10 @@
 set -euo pipefail
 export PATH="$PWD/.venv/bin:$PATH"  # the commands validate prints call `endocal` by name
 E=endocal
-OUT=${1:-demo-out}
+# OUT: `make demo` gives demo-out; run by hand without it, outside the repository (printed)
+OUT=${1:-${TMPDIR:-/tmp}/endocal-demo}
 mkdir -p "$OUT"
+echo "writing the demo's runs, models and report into $OUT"
 step() { local t0=$SECONDS; printf '\n\033[1m== %s\033[0m\n$' "$1"; printf ' %q' "${@:2}"; printf '\n'; "${@:2}"; printf '(%d s)\n' $((SECONDS - t0)); }
 
 step "bending planes: single-knob sweeps of the four half-planes" \

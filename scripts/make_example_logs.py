@@ -1,6 +1,10 @@
 """Write the CSV logs the README's `endocal import csv` examples read, from one simulated run.
 
-    .venv/bin/python scripts/make_example_logs.py [DIR]      # DIR defaults to the current folder
+    .venv/bin/python scripts/make_example_logs.py [DIR]      # DIR: default TMPDIR/endocal-examples
+
+DIR defaults to a folder outside the repository (``endocal-examples`` in the system's temporary
+folder, printed), so that neither the script nor the commands run on its logs write into a
+checkout.
 
 The run is the one tests/test_import_csv.py logs (a 20 s lissajous, seed 4, both knobs moving),
 written out three ways, as labs log:
@@ -15,15 +19,17 @@ written out three ways, as labs log:
 - rig_log.csv: the same bench with bare column names (Time, knob, TipAngle, sheath) and no map,
   for `--draft-map`.
 
-Run from the repository's root without DIR, the README's commands (`endocal import csv
-lab_log.csv --map configs/csv-map.example.toml ...`) then run as written and print what it shows.
-The simulated run itself is left in DIR/example-run.
+The two example maps are copied to DIR/configs/, so the how-to's commands (`endocal import csv
+lab_log.csv --map configs/csv-map.example.toml ...`), run in DIR, run as written and print what it
+shows. The simulated run itself is left in DIR/example-run.
 """
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +38,14 @@ import pandas as pd
 from endocal.runs.aligned import load_aligned, read_stream
 
 TICKS_PER_DEG = 4096 / 360.0
+REPO = Path(__file__).resolve().parents[1]
+#: The example maps the how-to's commands name (configs/...), copied beside the logs.
+MAPS = ("csv-map.example.toml", "csv-map.angles.example.toml")
+
+
+def default_dir() -> Path:
+    """Where the logs go without DIR: outside any checkout, in the system's temporary folder."""
+    return Path(tempfile.gettempdir()) / "endocal-examples"
 
 
 def lab_log(motor: pd.DataFrame, tracker: pd.DataFrame, whole_ticks: bool = True) -> pd.DataFrame:
@@ -56,11 +70,19 @@ def lab_log(motor: pd.DataFrame, tracker: pd.DataFrame, whole_ticks: bool = True
     return log.groupby("stamp_ms", as_index=False, sort=True).first()
 
 
+#: The simulated run the logs are written from: `endocal excite` and these arguments.
+EXCITE = ["excite", "lissajous", "--set", "duration_s=20", "--seed", "4", "--force", "--quiet"]
+
+
 def main(out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     run = out / "example-run"
-    subprocess.run([sys.executable, "-m", "endocal", "excite", "lissajous", "--set", "duration_s=20", "--out",
-                    str(run), "--seed", "4", "--force", "--quiet"], check=True)
+    subprocess.run([sys.executable, "-m", "endocal", *EXCITE, "--out", str(run)], check=True)
+    write_logs(run, out)
+
+
+def write_logs(run: Path, out: Path) -> None:
+    """The three logs of the run folder ``run``, and the example maps, into ``out``."""
     log = lab_log(read_stream(run, "motor"), read_stream(run, "tracker"))
     repeat = 101  # the row of stamp 13340 ms (line 103), written again on line 104
     log = pd.concat([log.iloc[:repeat + 1], log.iloc[repeat:repeat + 1], log.iloc[repeat + 1:]], ignore_index=True)
@@ -74,9 +96,12 @@ def main(out: Path) -> None:
     bench.to_csv(out / "bench_log.csv", index=False)
     pd.DataFrame({"Time": a["t_s"], "knob": np.deg2rad(a["ap_cmd_deg"]), "TipAngle": a["ap_meas_deg"],
                   "sheath": 180.0}).to_csv(out / "rig_log.csv", index=False)
-    names = ", ".join(str(out / n) for n in ("lab_log.csv", "bench_log.csv", "rig_log.csv"))
-    print(f"wrote {names} (the simulated run {run} logged as three rigs would)")
+    (out / "configs").mkdir(exist_ok=True)
+    for name in MAPS:
+        shutil.copyfile(REPO / "configs" / name, out / "configs" / name)
+    print(f"wrote lab_log.csv, bench_log.csv, rig_log.csv and configs/ (the example maps) in {out}, from the simulated "
+          f"run {run} logged as three rigs would; run the how-to's commands there: cd {out}")
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1] if len(sys.argv) > 1 else "."))
+    main(Path(sys.argv[1]) if len(sys.argv) > 1 else default_dir())

@@ -53,10 +53,11 @@ def _get(doc, path):
     return doc
 
 
-def mutate_document(doc, rng: np.random.Generator) -> tuple[str, object]:
-    """One structured change of a parsed document (a deep copy is changed, not ``doc``)."""
+def mutate_document(doc, rng: np.random.Generator, under: tuple[str, ...] = ()) -> tuple[str, object]:
+    """One structured change of a parsed document (a deep copy is changed, not ``doc``); with
+    ``under``, of a field below one of those top-level keys only."""
     doc = json.loads(json.dumps(doc))
-    paths = _paths(doc)
+    paths = [p for p in _paths(doc) if not under or p[0] in under] or _paths(doc)
     path = paths[int(rng.integers(len(paths)))]
     parent, key = _get(doc, path[:-1]), path[-1]
     op = int(rng.integers(4))
@@ -99,15 +100,17 @@ def mutate_bytes(raw: bytes, rng: np.random.Generator) -> tuple[str, bytes]:
     return f"bytes {a}..{b} repeated", raw[:b] + raw[a:b] + raw[b:]
 
 
-def json_mutations(raw: bytes, seed: int, n: int) -> Iterator[tuple[str, bytes]]:
-    """``n`` mutations of a JSON file: three structured changes to one byte-level change."""
+def json_mutations(raw: bytes, seed: int, n: int, under: tuple[str, ...] = ()) -> Iterator[tuple[str, bytes]]:
+    """``n`` mutations of a JSON file: three structured changes to one byte-level change; with
+    ``under``, structured changes only, of fields below those top-level keys (the fields a
+    loader passes on to the commands: a model's provenance, its fit report)."""
     doc = json.loads(raw)
     rng = np.random.default_rng(seed)
     for i in range(n):
-        if i % 4 == 3:
+        if i % 4 == 3 and not under:
             yield mutate_bytes(raw, rng)
         else:
-            label, new = mutate_document(doc, rng)
+            label, new = mutate_document(doc, rng, under)
             yield label, json.dumps(new, indent=2).encode()  # NaN and Infinity written as Python writes them
 
 

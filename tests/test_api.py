@@ -103,12 +103,14 @@ def test_reprs_are_short_and_lead_with_the_verdict(loop):
     r = repr(model).splitlines()
     assert r[0] == "Model pi+envelope of axis ap" and r[1].strip() == model.equation
     assert r[2].startswith(f"  fit: RMSE {model.rmse_deg:.3g} deg on 5001 samples")
+    # a validation's repr is its summary, the lines `endocal validate` prints
     rv = repr(v).splitlines()
-    assert rv[0] == "Validation of pi+envelope on axis ap: 2 record(s), 3000 samples"
-    assert f"RMSE {v.rmse_deg:.3g} deg (95 % CI" in rv[1]
-    assert any(line.startswith("  missing: add delay: ") for line in rv) and len(rv) <= 8
+    assert rv == v.summary() and len(rv) <= 15
+    assert rv[0].startswith(f"pi+envelope on axis ap: validation RMSE {v.rmse_deg:.3g} deg (95 % CI")
+    assert any(line.startswith("missing: delay: -") for line in rv)
+    assert "  " + v.suggestions[0].command in rv
     rv2 = repr(v2)
-    assert "vs pi+envelope: validation RMSE" in rv2 and "fell" in rv2 and "missing: nothing" in rv2
+    assert "error fell" in rv2 and "since pi+envelope: validation RMSE" in rv2 and "nothing missing" in rv2
     assert repr(v.suggestions[0]).startswith("Suggestion: add delay: -")
     run = ec.load_run(loop["val"][0])
     assert repr(run).splitlines()[0] == f"Run {str(run.path)!r}: aligned table"
@@ -130,9 +132,11 @@ def test_to_dict_is_the_commands_json_from_the_same_objects(loop, tmp_path):
         assert theirs[key] == ours[key], key
     assert set(theirs["provenance"]) == set(ours["provenance"])
     assert ours["provenance"]["command"].startswith("endocal.api.fit(")
-    # the validation: its to_dict is the result's (what `validate --json` prints), strict JSON
+    # the validation: its to_dict is the result's, with each refit also as its shell command, strict JSON
     d = v.to_dict()
-    assert d == v.result.to_dict()
+    assert {k: x for k, x in d.items() if k not in ("suspects", "scan")} == {
+        k: x for k, x in v.result.to_dict().items() if k not in ("suspects", "scan")}
+    assert d["suspects"][0]["command"] == v.suggestions[0].command
     assert json.loads(v.to_json())["suspects"][0]["effect"] == v.suggestions[0].effect == d["suspects"][0]["effect"]
     assert v.suggestions[0].to_dict() == d["suspects"][0]
     # a run: what `endocal info --json` prints
@@ -290,6 +294,22 @@ def test_import_endocal_stays_light_and_exports_the_api():
     assert not any((ROOT / "endocal" / name).exists() or (ROOT / "endocal" / f"{name}.py").exists()
                    for name in api.__all__)
 
+
+
+def test_the_commands_json_and_summary_are_the_apis_to_dict_and_repr(loop, tmp_path):
+    """One validation, every view: for the same model file and records, `validate --json-out` writes
+    `Validation.to_dict()` key for key, and the terminal summary is its repr line for line."""
+    from tests._cli import endocal as cli
+
+    path = loop["model"].save(tmp_path / "m.json")  # its provenance names the estimation data
+    v = ec.validate(path, loop["val"])
+    res = cli("validate", str(path), *map(str, loop["val"]), "--json-out", str(tmp_path / "v.json"))
+    assert res.returncode == 0, res.stderr
+    theirs, ours = json.loads((tmp_path / "v.json").read_text()), json.loads(v.to_json())
+    assert list(theirs) == list(ours) and theirs == ours
+    assert theirs["suspects"][0]["command"] == v.suggestions[0].command
+    assert theirs["suspects"][0]["command"].startswith(f"endocal fit hysteresis {loop['est'][0]}")
+    assert res.stdout.splitlines() == repr(v).splitlines()
 
 
 def _uses_the_api(path: Path) -> bool:

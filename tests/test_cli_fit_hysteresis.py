@@ -102,8 +102,11 @@ def test_the_fit_states_its_sample_rate_and_questions_a_clock_in_ms(run, tmp_pat
     rmse = load_model(tmp_path / "a.json").fit_report_.rmse_deg
     lines = ok.stdout.splitlines()
     assert len(lines) == 2 and lines[0].startswith("ap_deg = ") and lines[1].startswith(f"RMSE {rmse:.3f} deg on ")
-    assert ok.stderr.splitlines() == [f"wrote {tmp_path / 'a.json'}", f"next: endocal validate {tmp_path / 'a.json'} "
-                                      "RECORDS (records it was not fitted on)"], ok.stderr
+    assert ok.stderr.splitlines() == [
+        f"wrote {tmp_path / 'a.json'}", f"next: endocal validate {tmp_path / 'a.json'} RECORDS (records it was not fitted on)",
+        f"  only this one record? endocal validate {tmp_path / 'a.json'} {run} --cv rolling (rolling origin: each "
+        "candidate effect refitted on the record's start, scored on the stretch after it); or fit on part of the log "
+        "and validate on the rest with --cv split"], ok.stderr
     table = load_aligned(run).table
     table["t_s"] *= 1000.0  # a lab's clock in ms written as t_s
     table.to_csv(tmp_path / "ms.csv", index=False)

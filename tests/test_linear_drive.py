@@ -296,7 +296,7 @@ def test_the_api_prints_a_linear_drives_commands_in_mm_and_next_is_refused(bench
     model.save(tmp_path / "m.json")
     v = ec.validate(model, runs["chirp"])
     text = repr(v)
-    assert text.splitlines()[0].startswith("Validation of linear+deadzone on axis ap (drive commanded in mm):"), text
+    assert text.splitlines()[0].startswith("linear+deadzone on axis ap (drive commanded in mm): "), text
     worst = next(ln for ln in text.splitlines() if "worst regime" in ln)
     assert re.search(r" mm(/s)?\)?: RMSE [\d.]+ deg", worst) and "deg/s" not in worst and " deg)" not in worst, worst
     assert "RMSE" in text and re.search(r"RMSE [\d.]+ deg \(95 % CI", text)  # the angle's error: deg

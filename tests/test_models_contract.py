@@ -9,7 +9,7 @@ from endocal.errors import ModelError
 from endocal.models import BASES, HysteresisData, load_model, make_model, save_model
 from tests._models_signals import PAPER_TABLE1, damped_sine
 
-CASES = [(b, e) for b in ("linear", "bspline", "pi") for e in ((), ("envelope",))]
+CASES = [(b, e) for b in ("linear", "bspline", "pi", "bouc-wen", "dahl") for e in ((), ("envelope",))]
 
 
 @pytest.fixture(scope="module")
@@ -44,19 +44,30 @@ def test_contract(case, data, fitted, tmp_path):
     pred = m.predict([r.cmd_deg for r in runs])
     assert isinstance(pred, list) and len(pred) == 2
     rmse = np.sqrt(np.mean(np.concatenate([p - r.meas_deg for p, r in zip(pred, runs)]) ** 2))
-    assert rmse == pytest.approx(m.fit_report_.rmse_deg, rel=1e-9)
+    if not m.fit_report_.estimated_starts:  # a run fitted from an estimated start is scored from it (models.start)
+        assert rmse == pytest.approx(m.fit_report_.rmse_deg, rel=1e-9)
     assert rmse < 0.15 * np.std(np.concatenate([r.meas_deg for r in runs]))
     # inverse: predict(inverse(y)) == y for a reachable y (the model's own output of a smaller motion)
     y_des = m.predict(0.8 * runs[0].cmd_deg)
-    u = m.inverse(y_des)
-    assert np.max(np.abs(m.predict(u) - y_des)) < 1e-8
-    # a held target holds the command (test_a_held_target_holds_the_command for a flat band)
-    y_hold = np.concatenate([y_des[:300], np.full(200, y_des[299])])
-    assert np.ptp(m.inverse(y_hold)[300:]) < 1e-9
-    # the streaming compensator gives the batch inverse sample by sample
-    comp = m.compensator()
-    streamed = np.array([comp.step(v) for v in y_des[:400]])
-    assert np.max(np.abs(streamed - u[:400])) < 1e-9
+    try:
+        u = m.inverse(y_des)
+    except ModelError as exc:
+        # a base whose fitted law cannot be inverted says so in one line naming it, and refuses to compensate
+        # (a smooth friction base whose tip moves back after a reversal on this pinched loop)
+        assert not m.return_point_memory and case[0] in str(exc) and "\n" not in str(exc)
+        assert "compensation refused" in str(exc)
+        with pytest.raises(ModelError, match="compensation refused"):
+            m.compensator()
+        u = None
+    if u is not None:
+        assert np.max(np.abs(m.predict(u) - y_des)) < 1e-8
+        # a held target holds the command (test_a_held_target_holds_the_command for a flat band)
+        y_hold = np.concatenate([y_des[:300], np.full(200, y_des[299])])
+        assert np.ptp(m.inverse(y_hold)[300:]) < 1e-9
+        # the streaming compensator gives the batch inverse sample by sample
+        comp = m.compensator()
+        streamed = np.array([comp.step(v) for v in y_des[:400]])
+        assert np.max(np.abs(streamed - u[:400])) < 1e-9
     # save / load: exact round trip of predictions and inverse
     path = tmp_path / "model.json"
     save_model(m, path)
@@ -66,7 +77,8 @@ def test_contract(case, data, fitted, tmp_path):
     m2 = load_model(path)
     for r in runs:
         assert np.max(np.abs(m2.predict(r.cmd_deg) - m.predict(r.cmd_deg))) <= 1e-12
-    assert np.max(np.abs(m2.inverse(y_des) - u)) <= 1e-12
+    if u is not None:
+        assert np.max(np.abs(m2.inverse(y_des) - u)) <= 1e-12
     assert str(m2) == str(m)
     # unfitted model refuses
     with pytest.raises(ModelError, match="not fitted"):

@@ -68,20 +68,42 @@ def model_files(tmp_path_factory) -> dict[str, Path]:
     from endocal.validation.data import axis_data
 
     d = tmp_path_factory.mktemp("models")
-    data = axis_data(load_aligned(REPO / "data_samples" / "sim-triangle"), "ap")
+    record = load_aligned(REPO / "data_samples" / "sim-triangle")
+    data = axis_data(record, "ap")
+    # the provenance `fit hysteresis` writes: validate and report read it past the loader
+    provenance = {"software": {"endocal": "0"}, "created_utc": "2026-11-28T00:00:00.000Z", "command": "endocal fit",
+                  "cwd": str(REPO), "data": [{"path": str(record.source), "sha256": record.sha256}],
+                  "planes": None, "planes_sha256": None, "probe": {"name": "tee", "bending_axes": ["ap", "ml"]}}
     out = {}
     for base, effects in (("pi", ["envelope", "delay"]), ("bspline", ["deadzone", "creep"]), ("linear", ["drift"])):
         model = make_model(base, effects, axis="ap").fit(data, max_nfev=20)
         out[base] = d / f"{base}.json"
-        save_model(model, out[base])
+        save_model(model, out[base], provenance=provenance)
     return out
 
 
+_RECORDS: dict = {}
+
+
+def _record():
+    """The record the models were fitted on (loaded once)."""
+    from endocal.runs.aligned import load_aligned
+
+    if not _RECORDS:
+        _RECORDS["sim-triangle"] = load_aligned(REPO / "data_samples" / "sim-triangle")
+    return _RECORDS["sim-triangle"]
+
+
 def _use_model(path: Path) -> None:
-    """What every command does with a model file first: load, print, predict and invert over its range."""
+    """What every command does with a model file first: load, print, predict and invert over its range;
+    and what `validate` and `report` read past the loader: the estimation data, planes and probe its
+    provenance names, checked against a record."""
     from endocal.models import load_model
+    from endocal.validation.estimation import plan_estimation
 
     model = load_model(path)
+    for cv in ("auto", "rolling"):
+        plan_estimation(model, [_record()], model_path=path, cv=cv)
     model.equation()
     lo, hi = model.cmd_range_deg_
     t_s = np.arange(120) * 0.05

@@ -197,7 +197,8 @@ def test_a_fitted_range_too_narrow_is_refused_naming_it():
 # ---------------------------------------------------------------------------- what --json and the API carry
 #: The keys `validate --json` had before --next added its own (issue 27: add, never rename)
 JSON_KEYS = {"axis", "model", "data", "metrics", "heldout_rmse_deg", "regimes", "residuals", "suspects", "scan",
-             "scheme", "estimation", "pointers", "shift", "clean", "unexplained", "beyond_samples", "notes", "compare"}
+             "scheme", "estimation", "pointers", "shift", "clean", "unexplained", "beyond_samples", "notes", "note_keys",
+             "compare"}
 
 
 def test_the_json_says_what_was_designed_and_how_to_record_it(loop):
@@ -278,7 +279,7 @@ def test_the_summary_points_at_next_when_only_untested_effects_remain(loop, monk
     is this validation with --next, within the summary's 15 lines."""
     import dataclasses
 
-    from endocal.cli.validate import SUMMARY_MAX_LINES
+    from endocal.views import SUMMARY_MAX_LINES
     from endocal.validation import offline
 
     tmp, _ = loop
@@ -301,13 +302,38 @@ def test_the_summary_points_at_next_when_only_untested_effects_remain(loop, monk
 def test_the_summary_points_at_next_only_where_next_can_design(loop):
     """The pointer is a command that works: for a model --next would refuse (an axis no knob of the
     probe drives: the real piezo stack's), the summary says each experiment in words instead."""
-    from endocal.cli.validate import _next_command
+    from endocal.errors import EndocalError
     from endocal.validation.data import axis_data
+    from endocal.validation.next_experiment import check_next
 
     tmp, _ = loop
-    knob = _next_command(load_model(tmp / "m.json"), [load_aligned(tmp / "val")], tmp / "m.json", [tmp / "val"], [],
-                         "auto", None, "tee")
-    assert knob is not None and knob.endswith("--next next.toml"), knob
+    check_next(load_model(tmp / "m.json"), [load_aligned(tmp / "val")], "tee")  # validate_records: next_possible
     piezo = load_aligned(ROOT / "data_samples" / "piezo" / "piezo_aligned.csv")
     model = make_model("linear", axis="piezo").fit(axis_data([piezo], "piezo"))
-    assert _next_command(model, [piezo], Path("m.json"), [Path("check.csv")], [], "auto", None, "tee") is None
+    with pytest.raises(EndocalError):  # the summary then says each experiment in words
+        check_next(model, [piezo], "tee")
+
+
+def test_the_load_segment_records_the_same_motion_at_the_earlier_value_and_a_new_one(loop, tmp_path):
+    """Issue 32: a condition changed only between records is confounded with them (their motion, their start);
+    --next asks for the same motion at the earlier value and at a new one, and with both recorded the
+    estimation data can show a load term (before, with differing motions only, they cannot)."""
+    from endocal.validation.data import axis_data
+    from endocal.validation.identifiability import untestable_reason
+
+    tmp, _ = loop
+    proto = read_protocol_file(tmp / "next.toml")
+    instruction = proto.conditions["sheath_wrap_deg"]["instruction"]
+    assert "the same motion at two values" in instruction and "(180)" in instruction, instruction
+    nx = json.loads((tmp / "v.json").read_text())["next"]
+    earlier = ["endocal", "excite", str(tmp / "next.toml"), "--out", str(tmp / "next-fit-earlier"), "--set",
+               "sheath_wrap_deg=180"]
+    assert nx["excite"][2] == earlier
+    for name, value in (("old", 180), ("new", 120)):
+        proc = endocal("excite", tmp / "next.toml", "--out", tmp_path / name, "--set", f"sheath_wrap_deg={value}", "-q")
+        assert proc.returncode == 0, proc.stderr
+    records = [load_aligned(tmp / n) for n in ("est1", "est2")]
+    differing = axis_data(records + [load_aligned(tmp_path / "new")], "ap")
+    assert "constant within each record" in untestable_reason("load:sheath_wrap_deg", differing)
+    same = axis_data(records + [load_aligned(tmp_path / n) for n in ("old", "new")], "ap")
+    assert untestable_reason("load:sheath_wrap_deg", same) is None

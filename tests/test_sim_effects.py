@@ -182,3 +182,51 @@ def test_load_random_mode_is_bounded_seeded_and_slow():
     assert not np.allclose(wa, wb)
     # Band-limited to 0.02 Hz: at most 2*pi*0.02*60 = 7.5 deg/s, i.e. <= 0.075 deg per tick.
     assert np.abs(np.diff(wa)).max() <= 0.076
+
+
+# -- foreign laws (issue 31 part 4): plants whose law is not the catalogue's ------------------------
+def test_rate_law_linear_scales_the_slip_thresholds_not_the_friction_coefficient():
+    off = SimConfig.default()
+    linear = off.replace(rate={"enabled": True, "gain_s_per_deg": 0.012, "law": "linear"})
+    capstan = off.replace(rate={"enabled": True, "gain_s_per_deg": 0.012})
+    ratio_off = _loop_area(off, 0.5) / _loop_area(off, 0.05)
+    ratio_lin = _loop_area(linear, 0.5) / _loop_area(linear, 0.05)
+    # thresholds x (1 + 0.012 s/deg * up to 190 deg/s): up to 3.3 times the slip threshold at 0.5 Hz, so the
+    # loop fattens with speed; the capstan's exponential of the same gain (mu*Theta up to 3.3 times) fattens
+    # it differently: the two laws are two plants
+    assert ratio_lin > ratio_off + 0.2
+    assert abs(_loop_area(linear, 0.5) / _loop_area(capstan, 0.5) - 1.0) > 0.05
+
+
+def test_creep_with_two_time_constants_relaxes_as_their_sum():
+    goals = lambda t: {"ap": np.where(t >= 1.0, 50.0, 0.0)}
+    a1, tau1, a2, tau2 = 0.15, 1.0, 0.15, 12.0
+    base = quiet(deviation_deg=STRAIGHT)
+    t, c = run(base.replace(creep={"enabled": True, "fraction": a1, "time_constant_s": tau1, "fraction2": a2,
+                                   "time_constant2_s": tau2}), goals, 30.0)
+    _, q = run(base, goals, 30.0)
+    y, y_qs = c.truth["ap_true_deg"], q.truth["ap_true_deg"]
+    jump = y_qs[-1] - y_qs[np.searchsorted(t, 0.9)]
+    # in-plane, eq. 1 is half the bend and linear in it: the remainder is the jump times the two relaxations
+    # (the knob's 30 ms loop shifts the step by ~0.06 s: 6 % of tau1's term at most; 2 % of the jump)
+    for s in (2.0, 5.0, 10.0, 20.0):
+        k = np.searchsorted(t, 1.0 + s)
+        expected = a1 * np.exp(-s / tau1) + a2 * np.exp(-s / tau2)
+        assert (y_qs[k] - y[k]) / jump == pytest.approx(expected, abs=0.02 * expected + 2e-3), s
+
+
+def test_deadzone_center_moves_the_frozen_band_off_neutral():
+    def band_end(cfg):
+        """Knob angle (deg) where the falling branch's frozen stretch (the reversal's backlash, then the
+        slack band) ends and the tip moves again."""
+        t, c = run(cfg, sine("ap", 50, 0.05), 40.0)
+        sel = (t > 20) & (c.motor["ap_vel_degps"] < 0)
+        q, y = c.motor["ap_pos_deg"][sel], c.truth["ap_true_deg"][sel]
+        still = np.abs(np.diff(y)) < 1e-9
+        return float(q[1:][still].min())
+
+    on = SimConfig.default()
+    # the agonist has pulley_radius * 12 deg less slack than the antagonist: the band both tendons are slack
+    # in moves by 12 deg of knob, and with it the knob angle where the antagonist takes up its slack (one
+    # 25 ms tick of a 16 deg/s knob is 0.4 deg: the edge is read within that)
+    assert band_end(on.replace(deadzone={"center_deg": 12.0})) - band_end(on) == pytest.approx(12.0, abs=0.5)

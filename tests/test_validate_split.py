@@ -138,7 +138,7 @@ def test_the_summary_fits_a_screen_and_explain_prints_everything(sine_sweeps, pe
     worst regime), what is missing (the first suggestion, its gain and p), the untested suspects by
     name, and the refit command; ``--explain`` prints every metric, regime, candidate, suspect and
     note in full. One validation (pe_on_val's) is rendered both ways."""
-    from endocal.cli.refit import refit_command
+    from endocal.shell import refit_command
     from endocal.cli.validate import SUMMARY_MAX_LINES
     from endocal.validation.metrics import METRIC_KEYS
 
@@ -350,7 +350,7 @@ def test_a_validation_sweep_wider_than_the_estimation_sweep_is_scored_on_the_mod
     n = d["data"][0]["n_samples"]
     assert d["beyond_samples"] == pytest.approx(n * (1 - 2 / np.pi * np.arcsin(6 / 7)), rel=0.1)
     res = _run("validate", tmp / "bs.json", tmp / "wide")
-    assert f"warning[beyond-range]: {d['beyond_samples']} of {n} samples command beyond the range" in res.stdout, \
+    assert f"warning[beyond-range]: {d['beyond_samples']} of {n} samples command beyond the model's fitted range" in res.stdout, \
         res.stdout
 
 

@@ -273,6 +273,8 @@ def effects_markdown() -> str:
             f"| parameters | {params} |",
             f"| needs | {', '.join(info.needs) or 'command and measurement only'} |",
             f"| streaming compensation | {'yes' if info.streamable else 'no'} |",
+            f"| the records must hold | {'; '.join(info.requires) or 'nothing beyond a reversal'} |",
+            f"| looks like | {'; '.join(f'`{k}`: {v}' for k, v in info.lookalikes.items()) or 'none declared'} |",
             "",
             "**Physics** (from `" + cls.__module__ + "`):",
             "",

@@ -103,18 +103,13 @@ def refuse_input_as_output(flag: str, output: Path | None, inputs) -> None:
 
 
 def slow_clock_warning(n_samples: int, span_s: float) -> str | None:
-    """``warning: ...`` when records hold under one sample per second, else None.
+    """``warning: ...`` (keyed ``slow-clock``) when records hold under one sample per second, else None
+    (:func:`endocal.validation.offline.slow_clock`, which ``validate`` notes too)."""
+    from endocal.messages import Message
+    from endocal.validation.offline import slow_clock
 
-    Knob loops are logged at tens of Hz or more; a clock in ms written as ``t_s`` reads 1000x
-    too slow and would make every time-based effect (delay, creep, drift) meaningless.
-    """
-    from endocal.runs.format import LOG_RATE_RANGE_HZ
-
-    rate = n_samples / span_s if span_s > 0 else 0.0
-    if not 0 < rate < LOG_RATE_RANGE_HZ[0]:
-        return None
-    return (f"warning: {rate:.3g} samples per second: is t_s in seconds? (a clock in ms reads 1000x too slow; "
-            "endocal import csv converts units)")
+    text = slow_clock(n_samples, span_s)
+    return Message("warning: " + text, text.key) if text else None
 
 
 def stdout_is_terminal() -> bool:

@@ -18,6 +18,7 @@ from endocal.cli._common import (
     out,
     warnings_as_lines,
 )
+from endocal.cli._effects_file import effects_file_option, use_effects_files
 
 
 @cli_errors
@@ -44,6 +45,7 @@ def excite(
     max_force_n: Optional[float] = typer.Option(None, "--max-force-n", help="With --force-model: stop bending further into the load when the predicted tip force reaches this (N)."),
     tip_load_n: Optional[float] = typer.Option(None, "--tip-load-n", help="Known load hung at the tip (N), opposing positive bending of the protocol's first axis: recorded for `fit force`; the simulator hangs it."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+    effects_files: list[Path] = effects_file_option(),
 ) -> None:
     """Run an excitation protocol and log motor and tracker streams to a run folder.
 
@@ -58,6 +60,7 @@ def excite(
     from endocal.probe import load_probe
     from endocal.protocols import load_protocol, parse_overrides
 
+    use_effects_files(effects_files)  # before the models that use them and the sim config that hides them
     overrides = parse_overrides(sets)
     known = {q.name for q in load_protocol(protocol).spec.params}
     for flag, key, value in (("--amplitude", "amplitude_deg", amplitude), ("--offset", "offset_deg", offset),

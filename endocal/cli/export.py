@@ -10,6 +10,7 @@ from typing import Optional
 import typer
 
 from endocal.cli._common import cli_errors, err, fail, out, refuse_input_as_output
+from endocal.cli._effects_file import effects_file_option, use_effects_files
 from endocal.cli.messages import keyed
 
 app = typer.Typer(help="Take endocal's results where robotics people use them: a model's compensator as C99 "
@@ -32,6 +33,7 @@ def export_c_cmd(
     force: bool = typer.Option(False, "--force", help="Overwrite NAME.h and NAME.c."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (name, real, chain, dt_s, cmd_range, "
                                  "warnings, files)."),
+    effects_files: list[Path] = effects_file_option(),
 ) -> None:
     """Write the model's streaming compensator as C99: a header and a source with a state struct,
     NAME_init and NAME_step(desired_deg) -> knob command, one call per control tick.
@@ -43,6 +45,7 @@ def export_c_cmd(
     """
     from endocal.export.c import export_c
 
+    use_effects_files(effects_files)
     comp = export_c(model_path, out_dir, real="float" if use_float else "double", loop_hz=loop_hz, name=name,
                     force=force)
     h_path, c_path = comp.files
@@ -68,6 +71,7 @@ def export_mcap_cmd(
     force: bool = typer.Option(False, "--force", help="Replace --out."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (path, channels, t_range_s, start_ns, "
                                  "incomplete, notes)."),
+    effects_files: list[Path] = effects_file_option(),
 ) -> None:
     """Write a run as one MCAP file that Foxglove and PlotJuggler open without ROS (JSON Schema
     channels): motor streams per degree of freedom, tracker poses as foxglove.PoseInFrame and
@@ -79,6 +83,7 @@ def export_mcap_cmd(
     """
     from endocal.export.mcap import export_mcap
 
+    use_effects_files(effects_files)
     refuse_input_as_output("--out", out_path, [run, *models, run / "run.json", run / "aligned.parquet"])
     res = export_mcap(run, out_path, models=models, force=force)
     span = f"t_s {res.t_range_s[0]:.2f}..{res.t_range_s[1]:.2f}"

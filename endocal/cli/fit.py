@@ -10,6 +10,7 @@ from typing import Optional
 import typer
 
 from endocal.cli._common import cli_errors, err, out, refuse_input_as_output, slow_clock_warning
+from endocal.cli._effects_file import effects_file_option, use_effects_files
 from endocal.cli.messages import EXPLAIN_HELP, keyed, keyed_lines
 from endocal.errors import OutputExistsError
 
@@ -66,7 +67,7 @@ def planes(
 def hysteresis(
     data: list[Path] = typer.Argument(..., help="Run folders or aligned tables (.parquet / .csv); fitted together."),
     axis: str = typer.Option(..., "--axis", "-a", help="Bending axis to model, e.g. ap, ml, ud, lr."),
-    model: str = typer.Option("pi", "--model", "-m", help="Base model: linear, bspline or pi."),
+    model: str = typer.Option("pi", "--model", "-m", help="Base model: linear, bspline, pi (return-point memory), bouc-wen or dahl (smooth friction without it)."),
     effects: str = typer.Option("", "--effects", "-e", help="Comma-separated effects, e.g. envelope,delay (see `endocal effects`)."),
     planes_file: Optional[Path] = typer.Option(None, "--planes", help="planes.json: fit against the twisted planes the knob drives."),
     out_path: Path = typer.Option(..., "--out", "-o", help="Model file to write (versioned JSON)."),
@@ -75,6 +76,7 @@ def hysteresis(
     sets: list[str] = typer.Option([], "--set", help="A base-model setting, e.g. --set n_knots=3 (bspline: n_knots, degree; pi: n_operators, weights, offset); repeatable."),
     start_from: Optional[Path] = typer.Option(None, "--start-from", help="A fitted model (same axis and base) to start from: the effects it has start at its values. validate's refit commands use it."),
     explain: bool = typer.Option(False, "--explain", "-v", help=EXPLAIN_HELP),
+    effects_files: list[Path] = effects_file_option(),
 ) -> None:
     """Fit a hysteresis model (knob command -> bending angle) of one axis.
 
@@ -89,7 +91,8 @@ def hysteresis(
     from endocal.fitting import fit_hysteresis, fit_provenance
     from endocal.models import model_to_dict, save_model
 
-    refuse_input_as_output("--out", out_path, [*data, planes_file, start_from])
+    use_effects_files(effects_files)
+    refuse_input_as_output("--out", out_path, [*data, planes_file, start_from, *effects_files])
     if out_path.exists() and not force:
         raise OutputExistsError(f"{out_path} already exists: choose another --out or pass --force")
     planes = None
@@ -118,7 +121,21 @@ def hysteresis(
     else:
         _fit_summary(result)
     err.print(f"wrote {out_path}")
-    err.print(f"next: endocal validate {shlex.quote(str(out_path))} RECORDS (records it was not fitted on)", markup=False)
+    for line in _next_validate(out_path, result.sources):
+        err.print(line, markup=False)
+
+
+def _next_validate(model_path: Path, sources: list) -> list[str]:
+    """What to run after a fit: validate on other records; after a fit on one record, also what to do
+    when that record is all there is (rolling origin on it, or a held-out part with --cv split)."""
+    m = shlex.quote(str(model_path))
+    lines = [f"next: endocal validate {m} RECORDS (records it was not fitted on)"]
+    if len(sources) == 1:
+        rec = shlex.quote(str(sources[0]))
+        lines.append(f"  only this one record? endocal validate {m} {rec} --cv rolling (rolling origin: each "
+                     "candidate effect refitted on the record's start, scored on the stretch after it); or fit on "
+                     "part of the log and validate on the rest with --cv split")
+    return lines
 
 
 def _fit_explained(result) -> None:
@@ -126,7 +143,7 @@ def _fit_explained(result) -> None:
     rep = result.model.fit_report_
     out.print(str(result.model), markup=False)
     out.print(
-        f"fit: {result.samples} samples ({result.duration_s:.4g} s, {result.rate_hz:.3g} Hz) from "
+        f"fit: {result.samples} samples ({result.duration_s:.4g} s, {result.rate_hz:.1f} Hz) from "
         f"{len(result.sources)} source(s); RMSE {rep.rmse_deg:.3f} deg; {rep.nfev} evaluations; "
         + ("converged" if rep.status > 0 else f"stopped before converging ({rep.message}): the parameters may not be "
            "final; refit with --start-from this model"),
@@ -146,11 +163,12 @@ def _fit_summary(result) -> None:
     rep = result.model.fit_report_
     out.print(str(result.model), markup=False)
     out.print(f"RMSE {rep.rmse_deg:.3f} deg on {result.samples} samples ({result.duration_s:.4g} s, "
-              f"{result.rate_hz:.3g} Hz) from {len(result.sources)} source(s); "
+              f"{result.rate_hz:.1f} Hz) from {len(result.sources)} source(s); "
               + ("converged" if rep.status > 0 else "not converged"), markup=False)
     lines = []
     if rep.status <= 0:
-        lines.append(keyed(f"stopped before converging ({rep.message})", key="not-converged"))
+        lines.append(keyed(f"stopped before converging ({rep.message}), refit with --start-from the model just "
+                           "written to go on from its values", key="not-converged"))
     slow = slow_clock_warning(result.samples, result.duration_s)
     lines += keyed_lines([slow, *rep.warnings, result.glitches])
     if result.cut_start:

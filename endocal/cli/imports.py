@@ -90,13 +90,17 @@ def import_csv_cmd(
         for line in keyed_lines(notes, "note") + keyed_lines(warns):
             err.print(line, markup=False)
     if not res.alignment_error:
-        err.print(_next_fit(res.run_dir), markup=False)
+        err.print(_next_fit(res.run_dir, res.axes), markup=False)
 
 
-def _next_fit(data: Path) -> str:
-    """The next command after an import: fit the hysteresis of the records just written."""
-    return (f"next: endocal fit hysteresis {shlex.quote(str(data))} --axis AXIS --out MODEL.json "
-            f"(`endocal info {shlex.quote(str(data))}` names its axes)")
+def _next_fit(data: Path, axes: tuple[str, ...] = ()) -> str:
+    """The next command after an import: fit the hysteresis of the records just written, on the
+    axis the import found commanded and measured (the first, naming the others, when several)."""
+    q = shlex.quote(str(data))
+    if not axes:
+        return f"next: endocal fit hysteresis {q} --axis AXIS --out MODEL.json (`endocal info {q}` names its axes)"
+    others = f" (and --axis {' / '.join(axes[1:])}: one model per axis)" if len(axes) > 1 else ""
+    return f"next: endocal fit hysteresis {q} --axis {axes[0]} --out MODEL.json{others}"
 
 
 def _draft(log: Path, path: Path, force: bool) -> None:

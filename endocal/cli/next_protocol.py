@@ -30,6 +30,8 @@ def render_next(outcome, as_json: bool) -> None:
         say.print(f"  not in it: {note}", markup=False)
     for k, instruction in nx.conditions.items():
         say.print(f"  condition {k}: {instruction}", markup=False)
-    say.print("Record it twice, once to add to the estimation data and once to validate on:", markup=False)
+    say.print("Record it twice, once to add to the estimation data and once to validate on"
+              + (" (and, for the condition, the same motion at the earlier value, to add to the estimation data too)"
+                 if len(outcome.excite) > 2 else "") + ":", markup=False)
     for args in outcome.excite:
         say.print("  " + shlex.join(args), markup=False)

@@ -11,6 +11,7 @@ from typing import Optional
 import typer
 
 from endocal.cli._common import cli_errors, err, out, refuse_input_as_output
+from endocal.cli._effects_file import effects_file_option, use_effects_files
 from endocal.cli.messages import EXPLAIN_HELP, capped, keyed_lines
 
 
@@ -51,6 +52,7 @@ def report(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
     explain: bool = typer.Option(False, "--explain", "-v", help=EXPLAIN_HELP + " Adds each finding's test, the ladder "
                                  "of models and every note in full."),
+    effects_files: list[Path] = effects_file_option(),
 ) -> None:
     """Compare hysteresis models on records: metrics with 95 % CIs, statistical tests, figures, provenance.
 
@@ -63,6 +65,7 @@ def report(
     from endocal.report import build_report
     from endocal.report.result import side_files
 
+    use_effects_files(effects_files)
     models, records = split_paths(paths, data)
     if history_probe is not None and history is None:
         from endocal.errors import ModelError

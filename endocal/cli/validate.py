@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import shlex
 import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Optional
@@ -18,34 +17,17 @@ from endocal.cli._common import (
     guard_factory,
     out,
     refuse_input_as_output,
-    slow_clock_warning,
     warnings_as_lines,
 )
-from endocal.cli.messages import EXPLAIN_HELP, capped, key_of, keyed_lines
-from endocal.cli.refit import refit_command, with_refit_commands
-from endocal.errors import EndocalError, ModelError
+from endocal.cli._effects_file import effects_file_option, use_effects_files
+from endocal.cli.messages import EXPLAIN_HELP
+from endocal.errors import ModelError
+from endocal.views import SUMMARY_MAX_LINES  # noqa: F401  (the summary's budget, as tests and docs quote it)
 
 if TYPE_CHECKING:
     from rich.table import Table
 
 _UNITS = {"rmse_deg": "deg", "mae_deg": "deg", "max_deg": "deg", "median_deg": "deg", "median_pct": "%"}
-
-
-def previous_model_path(model_path: Path, effects: list[str]) -> Path | None:
-    """The model this one was refitted from, by the naming of the refit command (``M-EFFECT.json``, or
-    ``M-EFFECT-all.json`` under ``--refit-on all``, ``M-EFFECT-insample.json`` from estimation data
-    that holds the validated record, from ``M.json``)."""
-    name = model_path.name
-    if not name.endswith(".json"):
-        return None
-    stem = name[:-5].removesuffix("-all").removesuffix("-insample")
-    for e in effects:
-        tag = "-" + e.replace(":", "-")
-        if stem.endswith(tag):
-            cand = model_path.with_name(stem[: -len(tag)] + ".json")
-            if cand.is_file():
-                return cand
-    return None
 
 
 def _metrics_table(title: str, metrics) -> Table:
@@ -80,18 +62,17 @@ def heldout_label(scan, in_sample: bool = False) -> str:
     return f"held-out RMSE (model refitted on earlier data, rolling origin, {scan.folds} blocks)"
 
 
-def _scheme_word(result) -> str:
-    """What kind of RMSE the scan's numbers are, in one word."""
-    if result.scan.scheme != "estimation/validation":
-        return "held-out"
-    return "in-sample" if result.in_sample else "validation"
-
-
-def render(result, folded: bool = False) -> None:
-    """Print the terminal summary of a :class:`~endocal.validation.offline.ValidationResult` (``folded``: its
-    refit commands fold the validation data in, --refit-on all)."""
+def render(result) -> None:
+    """``--explain``: print every detail of a :class:`~endocal.validation.offline.ValidationResult` (the result
+    the summary renders too): the metrics table, the worst regimes, the residual tests, every candidate with
+    its physics and promise, the untested suspects with why and how to test them, every warning and note in
+    full."""
     from rich.markup import escape
 
+    from endocal.shell import refit_command
+    from endocal.views import promise, scheme_word
+
+    folded = result.request is not None and result.request.folded
     m = result.model
     scan = result.scan
     out.print(f"[bold]{m['label']}[/] on axis {result.axis}: {sum(d['n_samples'] for d in result.data)} samples "
@@ -99,10 +80,6 @@ def render(result, folded: bool = False) -> None:
     out.print(m["equation"], markup=False)
     for w in m.get("fit_warnings", []):  # what its fit said (a parameter at a bound, no better than a line)
         out.print(f"fit warning: {w}", markup=False)
-    slow = slow_clock_warning(sum(d["n_samples"] for d in result.data),
-                              sum(d.get("duration_s") or 0.0 for d in result.data))
-    if slow:
-        out.print(slow, markup=False)
     if scan.scheme != "none":
         out.print(f"scheme: {_SCHEME_WORDS[scan.scheme]} ({scan.scheme_reason})", markup=False)
     if result.estimation:
@@ -123,7 +100,7 @@ def render(result, folded: bool = False) -> None:
     c = result.compare
     if c is not None:
         arrow = "fell" if c.change_pct < 0 else "rose"
-        what = _scheme_word(result)
+        what = scheme_word(result)
         out.print(f"[bold]Watch the error fall:[/] {what} RMSE {c.old_label} {c.old_heldout_rmse_deg:.3g} deg -> "
                   f"{c.new_label} {c.new_heldout_rmse_deg:.3g} deg ({arrow} {abs(c.change_pct):.0f} %); "
                   f"on all data {c.old_rmse_deg:.3g} -> {c.new_rmse_deg:.3g} deg")
@@ -137,7 +114,7 @@ def render(result, folded: bool = False) -> None:
     for x in result.residuals.significant():
         out.print(f"  correlates with {x.signal} (|r| = {x.max_abs_corr:.2f} at lag {x.lag_s:+.3g} s): {x.hint}",
                   markup=False)
-    what = _scheme_word(result)
+    what = scheme_word(result)
     if result.suspects:
         thin = not any(s.significant for s in result.suspects)
         few = all(s.evidence.startswith("not enough") for s in result.suspects)
@@ -147,8 +124,7 @@ def render(result, folded: bool = False) -> None:
         out.print(f"[bold]Which effect is missing[/] ({head}):")
         for i, s in enumerate(result.suspects, 1):
             stat = s.evidence if thin else f"p = {s.p_value:.2g}"
-            out.print(f"  {i}. {s.effect}: -{s.gain_pct:.0f} % {what} RMSE ({s.base_rmse_heldout_deg:.3g} -> "
-                      f"{s.rmse_heldout_deg:.3g} deg), {stat}", markup=False)
+            out.print(f"  {i}. {s.effect}: {promise(s, what)}, {stat}", markup=False)
             out.print(f"     {s.cause}; signature: {s.signature}", markup=False)
             if s.caution:
                 out.print(f"     caution: {s.caution}", markup=False)
@@ -178,6 +154,13 @@ def render(result, folded: bool = False) -> None:
                  "this says little (see the notes)." if scan.still_blocks else "")
         out.print(f"[bold]Which effect is missing:[/] nothing: no catalog effect lowers the {what} RMSE by "
                   f"{scan.min_gain_pct:g} % or more, and the residual points at nothing the scan could not test.{rests}")
+    if scan.bases:
+        out.print(f"[bold]Which base[/] (the other bases with this model's effects, {what} gain, Holm-corrected p):")
+        for b in scan.bases:
+            out.print(f"  {b.line(what)}: {b.evidence}"
+                      + ("" if b.return_point_memory else "; no return-point memory"), markup=False)
+        for b in scan.base_suggestions[:1]:
+            out.print("  " + refit_command(b.refit), markup=False)
     if result.pointers:
         out.print("[bold]Untested suspects[/] (the data point at them; the scan did not confirm them):")
         for p in result.pointers:
@@ -186,106 +169,6 @@ def render(result, folded: bool = False) -> None:
             out.print(f"     to test it: {p.experiment}", markup=False)
     for note in result.notes:
         out.print(f"note: {note}", markup=False)
-
-
-#: Lines the summary of an offline validation prints at most (issue 26: a verdict a person reads at a glance).
-SUMMARY_MAX_LINES = 15
-
-
-def render_summary(result, *, folded: bool = False, model_path: Path, data: list[Path],
-                   old_path: Path | None = None, next_command: str | None = None) -> None:
-    """Print the summary of a :class:`~endocal.validation.offline.ValidationResult`: at most
-    :data:`SUMMARY_MAX_LINES` lines.
-
-    How far off (the RMSE with its interval), where (the worst regime), what is missing (the first
-    suggestion with its gain and p, or nothing), the untested suspects by name, one keyed line per
-    warning and note, and the next command. :func:`render` (``--explain``) prints everything.
-
-    ``next_command`` (this validation with ``--next``): when nothing is suggested but suspects
-    are untested or effects untestable on these records, the next command is that one, which
-    writes the experiment that tests them.
-    """
-    m, scan, c = result.model, result.scan, result.compare
-    n = sum(d["n_samples"] for d in result.data)
-    what = _scheme_word(result)
-    lo, hi = result.metrics.ci.get("rmse_deg", (float("nan"), float("nan")))
-    # "validation" only when the model was fitted on other data; rolling origin adds its held-out RMSE
-    word = "" if scan.scheme != "estimation/validation" else "in-sample " if result.in_sample else "validation "
-    heldout = (f", held-out {scan.baseline_rmse_heldout_deg:.3g} deg (rolling origin)"
-               if scan.scheme == "rolling-origin" else "")
-    head = [f"{m['label']} on axis {result.axis}: {word}RMSE {result.metrics.rmse_deg:.3g} deg (95 % CI {lo:.3g} .. "
-            f"{hi:.3g}){heldout}, {n} samples from {len(result.data)} record(s)"]
-    if c is not None:
-        since = f"{c.old_label} ({old_path.name})" if old_path is not None else c.old_label
-        head.append(f"error {'fell' if c.change_pct < 0 else 'rose'} {abs(c.change_pct):.0f} % since {since}: {what} "
-                    f"RMSE {c.old_heldout_rmse_deg:.3g} -> {c.new_heldout_rmse_deg:.3g} deg")
-    worst = result.regimes.worst(1)
-    if worst:
-        r = worst[0]
-        head.append(f"worst regime: {r.group}: {r.name}: RMSE {r.metrics.rmse_deg:.3g} deg ({r.ratio:.2f}x "
-                    f"overall), {100 * r.fraction:.0f} % of samples")
-    verdict, then = _verdict(result, folded, model_path, data, old_path, next_command)
-    head.append(verdict)
-    if result.pointers:
-        head.append("untested suspects: " + ", ".join(dict.fromkeys(p.effect for p in result.pointers)))
-    tail = [*then, "details: --explain (every metric with its interval, regime, residual test, candidate and note)"]
-    warnings = keyed_lines([*m.get("fit_warnings", []),
-                            slow_clock_warning(n, sum(d.get("duration_s") or 0.0 for d in result.data)),
-                            ("in-sample", "the estimation data includes the record validated here" if result.in_sample
-                             else ""),
-                            ("beyond-range", f"{result.beyond_samples} of {n} samples command beyond the range the "
-                             "model was fitted on" if result.beyond_samples > 0.1 * n else "")])
-    # the CLI's own warnings say what these notes say
-    notes = [x for x in result.notes if key_of(x) not in ("in-sample", "beyond-range")]
-    lines = capped(warnings + keyed_lines(notes, "note"), SUMMARY_MAX_LINES - len(head) - len(tail),
-                   "warnings and notes")
-    for line in head + lines + tail:
-        out.print(line, markup=False)
-
-
-def _verdict(result, folded: bool, model_path: Path, data: list[Path], old_path: Path | None,
-             next_command: str | None = None) -> tuple[str, list[str]]:
-    """What is missing, in one line, and the next command (lines)."""
-    scan, what = result.scan, _scheme_word(result)
-    untested = list(dict.fromkeys([*(p.effect for p in result.pointers), *scan.untestable]))
-    design = ([f"next: write the experiment that tests {', '.join(untested)}: {next_command}"]
-              if next_command and untested else [])
-    n = sum(d["n_samples"] for d in result.data)
-    report = ("next: compare the models on these records, with figures: endocal report "
-              + shlex.join([*(str(p) for p in (old_path, model_path) if p is not None),
-                            *(a for p in data for a in ("--data", str(p))), "--out", "report.html"]))
-    if result.suspects:
-        s = result.suspects[0]
-        thin = not any(x.significant for x in result.suspects)
-        others = [x.effect for x in result.suspects[1:]]
-        verdict = (f"{'first candidate' if thin else 'missing'}: {s.effect}: -{s.gain_pct:.0f} % {what} RMSE "
-                   f"({s.base_rmse_heldout_deg:.3g} -> {s.rmse_heldout_deg:.3g} deg), "
-                   + (s.evidence if thin else f"p = {s.p_value:.2g}")
-                   + (f"; also: {', '.join(others)}" if others else ""))
-        if result.beyond_samples > 0.5 * n:
-            return verdict, ["next: refit on data that covers this record's commands (most of it lies beyond the "
-                             "model's range), then validate again"]
-        then = "validate the new model on a third record" if folded else "validate the new model"
-        return verdict, [f"next: refit with {s.effect}, then {then}:", "  " + refit_command(s.refit)]
-    if scan.scheme == "none":
-        return f"missing: not tested: {scan.scheme_reason}", []
-    if result.pointers:
-        p = result.pointers[0]
-        return ("missing: nothing the scan confirmed, but the data point at effects it could not settle",
-                design or [f"next: to test {p.effect}: {p.experiment}"])
-    # after a refit (a model to compare with) the report of the two stays a next step beside the design
-    then = [*design, report] if design and old_path is not None else design or [report]
-    if result.unexplained:
-        return (f"nothing missing from the catalog (no effect lowers the {what} RMSE by {scan.min_gain_pct:g} % or "
-                f"more), but {result.unexplained}", then)
-    if scan.tested and scan.tested[0].gain_pct >= scan.min_gain_pct:
-        best = scan.tested[0]
-        return (f"nothing significant missing: the best candidate, {best.effect}, lowers the {what} RMSE by "
-                f"{best.gain_pct:.0f} % but not consistently (p = {best.p_value:.2g})", then)
-    still = (f"; but {scan.still_blocks} of its {scan.folds} held-out blocks hold no motion of this axis"
-             if scan.still_blocks else "")
-    return (f"nothing missing: no catalog effect lowers the {what} RMSE by {scan.min_gain_pct:g} % or more{still}",
-            then)
 
 
 @cli_errors
@@ -315,6 +198,7 @@ def validate(
     max_force_n: Optional[float] = typer.Option(None, "--max-force-n", help="With --force-model: stop bending into the load at this predicted tip force (N)."),
     explain: bool = typer.Option(False, "--explain", "-v", help=EXPLAIN_HELP + " Offline: the metrics table, the worst regimes, the residual tests, every candidate with its physics, the untested suspects with why and how to test them."),
     next_path: Optional[Path] = typer.Option(None, "--next", help="Offline: write the protocol that would settle what this validation could not (suspects it could not confirm, effects the data cannot test) to this .toml, sized from the effects seen, for the probe the records were made on (else --probe); prints the excite commands that record it (with --json or --json-out: the object's `next`: the file, the suspects, each one's half-cycles needed at the gain seen, the excite commands)."),
+    effects_files: list[Path] = effects_file_option(),
 ) -> None:
     """Compare a model with measurements: how far off, where it fails, which physical effect is missing.
 
@@ -328,6 +212,7 @@ def validate(
     """
     from endocal.models import load_model
 
+    use_effects_files(effects_files)  # before the model that may need them
     if folds < 2:
         raise ModelError(f"--folds must be 2 or more (held-out blocks of the rolling-origin scan), got {folds}")
     refuse_input_as_output("--json-out", json_out, [model_path, *(data or []), *train, *compare, planes, force_model,
@@ -372,75 +257,30 @@ def validate(
     if refit_on not in ("estimation", "all"):
         raise ModelError(f"--refit-on must be one of estimation, all, got {refit_on!r}")
     from endocal.runs.aligned import load_aligned
-    from endocal.validation.estimation import plan_estimation
-    from endocal.validation.offline import validate_offline
+    from endocal.validation.offline import validate_records
+    from endocal.views import validation_dict, validation_summary
 
-    tables = [load_aligned(p) for p in data]
-    if next_path is not None:
-        from endocal.validation.next_experiment import check_next
-
-        check_next(model, tables, probe)  # a fitted range no motion fits in is refused before the validation
-    plan = plan_estimation(model, tables, model_path=model_path, train_paths=train, cv=cv, planes_path=planes)
-    refuse_input_as_output("--json-out", json_out, [*plan.train_paths, plan.planes_path])
-    effects = [e.label for e in model.effects_]
-    old_path = compare_path if compare_path is not None else previous_model_path(model_path, effects)
-    old = load_model(old_path) if old_path is not None else None
-    if compare_path is not None and old.axis != model.axis:
-        raise ModelError(f"--compare {compare_path} is a model of axis '{old.axis}', but {model_path} is of axis "
-                         f"'{model.axis}': compare with a model of the same axis")
-    refit_paths, suffix = plan.train_paths, ""
-    if refit_on == "all" and plan.train is not None:  # asked for: the validation data folded into the refits
-        refit_paths = list(dict.fromkeys([*plan.train_paths, *(str(p) for p in data)]))
-        suffix = "-all"  # another model than the one scored: not under its name
-    result = validate_offline(model, tables, train=plan.train, train_paths=refit_paths, planes=plan.planes,
-                              planes_path=plan.planes_path, scheme_reason=plan.reason, folds=folds, seed=seed,
-                              compare=old, model_path=str(model_path), data_paths=[str(p) for p in data],
-                              load_columns=load_column or None, refit_suffix=suffix)
-    d = with_refit_commands(result.to_dict(), result.scan)
-    if old_path is not None and d["compare"] is not None:
-        d["compare"]["path"] = str(old_path)
-    outcome = None
-    if next_path is not None:
-        from endocal.cli.next_protocol import next_json
-        from endocal.validation.next_experiment import write_next
-
-        outcome = write_next(model, result, tables, plan.train, plan.planes, next_path, probe=probe,
-                             model_path=model_path)
-        d["next"] = next_json(outcome)
-    if not emit_json(d, as_json, json_out):
+    old = load_model(compare_path) if compare_path is not None else None
+    v = validate_records(model, [load_aligned(p) for p in data], model_path=model_path, train_paths=train, cv=cv,
+                         planes_path=planes, compare=old, compare_path=compare_path, refit_on=refit_on, folds=folds,
+                         seed=seed, load_columns=load_column or None, next_path=next_path, probe=probe)
+    refuse_input_as_output("--json-out", json_out, [*(d["source"] for d in v.estimation), *v.request.train,
+                                                    v.request.planes])
+    if not emit_json(validation_dict(v), as_json, json_out):
         if explain:
-            render(result, folded=bool(suffix))
-            if old_path is not None and compare_path is None:
-                err.print(f"compared with {old_path} (the model this one was refitted from)")
+            render(v)
+            if v.compare_found:
+                err.print(f"compared with {v.compare.old_path} (the model this one was refitted from)")
         else:
-            again = None if next_path is not None else _next_command(model, tables, model_path, data, train, cv,
-                                                                     planes, probe)
-            render_summary(result, folded=bool(suffix), model_path=model_path, data=list(data), old_path=old_path,
-                           next_command=again)
-    if outcome is not None:
+            for line in validation_summary(v):
+                out.print(line, markup=False)
+    if v.next is not None:
         from endocal.cli.next_protocol import render_next
         from endocal.validation.next_experiment import NothingSuspectedError
 
-        render_next(outcome, as_json)
-        if not outcome.written:  # said in the JSON too; on the command line one line, exit code 2
-            raise NothingSuspectedError(outcome.reason)
-
-
-def _next_command(model, tables, model_path: Path, data: list[Path], train: list[Path], cv: str,
-                  planes: Path | None, probe: str) -> str | None:
-    """This validation again with ``--next next.toml`` (the summary's pointer at the next experiment);
-    None when ``--next`` would refuse this model (a linear drive, an axis the probe has no knob for, a
-    fitted range no motion fits in): the summary then says each experiment in words."""
-    from endocal.validation.next_experiment import check_next
-
-    try:
-        check_next(model, tables, probe)
-    except EndocalError:
-        return None
-    return shlex.join(["endocal", "validate", str(model_path), *(str(p) for p in data),
-                       *(a for p in train for a in ("--train", str(p))), *(["--cv", cv] if cv != "auto" else []),
-                       *(["--planes", str(planes)] if planes is not None else []),
-                       *(["--probe", probe] if probe != "tee" else []), "--next", "next.toml"])
+        render_next(v.next, as_json)
+        if not v.next.written:  # said in the JSON too; on the command line one line, exit code 2
+            raise NothingSuspectedError(v.next.reason)
 
 
 def _rmse_ci(metrics) -> str:

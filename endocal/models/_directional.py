@@ -110,10 +110,10 @@ class DirectionalModel(HysteresisModel):
         return _GPlayStepper(p["transition_slope"], t_up, c_up, t_dn, c_dn, deg, v_range)
 
     def _gauge(self, effects: list[Effect]) -> dict[str, float]:
-        # The branches absorb any affine map of their input: fix the envelope's
-        # middle slope and its zero so f only carries the shape (kinks, outer slopes).
+        # The branches absorb any affine map of their input: an effect's own gauge fixes what would
+        # trade off against it (the envelope's middle slope and zero: f only carries the shape).
         for e in effects:
-            if e.name == "envelope":
-                return {f"{e.prefix}_k1": 1.0, f"{e.prefix}_theta1_deg": 0.0}
+            if g := e.gauge("affine"):
+                return g
         return {}
 

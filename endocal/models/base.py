@@ -37,6 +37,7 @@ from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
 from endocal.errors import ModelError, OutOfRangeWarning
+from endocal.messages import KEYS, Message, key_of
 from endocal.models.compensator import StreamingCompensator
 from endocal.models.data import HysteresisData, as_data
 from endocal.models.effects import resolve_effects
@@ -132,7 +133,21 @@ class FitReport:
     estimated_starts: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """As a model file keeps it: ``warnings`` as text, and ``warning_keys`` the key of each
+        (:class:`endocal.messages.Message`), so a warning read back keeps the key it was made with."""
+        return {**asdict(self), "warning_keys": [key_of(w) for w in self.warnings]}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> FitReport:
+        """The inverse of :meth:`to_dict` (a file without ``warning_keys``, written before warnings carried
+        keys, gives plain text: its warnings print under the key ``other``)."""
+        d = dict(d)
+        keys = d.pop("warning_keys", None)
+        keys = keys if isinstance(keys, list) else []
+        warnings = list(d.get("warnings") or [])
+        d["warnings"] = [Message(w, k) if isinstance(w, str) and isinstance(k, str) and k in KEYS else w
+                         for w, k in zip(warnings, keys + [None] * (len(warnings) - len(keys)))]
+        return cls(**d)
 
 
 class HysteresisModel(ABC):
@@ -219,6 +234,9 @@ class HysteresisModel(ABC):
         return {}
 
     inverse_kind: ClassVar[str] = "numerical"
+    #: A small reversal inside the loop returns to the branch it left (a bank of plays, a backlash between
+    #: two branches); the smooth friction bases (``bouc-wen``, ``dahl``) have no such memory.
+    return_point_memory: ClassVar[bool] = True
 
     # ------------------------------------------------------------------ helpers
     def _require_fitted(self) -> None:
@@ -392,10 +410,10 @@ class HysteresisModel(ABC):
         if not self.fit_report_.rmse_deg < warm_rmse:
             self.__dict__.update(warm)
             return self
-        self.fit_report_.warnings.insert(0, (
+        self.fit_report_.warnings.insert(0, Message(
             f"from the start model's values the fit ended at {warm_rmse:.3g} deg RMSE, worse than the start model "
             f"itself ({start_rmse:.3g} deg; a local minimum): fitted from scratch "
-            f"({self.fit_report_.rmse_deg:.3g} deg)"))
+            f"({self.fit_report_.rmse_deg:.3g} deg)", "local-minimum"))
         return self
 
     def _fit(self, data, meas_deg, *, t_s, extras, max_nfev, warm_start=None):
@@ -534,8 +552,9 @@ class HysteresisModel(ABC):
             nfev=int(res.nfev), njev=int(res.njev or 0), cost=float(res.cost),
             rmse_deg=float(math.sqrt(float(r @ r) / m)), n_samples=d.n_samples, n_runs=d.n_runs,
             n_free=n_free, rank_deficient=rank_def, estimated_starts=[st.to_dict() for st in starts],
-            warnings=([f"{d.n_samples} samples for {n_free} free parameters (fewer than 10 per parameter): the "
-                       "fit may follow the noise; check it on a record it was not fitted on (endocal validate)"]
+            warnings=([Message(f"{d.n_samples} samples for {n_free} free parameters (fewer than 10 per parameter): "
+                               "the fit may follow the noise; check it on a record it was not fitted on (endocal "
+                               "validate)", "few-samples")]
                       if d.n_samples < 10 * n_free else []) + _loose_parameters(free, owners, values, stderr, lo, hi,
                                                                                   d.cmd_unit)
                      + _no_better_than_a_line(d, float(math.sqrt(float(r @ r) / m)), self.base_name),
@@ -856,7 +875,7 @@ class HysteresisModel(ABC):
         v = grid
         probe = HysteresisData(cmd_deg=grid, t_s=np.arange(grid.size, dtype=float))
         for e in self.effects_:
-            if isinstance(e, InputEffect) and e.name == "envelope":
+            if isinstance(e, InputEffect) and e.position_map:  # a static map of the position: its image
                 v = e.apply(eff_p[id(e)], v, probe)
         return (float(v.min()), float(v.max()))
 
@@ -1030,9 +1049,9 @@ def _no_better_than_a_line(d: HysteresisData, rmse_deg: float, base: str) -> lis
     line = float(np.sqrt(np.mean((A @ coef - d.meas_deg) ** 2)))
     if not (line > 0 and rmse_deg >= 0.95 * line):
         return []
-    return [f"the fit ({rmse_deg:.3g} deg RMSE) is no better than a straight line through the data ({line:.3g} deg): "
-            f"the {base} model found no loop it can shape; look at the loop (endocal report) and try another base "
-            "(--model bspline or linear)"]
+    return [Message(f"the fit ({rmse_deg:.3g} deg RMSE) is no better than a straight line through the data "
+                    f"({line:.3g} deg): the {base} model found no loop it can shape; look at the loop (endocal report) "
+                    "and try another base (--model bspline or linear)", "line-fit")]
 
 
 def _loose_parameters(free: list[str], owners: dict, values: dict, stderr: dict, lo: np.ndarray,
@@ -1051,7 +1070,8 @@ def _loose_parameters(free: list[str], owners: dict, values: dict, stderr: dict,
             p = {short: values[full] for full, (o, short) in owners.items() if o is e}
             why = e.why_loose(p, {short: stderr[full] for full, (o, short) in owners.items() if o is e})
             if why:
-                out.append(in_drive_unit(why, drive_unit) if isinstance(e, InputEffect) else why)
+                out.append(Message(in_drive_unit(why, drive_unit) if isinstance(e, InputEffect) else why,
+                                   getattr(why, "key", "dead-band")))
                 explained.update(full for full, (o, _) in owners.items() if o is e)
     for i, n in enumerate(free):
         if owners[n][0] == "base" or n in explained:
@@ -1061,13 +1081,15 @@ def _loose_parameters(free: list[str], owners: dict, values: dict, stderr: dict,
         span = hi[i] - lo[i] if math.isfinite(hi[i] - lo[i]) else max(abs(v), 1.0)
         for bound, word in ((lo[i], "lower"), (hi[i], "upper")):
             if math.isfinite(bound) and abs(v - bound) <= 1e-4 * span:
-                out.append(f"{name} = {v:.4g} sits at its {word} bound {bound:.4g}: the data does not constrain it "
-                           "(the term may be absent from this data, or compensate for something else)")
+                out.append(Message(f"{name} = {v:.4g} sits at its {word} bound {bound:.4g}: the data does not "
+                                   "constrain it (the term may be absent from this data, or compensate for something "
+                                   "else)", "at-bound"))
                 break
         else:
             if not math.isfinite(se) or se > abs(v):
-                out.append(f"{name} = {v:.4g} +- {se:.2g}: its standard error exceeds its value, the data does not "
-                           "identify it (record motion that exercises the term, or drop it)")
+                out.append(Message(f"{name} = {v:.4g} +- {se:.2g}: its standard error exceeds its value, the data "
+                                   "does not identify it (record motion that exercises the term, or drop it)",
+                                   "unidentified"))
     return out
 
 

@@ -11,6 +11,11 @@ Layout (``format: endocal-model``, ``version: 2``)::
      "correlation": {"names": [...], "matrix": [[...]]},
      "fit": {...FitReport...}, "training_data": [{"sha256": "...", "n_samples": 1400}]}
 
+A user's effect (``--effects-file``, :mod:`endocal.models.userfile`) carries its source in its
+entry, ``{"name": "wear", "settings": {}, "source": {"path": ..., "module": ..., "sha256": ...}}``,
+and a user's base in ``base_source``; loading the model without that file, or with the file
+changed and not given again, is refused (:func:`~endocal.models.userfile.check_model_sources`).
+
 ``drive_unit`` is the unit of the command the model was fitted on: ``deg`` for a knob, ``mm``
 for a linear stage pulling the tendon. The parameters keep their names in either unit
 (``deadzone_slack_deg``, ``cmd_range_deg``), and hold the drive's unit: a model of a linear drive
@@ -34,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from endocal.errors import ModelError, OutputPathError
+from endocal.errors import CompensationRefusedError, ModelError, OutputPathError
 from endocal.files import atomic_write_bytes, read_json_document, refuse_non_finite
 from endocal.models.base import FitReport, HysteresisModel
 from endocal.models.effects import EFFECTS
@@ -44,7 +49,7 @@ FORMAT = "endocal-model"
 VERSION = 2
 #: Optional top-level fields: who made the file, from what (endocal version, data files and hashes, command);
 #: the drive's unit (deg when absent).
-_OPTIONAL = {"provenance", "drive_unit"}
+_OPTIONAL = {"provenance", "drive_unit", "base_source"}
 #: Units a model's command may be in (endocal.runs.aligned.DRIVE_UNITS).
 _DRIVE_UNITS = ("deg", "mm")
 _KEYS = {"format", "version", "axis", "base", "settings", "out_of_range", "fixed", "effects", "structure",
@@ -62,10 +67,13 @@ def _from_num(x, default: float) -> float:
 
 def model_to_dict(model: HysteresisModel) -> dict:
     """A fitted model as a JSON-able dict (see the module docstring for the layout)."""
+    from endocal.models.userfile import sources_of_model
+
     model._require_fitted()
     fixed = getattr(model, "fixed_", {})
     corr = model.correlation_
-    return {
+    sources, base_source = sources_of_model(model)
+    d = {
         "format": FORMAT,
         "version": VERSION,
         "axis": model.axis,
@@ -73,7 +81,8 @@ def model_to_dict(model: HysteresisModel) -> dict:
         "settings": model.get_settings(),
         "out_of_range": model.out_of_range,
         "fixed": None if model.fixed is None else {k: float(v) for k, v in model.fixed.items()},
-        "effects": [{"name": e.name, "settings": e.settings()} for e in model.effects_],
+        "effects": [{"name": e.name, "settings": e.settings(), **({"source": s.to_dict()} if s else {})}
+                    for e, s in zip(model.effects_, sources)],
         "structure": model.structure_,
         "parameters": {n: {"value": float(v), "stderr": _num(model.stderr_[n]), "fixed": n in fixed}
                        for n, v in model.params_.items()},
@@ -84,6 +93,9 @@ def model_to_dict(model: HysteresisModel) -> dict:
         "fit": None if model.fit_report_ is None else model.fit_report_.to_dict(),
         "training_data": list(model.training_data_),
     }
+    if base_source is not None:
+        d["base_source"] = base_source.to_dict()
+    return d
 
 
 def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
@@ -108,6 +120,9 @@ def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
         raise ModelError(f"{where}: wrong fields for a version-{VERSION} model file (unknown {sorted(unknown)}, "
                          f"missing {sorted(missing)})")
     _check_shape(d, where)
+    from endocal.models.userfile import check_model_sources
+
+    check_model_sources(d, where)  # a user's effect or base: registered from the file the model was fitted with
     base = d["base"]
     if not isinstance(base, str) or base not in BASES:
         raise ModelError(f"{where}: unknown base model '{base}' (known: {', '.join(BASES)})")
@@ -144,7 +159,7 @@ def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
         model.correlation_ = corr.reshape(len(names), len(names))
         se = np.array([model.stderr_[n] for n in names])
         model.covariance_ = model.correlation_ * np.outer(se, se)
-        model.fit_report_ = None if d["fit"] is None else FitReport(**d["fit"])
+        model.fit_report_ = None if d["fit"] is None else FitReport.from_dict(d["fit"])
         model.training_data_ = list(d["training_data"])
         model.provenance_ = dict(d.get("provenance") or {})
         _check_works(model, where)
@@ -183,6 +198,9 @@ def _check_shape(d: dict, where: str) -> None:
 
     for key in ("settings", "structure"):
         need(isinstance(d[key], dict), key, "an object")
+    need(d["axis"] is None or (isinstance(d["axis"], str) and d["axis"].isidentifier()), "axis",
+         "the name of a bending axis (or null)")
+    need(isinstance(d["out_of_range"], str), "out_of_range", "a text")
     need(isinstance(d["effects"], list) and all(isinstance(e, dict) and isinstance(e.get("name"), str)
                                                  and isinstance(e.get("settings"), dict) for e in d["effects"]),
          "effects", 'a list of {"name": ..., "settings": {...}}')
@@ -214,7 +232,83 @@ def _check_shape(d: dict, where: str) -> None:
         need(not (isinstance(value, int) and not isinstance(value, bool) and abs(value) > limit),
              f"structure/{key}", f"a count in proportion with the file's {len(d['parameters'])} parameters")
     need(d["fit"] is None or isinstance(d["fit"], dict), "fit", "null or an object")
-    need(isinstance(d["training_data"], list), "training_data", "a list")
+    if isinstance(d["fit"], dict):
+        _check_fit_report(d["fit"], need)
+    need(isinstance(d["training_data"], list) and all(
+        isinstance(t, dict) and isinstance(t.get("sha256"), str) and _is_count(t.get("n_samples"))
+        for t in d["training_data"]), "training_data", 'a list of {"sha256": "...", "n_samples": N}')
+    _check_provenance(d.get("provenance"), need)
+
+
+#: FitReport's fields and the JSON types each must have (what the fit summary, `validate` and the
+#: report format: a text where a number is printed with :.3f stops them, not the loader).
+_FIT_FIELDS = {"success": "bool", "status": "int", "message": "str", "nfev": "count", "njev": "count",
+               "cost": "number", "rmse_deg": "number", "n_samples": "count", "n_runs": "count", "n_free": "count",
+               "rank_deficient": "bool", "method": "str", "warnings": "texts", "estimated_starts": "objects",
+               "warning_keys": "texts"}
+_FIT_REQUIRED = set(_FIT_FIELDS) - {"method", "warnings", "estimated_starts", "warning_keys"}
+
+
+def _is_count(x) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool) and x >= 0
+
+
+def _of_type(x, kind: str) -> bool:
+    return {"bool": lambda: isinstance(x, bool),
+            "int": lambda: isinstance(x, int) and not isinstance(x, bool),
+            "count": lambda: _is_count(x),
+            "number": lambda: _is_number(x) and x >= 0,
+            "str": lambda: isinstance(x, str),
+            "texts": lambda: isinstance(x, list) and all(isinstance(s, str) for s in x),
+            "objects": lambda: isinstance(x, list) and all(isinstance(s, dict) for s in x)}[kind]()
+
+
+def _check_fit_report(fit: dict, need) -> None:
+    """The ``fit`` object's fields: each known, present when required, of its type."""
+    unknown, missing = set(fit) - set(_FIT_FIELDS), _FIT_REQUIRED - set(fit)
+    need(not unknown and not missing, "fit", f"an object with the fields {', '.join(_FIT_FIELDS)} "
+         f"(unknown {sorted(unknown)}, missing {sorted(missing)})")
+    for key, value in fit.items():
+        need(_of_type(value, _FIT_FIELDS[key]), f"fit/{key}",
+             {"bool": "true or false", "int": "an integer", "count": "an integer >= 0", "number": "a number >= 0",
+              "str": "a text", "texts": "a list of texts", "objects": "a list of objects"}[_FIT_FIELDS[key]])
+
+
+def _check_provenance(prov, need) -> None:
+    """A model file's ``provenance``: null, or an object whose known fields have the types its readers use.
+
+    ``validate`` finds the estimation data and the planes through it and checks the probe of
+    the records against it, the report lists it: a field changed by hand must stop here, on a
+    line naming it. Fields it does not know are kept (a provenance is a record, not a setting).
+    """
+    if prov is None:
+        return
+    need(isinstance(prov, dict), "provenance", "null or an object")
+
+    def text_or_null(key: str) -> None:
+        need(prov.get(key) is None or isinstance(prov[key], str), f"provenance/{key}", "a text or null")
+
+    for key in ("created_utc", "command", "cwd", "planes", "planes_sha256"):
+        text_or_null(key)
+    need(prov.get("software") is None or isinstance(prov["software"], dict), "provenance/software",
+         "null or an object")
+
+    def file_ref(x) -> bool:
+        return (isinstance(x, dict) and isinstance(x.get("path"), str) and bool(x["path"])
+                and (x.get("sha256") is None or isinstance(x["sha256"], str)))
+
+    need(prov.get("data") is None or (isinstance(prov["data"], list) and all(file_ref(x) for x in prov["data"])),
+         "provenance/data", 'a list of {"path": "...", "sha256": "..."}')
+    need(prov.get("start_from") is None or file_ref(prov["start_from"]), "provenance/start_from",
+         'null or {"path": "...", "sha256": "..."}')
+    probe = prov.get("probe")
+    need(probe is None or isinstance(probe, dict), "provenance/probe", 'null or {"name": ..., "bending_axes": [...]}')
+    if probe:
+        need(isinstance(probe.get("name"), str) and bool(probe["name"]), "provenance/probe/name",
+             "the name of the probe the model was fitted on")
+        axes = probe.get("bending_axes", [])
+        need(isinstance(axes, list) and all(isinstance(a, str) for a in axes), "provenance/probe/bending_axes",
+             "a list of axis names")
 
 
 class _AnyColumn(dict):
@@ -251,7 +345,11 @@ def _check_works(model: HysteresisModel, where: str) -> None:
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore")
             y = np.asarray(model.predict(_smoke_data(cmd, t_s)), dtype=float)
-            ok = bool(np.isfinite(y).all()) and bool(np.isfinite(model.inverse(_smoke_data(y, t_s))).all())
+            try:
+                back = model.inverse(_smoke_data(y, t_s))
+            except CompensationRefusedError:  # it predicts and validates; compensating with it says so in one line
+                back = cmd
+            ok = bool(np.isfinite(y).all()) and bool(np.isfinite(back).all())
     except ModelError as exc:
         raise ModelError(f"{where}: the model file does not make a working model ({_first_line(exc)}); "
                          "restore the file or refit the model") from None

@@ -26,6 +26,7 @@ import numpy as np
 from scipy.optimize import least_squares, lsq_linear
 
 from endocal.errors import ModelError
+from endocal.messages import Message
 from endocal.models._kernels import (_EXP_MAX, pi_exp_forward_jac, pi_free_forward_jac, play_bank_forward,
                                      play_bank_states, play_bank_step)
 from endocal.models.base import HysteresisModel
@@ -170,7 +171,7 @@ class PIModel(HysteresisModel):
         is kept; the fit report says when that is the other.
         """
         super()._fit(data, meas_deg, t_s=t_s, extras=extras, max_nfev=max_nfev, warm_start=warm_start)
-        if self.weights != "auto" or not any(e.name == "envelope" for e in self.effects_):
+        if self.weights != "auto" or not any(e.shapes_base() for e in self.effects_):
             return self
         d, _ = as_data(data, meas_deg, t_s=t_s, extras=extras)
         line = _branch_lines_rmse(d)
@@ -188,9 +189,9 @@ class PIModel(HysteresisModel):
             self.__dict__.update(fitted_first)
             return self
         words = {"exponential": "the paper's weight law (eq. 8)", "free": "free weights"}
-        self.fit_report_.warnings.insert(0, (
+        self.fit_report_.warnings.insert(0, Message(
             f"{words[chosen]} fitted worse ({first:.3g} deg RMSE) than a straight line per direction of motion "
-            f"({line:.3g} deg): {words[other]} taken ({self.fit_report_.rmse_deg:.3g} deg)"))
+            f"({line:.3g} deg): {words[other]} taken ({self.fit_report_.rmse_deg:.3g} deg)", "pi-weights"))
         return self
 
     # ------------------------------------------------------------------ structure
@@ -202,9 +203,10 @@ class PIModel(HysteresisModel):
             raise ModelError(f"weights must be one of {WEIGHT_CHOICES}, got {self.weights!r}")
         if self.offset not in ("auto", True, False):
             raise ModelError(f"offset must be 'auto', True or False, got {self.offset!r}")
-        has_env = any(e.name == "envelope" for e in effects)
-        weights = self.weights if self.weights != "auto" else ("exponential" if has_env else "free")
-        offset = self.offset if self.offset != "auto" else (not has_env)
+        # an effect that shapes the loop (the envelope of the modified PI) resolves the "auto" settings
+        shaped = next((sh for e in effects if (sh := e.shapes_base())), {})
+        weights = self.weights if self.weights != "auto" else shaped.get("weights", "free")
+        offset = self.offset if self.offset != "auto" else shaped.get("offset", True)
         st = {"n_operators": int(self.n_operators), "weights": weights, "offset": bool(offset)}
         # start values found while choosing are kept for _base_initial on the same command (it ran
         # both searches again: a fifth of a pi + envelope fit's time on the thesis's sine-set)
@@ -437,12 +439,11 @@ class PIModel(HysteresisModel):
         return out
 
     def _gauge(self, effects: list[Effect]) -> dict[str, float]:
-        # The play operator is homogeneous (Phi_{c r}[c x] = c Phi_r[x]): with exponential
-        # weights the envelope's scale trades off exactly against r, ω and β, so one
-        # scale parameter must be fixed. k1 = 1 makes f read in degrees around neutral.
+        # The play operator is homogeneous (Phi_{c r}[c x] = c Phi_r[x]): an effect's scale that
+        # trades off exactly against r, ω and β is fixed by the effect's own gauge (the envelope's k1 = 1).
         for e in effects:
-            if e.name == "envelope":
-                return {f"{e.prefix}_k1": 1.0}
+            if g := e.gauge("scale"):
+                return g
         return {}
 
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from endocal import __version__
 from endocal.errors import EndocalError, RunFormatError
+from endocal.messages import Message
 from endocal.models.data import OTHER_CMD, HysteresisData
 from endocal.planes import PlanesCalibration, load_planes
 from endocal.planes.halfplanes import NOMINAL_AZIMUTH_DEG
@@ -42,12 +43,22 @@ def _other_axis(hdata: HysteresisData) -> tuple[str, np.ndarray] | None:
     return ("other axis command", other)
 
 
-def _tip_path(d: DataEntry) -> np.ndarray:
+def _tip_path(d: DataEntry) -> np.ndarray | None:
+    """The measured tip in the base sensor's frame (mm), or None for a record that logged no tracker.
+
+    An aligned table, or a run of a rig that measures the angle itself, has no tip path to draw,
+    and nothing is missing: only a tracker stream that is there and cannot be read is an error.
+
+    Raises
+    ------
+    EndocalError
+        The record's tracker stream is unreadable or holds no usable pose pair.
+    """
     from endocal.planes.segment import tip_in_base_from_tracker
 
     src = Path(d.aligned.source)
-    if not src.is_dir():
-        raise RunFormatError(f"{d.label} is an aligned table: no tracker stream to draw the tip from")
+    if not (src / TRACKER).is_dir():
+        return None
     _, tip_in_base_mm, _, _ = tip_in_base_from_tracker(read_stream(src, TRACKER), where=d.label)
     return tip_in_base_mm
 
@@ -306,7 +317,7 @@ def build_report(
     if cal is not None:
         places = [Path(d.aligned.source).parent for d in data_entries] + [Path(p) for p in planes_runs]
         view = planes_view(cal, planes_path, places=places)
-        notes += view.notes
+        notes += [Message(n, "planes-figure") for n in view.notes]  # endocal.report.planes words them
     jobs: list[tuple[str, callable]] = []
 
     for g in groups:
@@ -333,9 +344,12 @@ def build_report(
     paths = {}
     for d in data_entries:
         try:
-            paths[d.label] = _tip_path(d)
+            tip = _tip_path(d)
         except EndocalError as exc:
-            notes.append(f"no task-space tip trajectory for {d.label}: {exc}")
+            notes.append(Message(f"no task-space tip trajectory for {d.label}: {exc}", "no-tip-path"))
+            continue
+        if tip is not None:
+            paths[d.label] = tip
     for d in data_entries:
         walk = _walked_path(d)
         if walk is None:
@@ -354,8 +368,9 @@ def build_report(
         for e in d.meta.get("events", []) or []:
             if e.get("kind") == "stop":
                 knobs = ", ".join(f"{a} knob at {v:.1f} deg" for a, v in (e.get("knob_deg") or {}).items())
-                notes.append(f"force guard stop in {d.label}: t = {e['t_s']:.2f} s, predicted tip force "
-                             f"{e['force_pred_n']:.3f} N (threshold {e['threshold_n']:g} N), {knobs}")
+                notes.append(Message(f"force guard stop in {d.label}: t = {e['t_s']:.2f} s, predicted tip force "
+                                     f"{e['force_pred_n']:.3f} N (threshold {e['threshold_n']:g} N), {knobs}",
+                                     "force-stop"))
     if paths:
         jobs.append((ReportFigure("tip-paths", "task-space", "Task-space tip trajectories",
                                   "Measured tip position in the base sensor's frame (EM tracker), per record.", b""),

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from endocal.errors import EndocalError, ModelError, RunFormatError
+from endocal.messages import Message
 from endocal.models import HysteresisData, HysteresisModel, load_model
 from endocal.report.adapters import RegimeBreakdown, axis_data, error_by_regime, predict_extrapolated
 from endocal.report.stats import Comparison, Units, compare_models, make_units, unit_rmse
@@ -464,9 +465,9 @@ def evaluate(
                 notes = []
                 if beyond:
                     lo, hi = m.model.cmd_range_deg_
-                    notes.append(f"{beyond} samples of {d.label} command beyond {m.label}'s fitted range "
-                                 f"[{lo:.3g}, {hi:.3g}] {m.model.drive_unit_}: predicted by continuing the model there "
-                                 "(an extrapolation)")
+                    notes.append(Message(f"{beyond} samples of {d.label} command beyond {m.label}'s fitted range "
+                                         f"[{lo:.3g}, {hi:.3g}] {m.model.drive_unit_}: predicted by continuing the "
+                                         "model there (an extrapolation)", "beyond-range"))
                 preds[m.label] = (np.asarray(pred, float), notes)
             if not preds:
                 continue

@@ -77,17 +77,26 @@ def time_series(t_s: np.ndarray, cmd_deg: np.ndarray, meas_deg: np.ndarray, pred
     """
     fig = _new(10.5, 5.2)
     ax, ax_e = fig.subplots(2, 1, sharex=True, height_ratios=[2, 1])
-    ax.plot(t_s, cmd_deg, color=CMD_COLOR, lw=1.0, ls="--", label=f"knob command ({cmd_unit})")
+    # a knob's command shares the angle's axis (both deg); a linear drive's (mm, a few of them against
+    # tens of degrees) gets its own axis on the right, or it draws as a flat line at the angle's zero
+    ax_cmd = ax if cmd_unit == "deg" else ax.twinx()
+    cmd_line, = ax_cmd.plot(t_s, cmd_deg, color=CMD_COLOR, lw=1.0, ls="--", label=f"knob command ({cmd_unit})")
     ax.plot(t_s, meas_deg, color=MEAS_COLOR, lw=1.6, label="measured")
     for lbl, y in predicted.items():
         ax.plot(t_s, y, color=colors[lbl], lw=1.0, label=lbl)
         ax_e.plot(t_s, y - meas_deg, color=colors[lbl], lw=0.8, label=lbl)
     ax_e.axhline(0, color="k", lw=0.6)
-    ax.set_ylabel("angle (deg)" if cmd_unit == "deg" else f"angle (deg), command ({cmd_unit})")
+    ax.set_ylabel("angle (deg)")
+    if ax_cmd is not ax:
+        ax_cmd.set_ylabel(f"command ({cmd_unit})", color=CMD_COLOR)
+        ax_cmd.tick_params(axis="y", colors=CMD_COLOR)
     ax_e.set_ylabel("error (deg)\npredicted - measured")
     ax_e.set_xlabel("time (s)")
     ax.set_title(title, loc="left", fontsize=11)
-    ax.legend(loc="upper right", fontsize=8, ncols=min(4, 2 + len(predicted)))
+    handles = ax.get_legend_handles_labels()[0]
+    if ax_cmd is not ax:
+        handles = [cmd_line, *handles]
+    ax.legend(handles=handles, loc="upper right", fontsize=8, ncols=min(4, 2 + len(predicted)))
     for a in (ax, ax_e):
         a.grid(alpha=0.3)
     return fig

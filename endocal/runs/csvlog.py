@@ -64,7 +64,8 @@ from endocal.runs.aligned import CMD_SUFFIXES, CSV_SUFFIXES, MEAS, check_aligned
 from endocal.runs.csvchecks import (MAX_GAP_S, ReadingGaps, check_aligned_rows, check_base_order, check_distance,
                                     check_knob_to_bend, check_knobs, check_rate, check_unit_names,
                                     measured_angle_warnings, reading_gaps)
-from endocal.runs.format import atomic_write_bytes, check_parent, parquet_bytes, prepare_output, software_versions
+from endocal.runs.format import (atomic_write_bytes, check_parent, parquet_bytes, prepare_output, sample_rate_hz,
+                                 software_versions)
 from endocal.runs.imported import tracker_stream, write_imported_run
 from endocal.runs.textable import comment_lines, read_csv_table, sniff_delimiter
 
@@ -108,6 +109,8 @@ class CsvImportResult:
     outside their span), ``longest_gap_s`` the longest such gap (s); each ``*_line`` is the first
     such row's line in the log (None when there is none). ``unit_warnings``: measured angles whose
     numbers look like a unit mistake, one line each (:func:`~endocal.runs.csvchecks.measured_angle_warnings`).
+    ``axes``: the bending axes a hysteresis model can be fitted to (measured, and commanded through a
+    range), in the probe's order.
     """
 
     run_dir: Path
@@ -132,6 +135,7 @@ class CsvImportResult:
     motor_rows_unaligned_line: int | None = None
     longest_gap_s: float = 0.0
     unit_warnings: tuple[str, ...] = ()
+    axes: tuple[str, ...] = ()
 
     @property
     def gap_warning(self) -> str | None:
@@ -825,8 +829,7 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
     map_text = Path(cmap.source).read_bytes() if Path(cmap.source).is_file() else b""
     source = {"name": "csv-import", "source": str(log), "sha256": sha, "map": cmap.source,
               "map_sha256": hashlib.sha256(map_text).hexdigest() if map_text else None}
-    dt = np.diff(motor["t_s"])
-    rate = float(1.0 / np.median(dt)) if dt.size and np.median(dt) > 0 else None
+    rate = sample_rate_hz(motor["t_s"])
     # a drive in another unit than the probe's knobs says so: "ap (mm) <- Tendon Disp."
     columns = {"time": cmap.time_column or f"{cmap.sample_rate_hz:g} Hz",
                **{d if cmap.unit(d) == probe.unit(d) else f"{d} ({cmap.unit(d)})": k.position
@@ -847,7 +850,8 @@ def import_csv(log: str | Path, mapping: str | Path | CsvMap, out: str | Path, *
         return CsvImportResult(run_dir, n_rows, bool(cmap.angles), len(motor["t_s"]), n_read, n_aligned, dropped,
                                merged, float(motor["t_s"][-1]), rate, columns, alignment_error,
                                int(incomplete.sum()), first(incomplete), int(invalid.sum()), first(invalid),
-                               int(unused.sum()), first(unused), gaps.rows, gaps.first_line, gaps.longest_s)
+                               int(unused.sum()), first(unused), gaps.rows, gaps.first_line, gaps.longest_s,
+                               axes=_fittable_axes(motor, cmap))
 
     if cmap.angles:
         is_read, covered, table, unit_warnings = _angles_table(df, t, motor, cmap, where)
@@ -949,6 +953,13 @@ def _angles_table(df: pd.DataFrame, t: np.ndarray, motor: dict, cmap: CsvMap,
     warnings = measured_angle_warnings({dof: motor[f"{dof}_pos_{cmap.unit(dof)}"][ok] for dof in cmap.knobs},
                                        {axis: table[axis + MEAS] for axis in cmap.angles}, cmap, where)
     return is_read, ok, out, warnings
+
+
+def _fittable_axes(motor: dict[str, np.ndarray], cmap: CsvMap) -> tuple[str, ...]:
+    """The bending axes of an import a model can be fitted to: measured (an [angles] column, or both
+    poses for every bending axis) and commanded through a range (a knob held still has no loop)."""
+    measured = [a for a in cmap.probe.bending_axes if a in cmap.knobs and (not cmap.angles or a in cmap.angles)]
+    return tuple(a for a in measured if float(np.ptp(motor[f"{a}_goal_{cmap.unit(a)}"])) > 0)
 
 
 def _write_table(out: Path, table: pd.DataFrame, provenance: dict) -> None:

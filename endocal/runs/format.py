@@ -72,6 +72,31 @@ UNITS = {
 }
 
 
+def sample_rate_hz(*t_s) -> float | None:
+    """The rate of the clock records were sampled on, Hz: one over the median spacing of their times.
+
+    Every command that states a record's rate states this one (``import`` records it in
+    ``run.json``, ``info`` prints it, ``fit`` prints it for the records it fitted), so one log
+    has one rate. The median, not rows over span: a log that dropped rows, or a table whose
+    glitches were left out, was still sampled on its clock's period, and a logger's jitter
+    (a period of 1.9996 ms or 2.0004 ms) moves the median by that much only.
+
+    Parameters
+    ----------
+    *t_s : (n,) arrays
+        Times of each record (s); the spacings of all of them are pooled.
+
+    Returns
+    -------
+    float or None
+        None when no record holds two samples at different times.
+    """
+    steps = [np.diff(np.asarray(t, dtype=float)) for t in t_s]
+    steps = np.concatenate(steps) if steps else np.zeros(0)
+    steps = steps[np.isfinite(steps) & (steps > 0)]
+    return float(1.0 / np.median(steps)) if steps.size else None
+
+
 def utc_now() -> str:
     """Current time as an ISO 8601 UTC string with a ``Z`` suffix."""
     return datetime.now(timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")

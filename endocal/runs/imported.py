@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from endocal.probe import ProbeConfig
-from endocal.runs.format import MOTOR, RUN_JSON, create_run_folder, run_meta, utc_now, write_folder_staged, write_json
+from endocal.runs.format import (MOTOR, RUN_JSON, create_run_folder, run_meta, sample_rate_hz, utc_now,
+                                 write_folder_staged, write_json)
 from endocal.runs.logger import StreamLogger, finish_run
 from endocal.streams import StreamChunk
 
@@ -70,8 +71,7 @@ def write_imported_run(out: Path, motor: dict[str, np.ndarray], tracker: dict[st
 
 def _write_run(out: Path, motor: dict, tracker: dict, probe: ProbeConfig, source: dict, backend: dict,
                command: str | None, wall0: float, drive_units: dict[str, str] | None) -> dict:
-    dt = np.diff(motor["t_s"])
-    rate = float(1.0 / np.median(dt)) if dt.size and np.median(dt) > 0 else None
+    rate = sample_rate_hz(motor["t_s"])
     meta = run_meta(protocol=source, probe=probe, backend=backend, seed=None, realtime=True, command=command,
                     sample_rate_hz=rate, planned_duration_s=float(motor["t_s"][-1]), drive_units=drive_units)
     meta["started_utc"] = utc_now()

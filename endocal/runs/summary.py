@@ -7,6 +7,7 @@ from pathlib import Path
 
 from endocal.models.data import reversals
 from endocal.runs.aligned import MEAS, AlignedData, load_aligned
+from endocal.runs.format import sample_rate_hz
 
 
 @dataclass
@@ -68,7 +69,7 @@ def summarize(path: str | Path | AlignedData) -> DataSummary:
         source=data.source,
         rows=len(t),
         duration_s=float(t[-1] - t[0]),
-        rate_hz=float((len(t) - 1) / (t[-1] - t[0])) if len(t) > 1 and t[-1] > t[0] else float("nan"),
+        rate_hz=sample_rate_hz(t) or float("nan"),
         axes=axes,
         extras=data.extras,
         sha256=data.sha256,

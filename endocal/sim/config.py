@@ -13,9 +13,15 @@ Layout
 ``[tendon]``, ``[bending]``, ``[motor]``, ``[tracker]``
     the always-on physics.
 ``[rate]``, ``[deadzone]``, ``[envelope]``, ``[coupling]``, ``[delay]``, ``[drift]``, ``[creep]``, ``[load]``
-    the effect catalog later issues diagnose (:data:`EFFECTS`); each has ``enabled``.
+    the effects of the catalogue the simulator produces (:data:`EFFECTS`: the effects whose class
+    names its section, ``Effect.sim_section``); each has ``enabled``.
 ``[contact]``
     an optional obstacle at the tip (ground truth for the contact-force issue).
+``[user_effects.NAME]``
+    a user's own effect hidden in the plant (:mod:`endocal.sim.user_effects`): its parameters
+    by their short names (``per_kdeg = 0.01``) and optionally ``axes = ["axis1"]`` (default: both
+    bending axes). The effect comes from the file given with ``--effects-file``, never from
+    the config: a config that names an effect no file provides is refused.
 """
 
 from __future__ import annotations
@@ -30,9 +36,6 @@ from pathlib import Path
 from typing import Any
 
 from endocal.errors import ConfigError
-
-#: The effect catalog, in the order later issues list it.
-EFFECTS = ("rate", "deadzone", "envelope", "coupling", "delay", "drift", "creep", "load")
 
 #: Conditions of the rig the simulator models and logs (a protocol's ``[conditions]``, set per run with
 #: ``--set NAME=VALUE``): condition column -> (section, key) of the sim config it sets. The wrap of the
@@ -68,6 +71,14 @@ class TendonConfig:
     mu: float = _p(0.2, "Coulomb friction coefficient tendon/sheath (capstan)", 0.0, 2.0)
     wrap_deg: float = _p(180.0, "total wrap angle of the sheath along the insertion tube (deg)", 0.0, 1080.0)
     pretension_n: float = _p(4.0, "tendon pretension at the neutral knob without slack (N)", 0.0, 200.0)
+    friction: str = _p("capstan", "friction law of the tendons in the sheath: 'capstan' (Coulomb friction distributed "
+                       "along the sheath: a small reversal returns to the branch it left) or 'bouc-wen' (one smooth "
+                       "Bouc-Wen element at the knob, frictionless sheath: no return-point memory)",
+                       choices=("capstan", "bouc-wen"))
+    bouc_wen_lag_deg: float = _p(20.0, "friction = 'bouc-wen': knob lag (deg) at which the element saturates, per unit "
+                                 "of the capstan exponent mu * wrap (mu * (1 + rate) * wrap_rad with [rate])", 0.0)
+    bouc_wen_sigma: float = _p(1.0, "friction = 'bouc-wen': sigma of the normalised Bouc-Wen law (>= 0.5; the tip "
+                               "holds at a reversal from saturation, then picks up along an exponential)", 0.5, 50.0)
 
 
 @dataclass(frozen=True)
@@ -110,10 +121,13 @@ class TrackerConfig:
 
 @dataclass(frozen=True)
 class RateConfig:
-    """Friction growing with sliding speed: mu_eff = mu * (1 + gain * |knob speed|)."""
+    """Friction growing with sliding speed: mu_eff = mu * (1 + gain * |knob speed|) (law 'capstan'), or
+    the slip thresholds times (1 + gain * |knob speed|) (law 'linear', a plant unlike the catalogue's law)."""
 
     enabled: bool = _p(False, "switch the effect on")
     gain_s_per_deg: float = _p(0.006, "relative friction increase per deg/s of knob speed (s/deg)", 0.0, 1.0)
+    law: str = _p("capstan", "'capstan' (the friction coefficient grows with speed) or 'linear' (the slip "
+                  "thresholds grow linearly with speed)", choices=("capstan", "linear"))
 
 
 @dataclass(frozen=True)
@@ -122,6 +136,8 @@ class DeadzoneConfig:
 
     enabled: bool = _p(True, "switch the effect on")
     slack_mm: float = _p(1.5, "extra free length of each tendon at the neutral knob (mm)", 0.0, 50.0)
+    center_deg: float = _p(0.0, "knob angle at which both tendons are equally slack (deg): a band not centred "
+                           "at 0 (the agonist has pulley_radius * center less slack)", -90.0, 90.0)
 
 
 @dataclass(frozen=True)
@@ -164,6 +180,9 @@ class CreepConfig:
     enabled: bool = _p(False, "switch the effect on")
     fraction: float = _p(0.25, "share a of the bend that relaxes slowly (0..1)", 0.0, 1.0)
     time_constant_s: float = _p(2.0, "relaxation time constant tau (s)", 0.0, 3600.0, lo_open=True)
+    fraction2: float = _p(0.0, "share of the bend that relaxes with the second time constant (0 = one relaxation)",
+                          0.0, 1.0)
+    time_constant2_s: float = _p(20.0, "second relaxation time constant (s)", 0.0, 3600.0, lo_open=True)
 
 
 @dataclass(frozen=True)
@@ -210,6 +229,19 @@ _SECTIONS: dict[str, type] = {
     "load": LoadConfig,
     "contact": ContactConfig,
 }
+
+
+def simulated_effects() -> tuple[str, ...]:
+    """The catalogue's effects this simulator produces: those whose class names one of its sections
+    (``Effect.sim_section``), in the order of the sections."""
+    from endocal.models.effects import EFFECTS as CATALOGUE
+
+    simulated = {cls.sim_section for cls in CATALOGUE.values() if cls.sim_section}
+    return tuple(name for name in _SECTIONS if name in simulated)
+
+
+#: The effects the simulator switches (each section has ``enabled``), asked of the catalogue.
+EFFECTS = simulated_effects()
 
 
 def _coerce(value: Any, f: dataclasses.Field, key: str, where: str) -> Any:
@@ -290,6 +322,9 @@ class SimConfig:
         Effects, each with ``enabled``.
     contact :
         Optional obstacle at the tip.
+    user_effects : dict
+        ``name -> {short parameter name: value, "axes": [...]}``: a user's effects hidden in the
+        plant (:mod:`endocal.sim.user_effects`).
     """
 
     deviation_deg: dict = field(default_factory=lambda: dict(PAPER_DEVIATION_DEG))
@@ -306,6 +341,7 @@ class SimConfig:
     creep: CreepConfig = field(default_factory=CreepConfig)
     load: LoadConfig = field(default_factory=LoadConfig)
     contact: ContactConfig = field(default_factory=ContactConfig)
+    user_effects: dict = field(default_factory=dict)
 
     # -- construction -------------------------------------------------------------------
     @classmethod
@@ -324,7 +360,7 @@ class SimConfig:
         """
         if not isinstance(data, dict):
             raise ConfigError(f"{where}: a sim config must be a table of sections")
-        known = {"deviation_deg", *_SECTIONS}
+        known = {"deviation_deg", "user_effects", *_SECTIONS}
         unknown = sorted(set(data) - known)
         if unknown:
             raise ConfigError(f"{where}: unknown key '{unknown[0]}' (known sections: deviation_deg, {', '.join(_SECTIONS)})")
@@ -334,6 +370,10 @@ class SimConfig:
         for name, section_cls in _SECTIONS.items():
             if name in data:
                 kwargs[name] = _build_section(name, section_cls, data[name], where)
+        if "user_effects" in data:
+            from endocal.sim.user_effects import check_user_effects
+
+            kwargs["user_effects"] = check_user_effects(data["user_effects"], where)
         cfg = cls(**kwargs)
         cfg._check_consistency(where)
         return cfg
@@ -367,6 +407,8 @@ class SimConfig:
         """
         data = self.to_dict()
         for name, values in sections.items():
+            if name == "user_effects" and name not in data:  # the first hidden user effect
+                data[name] = {}
             if name not in data:
                 raise ConfigError(f"sim config: unknown section '{name}'")
             if not isinstance(values, dict):
@@ -375,6 +417,9 @@ class SimConfig:
         return SimConfig.from_dict(data, where="sim config (replace)")
 
     def _check_consistency(self, where: str) -> None:
+        if self.creep.fraction + self.creep.fraction2 > 1.0:
+            raise ConfigError(f"{where}: creep.fraction + creep.fraction2 ({self.creep.fraction} + "
+                              f"{self.creep.fraction2}) exceeds 1: more of the bend cannot relax than there is")
         if self.load.enabled and self.load.amplitude_deg > self.tendon.wrap_deg:
             raise ConfigError(
                 f"{where}: load.amplitude_deg ({self.load.amplitude_deg}) exceeds tendon.wrap_deg "
@@ -389,14 +434,17 @@ class SimConfig:
             section = getattr(self, name)
             out[name] = {f.name: (list(v) if isinstance(v := getattr(section, f.name), tuple) else v)
                          for f in dataclasses.fields(section)}
+        if self.user_effects:  # absent otherwise: the hash of every config without one is unchanged
+            out["user_effects"] = {k: dict(v) for k, v in self.user_effects.items()}
         return out
 
     def effects_enabled(self) -> list[str]:
-        """Names of the switched-on effects, in catalog order (``contact`` is listed last if on)."""
+        """Names of the switched-on effects, in catalog order (``contact`` is listed after them if on, then the
+        user's hidden effects)."""
         names = [name for name in EFFECTS if getattr(self, name).enabled]
         if self.contact.enabled:
             names.append("contact")
-        return names
+        return names + list(self.user_effects)
 
     def config_hash(self) -> str:
         """First 16 hex digits of the SHA-256 of the canonical JSON of :meth:`to_dict`."""

@@ -3,10 +3,13 @@
 Signal path of one motor tick (all in :mod:`endocal.sim.tendon`, compiled):
 
 1. each servo's position loop moves its DoF towards the goal (critically damped, speed-limited);
-2. per bending axis, the tendon pair slides through the sheath with capstan friction, and the
-   bend ``beta`` settles where the distal tendon tensions balance the bending section's
+2. per bending axis, the tendon pair slides through the sheath with capstan friction (or, with
+   ``[tendon] friction = "bouc-wen"``, freely, its pull held back by one Bouc-Wen element at the
+   knob, a friction without return-point memory), and the bend ``beta`` settles where the distal tendon tensions balance the bending section's
    moment (and a wall's, with ``[contact]``);
-3. ``[creep]`` relaxes the bend (standard linear solid);
+3. ``[creep]`` relaxes the bend (standard linear solid); a user's effects hidden with
+   ``[user_effects]`` change the goals the tendons are pulled by, or the bend
+   (:mod:`endocal.sim.user_effects`);
 4. the two axes combine as the duodenoscope paper hypothesises (sec. 2.2, second hypothesis:
    the bending direction is the resultant of the wire pulls) into the bending vector
 
@@ -77,6 +80,11 @@ class Simulator:
             np.random.default_rng(s) for s in streams
         )
         self._setup_physics(rng_load)
+        self._hidden = None
+        if config.user_effects:
+            from endocal.sim.user_effects import HiddenEffects
+
+            self._hidden = HiddenEffects(config.user_effects, self._axes, probe.resolve_axis, self.seed)
         # State carried across chunks.
         self._held_goal = np.zeros(tendon.N_DOF)  # the probe starts at home: knobs neutral, no translation/rotation
         self._pos = np.zeros(tendon.N_DOF)
@@ -86,7 +94,9 @@ class Simulator:
             self._prof[:] = self._e0 / self._w.sum()  # uniform pretension, no friction history yet
         self._d_mm = np.zeros(2)
         self._beta_qs = np.zeros(2)
+        self._bw_state = np.zeros((2, 2))  # [tendon] friction = "bouc-wen": per axis, the lag and the last knob (rad)
         self._creep_slow = np.zeros(2)
+        self._creep_slow2 = np.zeros(2)
         self._t_last: float | None = None
         self._next_frame: int | None = None
         self._hist_t = np.empty(0)
@@ -109,6 +119,8 @@ class Simulator:
         self._vmax = np.array([math.radians(m.knob_max_speed_dps), math.radians(m.knob_max_speed_dps),
                                m.translation_max_speed_mmps, math.radians(m.rotation_max_speed_dps)])
         self._rate_gain = math.degrees(c.rate.gain_s_per_deg) if c.rate.enabled else 0.0  # s/rad
+        # [tendon] friction = "bouc-wen": the lag's limit per unit of the capstan exponent (rad); 0 = capstan
+        self._bw_lag_per_mu = math.radians(ten.bouc_wen_lag_deg) if ten.friction == "bouc-wen" else 0.0
         cp = c.coupling
         self._coupling = np.array([cp.first_from_second, cp.second_from_first]) if cp.enabled else np.zeros(2)
         self._inv_bs2 = 1.0 / math.radians(c.envelope.stiffening_bend_deg) ** 2 if c.envelope.enabled else 0.0
@@ -210,7 +222,8 @@ class Simulator:
         dt = np.empty(n)
         dt[0] = 0.0 if self._t_last is None else t[0] - self._t_last
         dt[1:] = np.diff(t)
-        goal_int = np.column_stack([np.radians(g[:, 0]), np.radians(g[:, 1]), g[:, 2], np.radians(g[:, 3])])
+        pulled = g if self._hidden is None else np.column_stack([self._hidden.goal(t, g[:, :2]), g[:, 2:]])
+        goal_int = np.column_stack([np.radians(pulled[:, 0]), np.radians(pulled[:, 1]), g[:, 2], np.radians(g[:, 3])])
         wrap_deg = self.sheath_wrap_deg(t)
         out_pos = np.empty((n, 4))
         out_vel = np.empty((n, 4))
@@ -226,7 +239,15 @@ class Simulator:
         else:
             force_pred_n = self._guarded_ticks(t, dt, g, goal_int, wrap_rad, outs, noise_ma, guard)
         cr = self.config.creep
-        beta = tendon.creep_filter(out_beta, dt, cr.fraction, cr.time_constant_s, self._creep_slow) if cr.enabled else out_beta
+        beta = out_beta
+        if cr.enabled and cr.fraction2 > 0.0:  # two relaxations in parallel, each its own slow state
+            slow1 = tendon.creep_filter(out_beta, dt, 1.0, cr.time_constant_s, self._creep_slow)
+            slow2 = tendon.creep_filter(out_beta, dt, 1.0, cr.time_constant2_s, self._creep_slow2)
+            beta = (1.0 - cr.fraction - cr.fraction2) * out_beta + cr.fraction * slow1 + cr.fraction2 * slow2
+        elif cr.enabled:
+            beta = tendon.creep_filter(out_beta, dt, cr.fraction, cr.time_constant_s, self._creep_slow)
+        if self._hidden is not None:  # a user's effects on the bend ([user_effects], endocal.sim.user_effects)
+            beta = self._hidden.bend(t, beta)
         contact_force_n = np.zeros(n)
         if self._wall_axis >= 0:
             contact_force_n = out_mwall / self.lever_arm_mm(out_beta[:, self._wall_axis])
@@ -270,7 +291,9 @@ class Simulator:
             self.config.bending.stiffness_nmm_per_rad, self._inv_bs2, self.config.bending.friction_nmm,
             self._wall_axis, self._wall_rad, self._wall_sign, self._k_wall, self._w_force,
             self._held_goal, self._pos, self._vel, self._prof, self._d_mm, self._beta_qs,
-            *outs,
+            *outs, self.config.rate.enabled and self.config.rate.law == "linear",
+            math.radians(self.config.deadzone.center_deg) if self.config.deadzone.enabled else 0.0,
+            self._bw_lag_per_mu, ten.bouc_wen_sigma, self._bw_state,
         )
 
     def _guarded_ticks(self, t, dt, g, goal_int, wrap_rad, outs, noise_ma, guard) -> np.ndarray:

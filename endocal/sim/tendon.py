@@ -63,6 +63,8 @@ import math
 import numpy as np
 from numba import njit
 
+from endocal.models._smooth_friction import state_step
+
 #: Indices of the degrees of freedom in the motor arrays: two knobs, translation, rotation.
 N_DOF = 4
 
@@ -334,9 +336,31 @@ def _motor(pos, vel, goal, tau, vmax, dt):
 
 
 @njit(cache=True)
+def bouc_wen_lag(h, dq, lag_max, sigma):
+    """``[tendon] friction = "bouc-wen"``: the knob lag ``h`` (rad) after a knob step ``dq`` (rad).
+
+    The normalised Bouc-Wen law (Ismail, Ikhouane & Rodellar 2009, eq. 13) with ``n = 1`` on the state
+    ``w = h / lag_max`` and ``rho = 1 / (2 sigma lag_max)``: right after a reversal from saturation the lag
+    changes as fast as the knob (the tendon, and the tip, hold), then the pull picks up along an
+    exponential. ``lag_max`` follows the friction (mu, wrap, speed), so a lag above a lower new limit is
+    clipped to it (the element slips). No return-point memory: the state after a small reversal and
+    back is not the state before it.
+    """
+    if lag_max <= 0.0:
+        return 0.0
+    wk = h / lag_max
+    if wk > 1.0:
+        wk = 1.0
+    elif wk < -1.0:
+        wk = -1.0
+    return lag_max * state_step(0, wk, dq, 1.0 / (2.0 * sigma * lag_max), sigma, 1.0)
+
+
+@njit(cache=True)
 def simulate_ticks(dt_s, goal, wrap_rad, w, tau_s, vmax, r_p, r_t, e0, mu, rate_gain_s_per_rad, coupling,
                    k_bend, inv_bs2, m_fric, wall_axis, wall_rad, wall_sign, k_wall, w_force,
-                   held, pos, vel, prof, d_mm, beta_qs, out_pos, out_vel, out_t0, out_beta, out_mwall):
+                   held, pos, vel, prof, d_mm, beta_qs, out_pos, out_vel, out_t0, out_beta, out_mwall,
+                   rate_linear=False, band_center_rad=0.0, bw_lag_per_mu=0.0, bw_sigma=1.0, bw_state=None):
     """Run a chunk of motor ticks; every state array is updated in place.
 
     Parameters
@@ -355,6 +379,12 @@ def simulate_ticks(dt_s, goal, wrap_rad, w, tau_s, vmax, r_p, r_t, e0, mu, rate_
         Pulley radius, tendon offset, ``e_pre - slack`` (mm), friction coefficient.
     rate_gain_s_per_rad : float
         ``[rate]``: relative friction increase per rad/s of knob speed (0 = off).
+    rate_linear : bool
+        ``[rate] law = "linear"``: the slip thresholds, not the friction coefficient, grow linearly
+        with speed: the capstan's bound ``e^{mu Theta}`` becomes ``1 + (e^{mu Theta} - 1)(1 + g |v|)``.
+    band_center_rad : float
+        ``[deadzone] center_deg``: the knob angle at which the two tendons are equally slack (the
+        agonist has ``r_p * center`` less slack than the antagonist): a dead band not centred at 0.
     coupling : (2,) array
         Coupling ratios of axis 1 (from axis 2) and axis 2 (from axis 1).
     k_bend, inv_bs2 : float
@@ -383,6 +413,12 @@ def simulate_ticks(dt_s, goal, wrap_rad, w, tau_s, vmax, r_p, r_t, e0, mu, rate_
         Quasi-static bend per axis (rad).
     out_mwall : (n,) array
         Contact moment magnitude (N*mm) of the wall or weight.
+    bw_lag_per_mu, bw_sigma : float
+        ``[tendon] friction = "bouc-wen"`` (``bw_lag_per_mu > 0``): the sheath is frictionless and one
+        Bouc-Wen element at the knob holds the pull back by a lag (:func:`bouc_wen_lag`) that saturates at
+        ``bw_lag_per_mu * mu_eff * wrap`` (rad).
+    bw_state : (2, 2) array
+        Per axis, the element's lag (rad) and the knob angle it last saw (rad); updated.
     """
     n_nodes = prof.shape[2]
     n_seg = n_nodes - 1
@@ -392,25 +428,41 @@ def simulate_ticks(dt_s, goal, wrap_rad, w, tau_s, vmax, r_p, r_t, e0, mu, rate_
     hi_d = np.empty(n_nodes)
     mid = np.empty((2, n_nodes))
     last_mu_theta = -1.0
+    last_factor = -1.0
     for i in range(dt_s.size):
         for dof in range(4):
             pos[dof], vel[dof] = _motor(pos[dof], vel[dof], held[dof], tau_s[dof], vmax[dof], dt_s[i])
             held[dof] = goal[i, dof]
         m_wall_tick = 0.0
         for ax in range(2):
-            mu_theta = mu * wrap_rad[i] * (1.0 + rate_gain_s_per_rad * abs(vel[ax]))  # [rate]: mu_eff
-            if mu_theta != last_mu_theta:
+            speed_factor = 1.0 + rate_gain_s_per_rad * abs(vel[ax])
+            mu_theta = mu * wrap_rad[i] * (1.0 if rate_linear else speed_factor)  # [rate]: mu_eff
+            factor = speed_factor if rate_linear else 1.0
+            q_pull = pos[ax] - band_center_rad
+            if bw_lag_per_mu > 0.0:
+                # the friction is the element's: its lag takes the knob's pull back, the sheath slides freely
+                bw_state[ax, 0] = bouc_wen_lag(bw_state[ax, 0], pos[ax] - bw_state[ax, 1],
+                                               bw_lag_per_mu * mu_theta * factor, bw_sigma)
+                bw_state[ax, 1] = pos[ax]
+                q_pull -= bw_state[ax, 0]
+                mu_theta = 0.0
+            if mu_theta != last_mu_theta or factor != last_factor:
                 for j in range(n_nodes):
                     th = mu_theta * j / n_seg
-                    lo_p[j] = math.exp(-th)
-                    hi_p[j] = math.exp(th)
+                    if rate_linear:  # [rate] law "linear": the thresholds scale with speed
+                        hi_p[j] = 1.0 + (math.exp(th) - 1.0) * factor
+                        lo_p[j] = 1.0 / hi_p[j]
+                    else:
+                        lo_p[j] = math.exp(-th)
+                        hi_p[j] = math.exp(th)
                 for j in range(n_nodes):
                     lo_d[j] = lo_p[n_seg - j]
                     hi_d[j] = hi_p[n_seg - j]
                 last_mu_theta = mu_theta
+                last_factor = factor
             other = beta_qs[1 - ax]
             has_wall = wall_axis == ax
-            b, d_new, m_wall = axis_step(prof[ax], mid, w, lo_p, hi_p, lo_d, hi_d, pos[ax], d_mm[ax], beta_qs[ax],
+            b, d_new, m_wall = axis_step(prof[ax], mid, w, lo_p, hi_p, lo_d, hi_d, q_pull, d_mm[ax], beta_qs[ax],
                                          other, r_p, r_t, e0, coupling[ax], k_bend, inv_bs2, m_fric,
                                          wall_rad if has_wall else 0.0, wall_sign, k_wall if has_wall else 0.0,
                                          w_force if has_wall else 0.0)

@@ -1,8 +1,8 @@
 """The candidate effects a scan tests: every catalog effect the model lacks that the data can show.
 
 ``load`` takes a column (``load:sheath_wrap_deg``) and is tried on every extra column that
-varies; an effect the data cannot reveal or fit (:mod:`endocal.validation.identifiability`) is
-not tested, and why is said.
+varies; an effect the data cannot reveal or fit (what it declares in ``Effect.requires``,
+:mod:`endocal.validation.identifiability`) is not tested, and why is said.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from endocal.errors import ModelError
 from endocal.models import EFFECTS, HysteresisData
 from endocal.models.base import HysteresisModel
 from endocal.validation.data import load_candidates
-from endocal.validation.identifiability import FITTABILITY, IDENTIFIABILITY, coupling_reason
+from endocal.validation.identifiability import untestable_reason
 from endocal.validation.structure import effect_labels
 
 
@@ -82,14 +82,14 @@ def candidate_effects(model: HysteresisModel, data: HysteresisData, candidates: 
     else:
         cands = [c for c in candidates if c not in have]
     tested = []
+    where = ("the estimation data" if not rolling else
+             f"the first training block (the first {train.n_samples} of {data.n_samples} samples)")
     for c in cands:
-        name = c.partition(":")[0]
-        check = (IDENTIFIABILITY if rolling else FITTABILITY).get(name)
-        reason = check(data) if check is not None else None
-        if reason is None and name == "coupling":
-            reason = coupling_reason(train, where="the estimation data" if not rolling else
-                                      f"the first training block (the first {train.n_samples} of {data.n_samples} "
-                                      "samples)")
+        # what the effect declares the records must hold (Effect.requires): to be fitted, and under rolling
+        # origin, which has no separate validation record to decide, to be told from a wider loop
+        reason = untestable_reason(c, data, to=("fit", "test") if rolling else ("fit",))
+        if reason is None and train is not data:
+            reason = untestable_reason(c, train, to=("fit",), where=where)
         if reason is not None:
             untestable[c] = reason
         else:

@@ -28,6 +28,7 @@ import pandas as pd
 from scipy.ndimage import median_filter
 
 from endocal.errors import ModelError
+from endocal.messages import Message
 from endocal.models.data import OTHER_CMD, HysteresisData, common_drive_unit
 from endocal.runs.aligned import AlignedData
 
@@ -121,8 +122,8 @@ def glitch_note(dropped: list[tuple[str, int, int, int, float]], axis: str) -> s
              f"{n_held} measured {axis} angle(s) repeating one reading exactly while the knob moved (a frozen "
              "tracker)" if n_held else ""]
     src, t0 = dropped[0][0], dropped[0][-1]
-    return (f"left out {'; and '.join(x for x in parts if x)} (a tracker or logger glitch; the first in {src} at "
-            f"t = {t0:.3f} s): the fit and the scores use the samples around them")
+    return Message(f"left out {'; and '.join(x for x in parts if x)} (a tracker or logger glitch; the first in {src} "
+                   f"at t = {t0:.3f} s): the fit and the scores use the samples around them", "glitches")
 
 
 def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str, planes=None,

@@ -1,106 +1,72 @@
 """Which effects a record can reveal at all, and why not when it cannot.
 
-Each check takes the data and returns None when the effect can be seen in it, else why not
-in words, with the experiment that would show it (``rate`` needs the same motion at several
-frequencies, ``creep`` a hold after a move, ``coupling`` the other knob moving).
+Each effect declares what the records must hold (``Effect.requires``,
+:mod:`endocal.models.effects.requirements`): to be fitted at all (time stamps, the other knob
+moving, a condition that varies) and to be told from a wider loop (several speeds, holds after
+moves). :func:`untestable_reason` asks them in order and returns the first reason, in words
+with the experiment that would show the effect; nothing here names an effect.
 """
 
 from __future__ import annotations
 
-import numpy as np
-
-from endocal.models import HysteresisData
-from endocal.models.data import OTHER_CMD
-from endocal.validation.data import is_constant
-from endocal.validation.regimes import hold_mask, turning_points
+from endocal.errors import ModelError
+from endocal.models import EFFECTS, HysteresisData
+from endocal.models.effects import Effect, make_effect
 
 
-def _one_frequency(data: HysteresisData) -> str | None:
-    """Why the data has a single frequency of motion (None when it has several)."""
-    turns = turning_points(data)
-    t = data.t_s if data.t_s is not None else np.arange(data.n_samples, dtype=float)
-    same_run = np.searchsorted(data.run_starts, turns[1:], side="right") == np.searchsorted(
-        data.run_starts, turns[:-1], side="right")
-    half = np.diff(t[turns])[same_run] if turns.size > 1 else np.array([])
-    if half.size < 2:
-        return "too few reversals"
-    lo, hi = np.quantile(half, [0.1, 0.9])
-    return "one frequency only" if hi < 1.5 * lo else None
+def _effect(effect: str | Effect | type) -> tuple[type, Effect | None]:
+    if isinstance(effect, Effect):
+        return type(effect), effect
+    if isinstance(effect, type):
+        return effect, None
+    cls = EFFECTS[effect.partition(":")[0]]
+    try:
+        return cls, make_effect(effect)
+    except ModelError:  # a name without its column (``load``): the class alone
+        return cls, None
 
 
-def rate_reason(data: HysteresisData) -> str | None:
-    """Why ``data`` cannot tell speed-dependent friction from a wider loop (None: it can)."""
-    why = _one_frequency(data)
-    if why is None:
-        return None
-    return (f"{why}: rate cannot be identified (speed-dependent friction needs the same motion at several "
-            "frequencies: run `chirp` or `sine-set`)")
+def untestable_reason(effect: str | Effect | type, data: HysteresisData, *, to: tuple[str, ...] = ("fit",),
+                      where: str = "", **context) -> str | None:
+    """Why ``data`` cannot fit (``to=("fit",)``) or test (``("fit", "test")``) ``effect``; None: it can.
 
-
-def delay_reason(data: HysteresisData) -> str | None:
-    """Why ``data`` cannot tell a delay from a wider loop (None: it can)."""
-    if data.t_s is None:
-        return "no time stamps: delay cannot be identified"
-    why = _one_frequency(data)
-    if why is None:
-        return None
-    return (f"{why}: delay cannot be identified (at one frequency a time shift looks like a wider loop: "
-            "run `chirp` or `random`)")
-
-
-def creep_reason(data: HysteresisData) -> str | None:
-    """Why ``data`` cannot show creep: no hold after a move (None: it can)."""
-    hold = hold_mask(data, 1.0)
-    span = float(np.ptp(data.cmd_deg))
-    t = data.t_s
-    starts = np.flatnonzero(hold & ~np.concatenate([[False], hold[:-1]]))
-    for k in starts:
-        run0 = int(data.run_starts[np.searchsorted(data.run_starts, k, side="right") - 1])
-        if k == run0:
-            continue  # a record that starts at rest: no move before this hold
-        # the 2 s before the hold, within its own record: each record's clock starts again (the
-        # concatenated t_s is not sorted), so a search over all of it can land in another record
-        j = run0 + int(np.searchsorted(t[run0:k + 1], t[k] - 2.0)) if t is not None else max(k - 20, run0)
-        if np.ptp(data.cmd_deg[j:k + 1]) >= 0.05 * span:
-            return None
-    return ("no holds: creep cannot be identified (it shows as the tip still moving after the knob stops: "
-            "run `staircase`)")
-
-
-def coupling_reason(data: HysteresisData, where: str = "") -> str | None:
-    """Why ``data`` cannot show coupling: no other knob, or one that never moves (in ``where``); None: it can."""
-    if OTHER_CMD not in data.extras:
-        return "one axis only: coupling cannot be identified (drive both knobs: run `lissajous` or `circle`)"
-    if is_constant(data.extras[OTHER_CMD]):
-        if where:
-            return (f"the other knob never moves in {where}: coupling cannot be fitted there (record estimation "
-                    "data in which both knobs move, e.g. `lissajous` or `circle`, or each knob in turn: `sine-set`)")
-        return "the other knob never moves: coupling cannot be identified (run `lissajous` or `circle`)"
+    Parameters
+    ----------
+    effect : str, Effect or effect class
+        As ``--effects`` writes it (``"load:sheath_wrap_deg"``), an instance or a class.
+    data : HysteresisData
+    to : tuple of str
+        The purposes of :class:`~endocal.models.effects.requirements.Requirement` checked, in
+        the effect's order.
+    where : str
+        The part of the data the effect would be fitted on (its reasons say it cannot be fitted there).
+    context
+        Passed to requirements that take it (``span_deg``: the range the model was fitted on).
+    """
+    cls, inst = _effect(effect)
+    for req in cls.requires:
+        if req.to in to:
+            why = req.reason(data, name=cls.name, where=where, effect=inst, **context)
+            if why is not None:
+                return why
     return None
 
 
-def time_reason(name: str):
-    """A check that effect ``name`` needs time stamps."""
-    def reason(data: HysteresisData) -> str | None:
-        return None if data.t_s is not None else f"no time stamps: {name} cannot be identified"
-    return reason
+def requirement_reasons(effect: str | Effect | type, data: HysteresisData, to: str, **context) -> list[tuple[str, str]]:
+    """``(key, reason)`` of every requirement of purpose ``to`` that ``data`` does not hold."""
+    cls, inst = _effect(effect)
+    out = []
+    for req in cls.requires:
+        if req.to == to and (why := req.reason(data, name=cls.name, effect=inst, **context)) is not None:
+            out.append((req.key, why))
+    return out
 
 
-#: Effect name -> check of whether the data can reveal it (None: it can; else why not).
-IDENTIFIABILITY = {
-    "rate": rate_reason,
-    "creep": creep_reason,
-    "coupling": coupling_reason,
-    "delay": delay_reason,
-    "drift": time_reason("drift"),
-}
-
-#: Effect name -> check of whether its parameters can be fitted at all (the estimation/validation
-#: scheme tests every fittable candidate on the separate validation data).
-FITTABILITY = {
-    "coupling": coupling_reason,
-    "delay": time_reason("delay"),
-    "drift": time_reason("drift"),
-    "creep": time_reason("creep"),
-    "rate": time_reason("rate"),
-}
+def unheld_cautions(effect: Effect, train: HysteresisData, val: HysteresisData) -> list[str]:
+    """Cautions of ``effect``'s requirements that neither the estimation nor the validation data hold
+    (:attr:`~endocal.models.effects.requirements.Requirement.caution`): a fit there may stand for something else."""
+    out = []
+    for req in type(effect).requires:
+        if req.caution and req.check(train, effect=effect) is not None and req.check(val, effect=effect) is not None:
+            out.append(req.caution)
+    return out

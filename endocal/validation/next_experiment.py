@@ -10,26 +10,20 @@ motions that show each effect, inside the probe's limits and the range the model
 on, each sized so that the paired test of the next ``validate`` can reach significance, and
 a ``[conditions]`` prompt where only the user can change what is tested.
 
-What tests what (the catalog's physics, :mod:`endocal.models.effects`)
-    ``coupling``: both knobs at once (``lissajous``): the other bend moves this one only when
-    it moves.
-    ``rate`` vs ``delay``: the same sine at several frequencies (``sine-varying``, up and back
-    down), up to the speed at which the two hypotheses predict measurably different loops
-    (a lag shifts the response in proportion to the speed at every speed; friction growing
-    with speed widens the loop through the capstan's exponential): found by fitting the
-    alternative on the estimation data and predicting both on trial sines
-    (:func:`speeds_at_stake`), the discrimination design of Box & Hill (Technometrics 9,
-    1967) in its simplest form.
-    ``creep``: moves with a hold after each (``staircase`` of one step, repeated): the tip
-    still moving after the knob stops.
-    ``envelope``: the full amplitude of the fitted range, on every segment.
-    ``load``: the whole run at a changed condition (``[conditions]``: ``--set COLUMN=VALUE``
-    of the covariate the records log constant, or an instruction and a column to log when
-    they log none).
-    ``drift`` (pointed at): a long hold. A residual that is no noise: the loop at two
-    amplitudes and three speeds (``sine-set``), for another base to be compared on. A
-    candidate not significant: more of the validation record's kind of motion (``random``
-    in its band), as long as the power calculation asks.
+What tests what: each effect's own ``segment`` (``Effect.segment``, :mod:`endocal.models.effects`)
+    built with the builders of :class:`Design`, in the effects' ``segment_order``: the other knob
+    moving with this one (``coupling``); one ladder of frequencies shared by the effects that ask
+    for it (``rate`` vs ``delay``: the same sine at several frequencies, up and back down, up to the
+    speed at which the two hypotheses predict measurably different loops, found by fitting the
+    alternative on the estimation data and predicting both on trial sines, :func:`speeds_at_stake`:
+    the discrimination design of Box & Hill, Technometrics 9, 1967, in its simplest form); moves
+    with holds (``creep``); a long hold (``drift``); the full amplitude (``envelope``); a condition
+    of the run, the same motion at the earlier value and at a new one (``load``: a condition
+    changed only between records is confounded with them). An effect without a segment gets its
+    ``protocol`` in words. A residual that is no noise: the loop at two amplitudes and three speeds
+    (``sine-set``), for another base to be compared on. A candidate not significant: more of the
+    validation record's kind of motion (``random`` in its band), as long as the power
+    calculation asks.
 
 How long (:mod:`endocal.validation.power`)
     A candidate the scan tested is sized at the gain it showed: the half-cycles with which
@@ -53,14 +47,15 @@ import numpy as np
 
 from endocal.errors import LimitError, ModelError, ProtocolError
 from endocal.models import EFFECTS, HysteresisData
+from endocal.models.effects import make_effect
 from endocal.models.base import HysteresisModel
 from endocal.models.data import OTHER_CMD
 from endocal.probe import ProbeConfig, load_probe
 from endocal.protocols import Protocol, SIGNALS
-from endocal.validation.data import is_constant, load_candidates
+from endocal.validation.candidates import takes_column
+from endocal.validation.data import load_candidates
 from endocal.validation.power import POWER, evidence_phrase, units_for_power
 from endocal.validation.regimes import turning_points
-from endocal.validation.identifiability import creep_reason
 from endocal.validation.predict import predict_errors
 from endocal.validation.scan import MAX_SCAN_SAMPLES, scan_stride
 from endocal.validation.structure import effect_labels, split_fit
@@ -73,17 +68,6 @@ MIN_AMPLITUDE_DEG = 5.0
 #: Share of the probe's knob speed and acceleration limits a design uses: the limits are what
 #: ``excite`` refuses, and a servo asked for its top speed follows it late.
 LIMIT_SHARE = 0.8
-#: Hold after each move of the creep segment (s): the catalog's creep relaxes with one time
-#: constant; 5 s holds 2.5 time constants of the simulator's 2 s (92 % of the relaxation), and a
-#: relaxation slower than that shows as its start.
-HOLD_S = 5.0
-#: A drift pointed at is tested by holding the knob still this long (s): a drift of 1 deg/min
-#: moves the zero by 1 deg, three times a tracker's noise.
-DRIFT_HOLD_S = 60.0
-#: Fade in and out of the both-knob figure (s).
-FADE_S = 5.0
-#: The validation record reaches the full amplitude when it spans this share of the fitted range.
-FULL_SPAN = 0.9
 #: The condition column asked for when the records log none.
 CONDITION = "load_condition"
 
@@ -302,9 +286,46 @@ def speeds_at_stake(model: HysteresisModel, alternative: HysteresisModel, centre
 
 
 # ---------------------------------------------------------------------------- the design
+@dataclass(frozen=True)
+class Planned:
+    """What an effect's :meth:`~endocal.models.effects.base.Effect.segment` planned (a builder of
+    :class:`Design` makes it).
+
+    Attributes
+    ----------
+    segment : int or None
+        1-based segment of the sequence that tests it; None for a condition of the whole run.
+    half_cycles : int
+        Half-cycles of this axis the test gets (0 for a condition: counted when the run is built).
+    sized : str or None
+        How that length was chosen, in words; None: the power calculation's words.
+    note : str
+        Set when nothing could be designed on this probe: why (the design's notes say it).
+    deferred : bool
+        Planned with other effects in one shared segment, built after every effect asked.
+    effect : str or None
+        The label the test is listed under when it is not the effect's name (``load:COLUMN``).
+    """
+
+    segment: int | None
+    half_cycles: int
+    sized: str | None = None
+    note: str = ""
+    deferred: bool = False
+    effect: str | None = None
+
+
 @dataclass
-class _Plan:
-    """The motion envelope of a design: where and how fast the knob may go."""
+class Design:
+    """The experiment being designed: where and how fast the knob may go, and builders of motions.
+
+    An effect's ``segment(design, n_half_cycles)`` reads the motion envelope (``axis``, ``other``,
+    ``lo``/``hi``, ``centre``, ``amplitude``, ``f_typ_hz``, :meth:`cap_hz`, the speed limits),
+    adds segments (:meth:`add`) and returns :meth:`planned`; or asks a shared builder:
+    :meth:`speeds` (one ladder of frequencies for every effect that asks), :meth:`full_range` (any
+    segment sweeping the fitted range), :meth:`condition` (a condition of the run, at the earlier
+    value and a new one); or says why it cannot (:meth:`cannot`).
+    """
 
     axis: str
     other: str | None
@@ -317,8 +338,17 @@ class _Plan:
     max_accel_dps2: float
     f_typ_hz: float  # frequency of a sine over the full range at the validation record's typical speed
     fs_hz: float = 100.0
+    probe: str = ""
     segments: list = field(default_factory=list)
     tests: list = field(default_factory=list)
+    #: the smallest sweep a designed motion makes about its centre (deg)
+    min_amplitude_deg: float = MIN_AMPLITUDE_DEG
+    #: records and condition columns the builders read (set by design_next)
+    train: HysteresisData | None = None
+    val: HysteresisData | None = None
+    bending_axes: tuple = ()
+    conditions: dict = field(default_factory=dict)
+    speed_requests: dict = field(default_factory=dict)
 
     @property
     def centre(self) -> float:
@@ -334,11 +364,76 @@ class _Plan:
         return min(v / (2.0 * math.pi * amplitude), math.sqrt(self.max_accel_dps2 / amplitude) / (2.0 * math.pi))
 
     def add(self, signal: str, **params) -> int:
+        """Append a segment of the ``sequence`` (a signal of :data:`~endocal.protocols.SIGNALS` and its
+        parameters); returns its 1-based number."""
         self.segments.append({"signal": signal, **params})
         return len(self.segments)
 
+    @staticmethod
+    def planned(segment: int | None, half_cycles: int, sized: str | None = None) -> Planned:
+        """What a segment tests: its number, the half-cycles it gives, how it was sized (None: the power words)."""
+        return Planned(segment, int(half_cycles), sized)
 
-def _ladder_hz(plan: _Plan, f_lo: float, f_hi: float) -> list[float]:
+    @staticmethod
+    def cannot(note: str) -> Planned:
+        """Nothing designed for the effect on this probe, and why (in the design's notes)."""
+        return Planned(None, 0, note=note)
+
+    def speeds(self, effect: str, n_half_cycles: int) -> Planned:
+        """The same sine at several frequencies, up to the probe's limits, shared by every effect that asks
+        (a lag and friction growing with speed part at the speeds at stake: :func:`speeds_at_stake`)."""
+        self.speed_requests[effect] = int(n_half_cycles)
+        return Planned(None, 0, deferred=True)
+
+    def full_range(self, n_half_cycles: int) -> Planned:
+        """The full amplitude of the fitted range: the first segment on this axis that moves (every one
+        sweeps the range), else a sine at the typical frequency."""
+        on_axis = [i for i, s in enumerate(self.segments, 1) if self.axis in s["axes"] and s["signal"] != "hold"]
+        if on_axis:
+            k = on_axis[0]
+            return Planned(k, next(t.half_cycles for t in self.tests if t.segment == k),
+                           f"segment {k} sweeps the full fitted range [{self.lo:.4g}, {self.hi:.4g}] deg, as every "
+                           "segment does")
+        f = min(self.f_typ_hz, self.cap_hz(self.amplitude))
+        cycles = max(1, math.ceil(n_half_cycles / 2))
+        k = self.add("sine", axes=[self.axis], amplitude_deg=self.amplitude, offset_deg=self.centre,
+                     frequency_hz=round(f, 6), cycles=cycles)
+        return Planned(k, 2 * cycles)
+
+    def condition(self, n_half_cycles: int, effect: str = "load") -> Planned:
+        """A condition of the whole run, recorded at the records' earlier value and at a new one.
+
+        A condition that changes only between records is confounded with them (their motion, their
+        start, the base's misfit on them): the run's motion is recorded twice for fitting, once at
+        the value the records hold and once at a new one (``excite --set``, :func:`excite_args`), so
+        the same motion at two values shows what the condition does. When no column logs it, the user
+        logs one from now on and records the run at two values of it.
+        """
+        col, recorded = _condition_column(self.train, self.val, self.bending_axes)
+        earlier = ", ".join(f"{x:g}" for x in recorded)
+        if col == CONDITION:
+            instruction = ("change a condition the friction of the tendons depends on (the insertion tube's "
+                           "curvature, a tendon's pretension, the lubrication) and give a number that measures it; "
+                           "log it as a column of every record from now on (rename the column to say its unit); "
+                           "record this run for fitting at two values of it, the same motion at each")
+        else:
+            instruction = (f"record this run for fitting twice, the same motion at two values of the condition "
+                           f"'{col}' measures: at the earlier records' value ({earlier}) and at a value unlike "
+                           "theirs (for the sheath's wrap: curve the insertion tube differently); give the value "
+                           "each run has")
+        self.conditions[col] = {"instruction": instruction, "recorded": recorded}
+        if not self.segments:  # the condition alone: the validation record's kind of motion
+            f = min(self.f_typ_hz, self.cap_hz(self.amplitude))
+            cycles = max(1, math.ceil(n_half_cycles / 2))
+            self.add("sine", axes=[self.axis], amplitude_deg=self.amplitude, offset_deg=self.centre,
+                     frequency_hz=round(f, 6), cycles=cycles)
+        at = f"at {earlier} (the earlier records') and at a new value" if recorded else "at two values"
+        return Planned(None, 0, f"the whole run, the same motion {at}: {effect}:{col} is fitted on the same motion "
+                                "at two values of the condition, so it cannot stand for a difference of motion "
+                                "between the records", effect=f"{effect}:{col}")
+
+
+def _ladder_hz(plan: Design, f_lo: float, f_hi: float) -> list[float]:
     """Frequencies from ``f_lo`` up to ``f_hi`` and back: at most doubling, and each step's jump of
     speed at the zero crossing where it happens within the acceleration limit (one sample)."""
     step_max = plan.max_start_dps / (2.0 * math.pi * plan.amplitude)
@@ -392,9 +487,10 @@ def _targets(model: HysteresisModel, result, train: HysteresisData, val: Hystere
 
     def put(effect: str, status: str, why: str) -> None:
         name = effect.partition(":")[0]
-        if (name in have and name != "load") or effect in effect_labels(model):
+        per_column = name in EFFECTS and takes_column(name)  # one term per column: another column is another term
+        if (name in have and not per_column) or effect in effect_labels(model):
             return
-        out.setdefault("load" if name == "load" else effect, (status, why))
+        out.setdefault(name if per_column else effect, (status, why))
 
     for effect, why in scan.untestable.items():
         put(effect, "untestable", why)
@@ -404,16 +500,26 @@ def _targets(model: HysteresisModel, result, train: HysteresisData, val: Hystere
         if not s.significant and s.gain_pct >= scan.min_gain_pct:
             put(s.effect, "not significant", f"-{s.gain_pct:.0f} % validation RMSE, {s.evidence}")
     suggested = {sp.effect for sp in result.suspects}
-    for e in ("rate", "delay"):  # told apart only where the records reach the speeds at which they differ
-        if e not in suggested:
-            put(e, "speeds", "a lag and friction growing with speed both widen the loop with speed; the records may "
-                "not reach the speeds at which the two differ")
-    if "creep" not in have and creep_reason(train) and creep_reason(val):
-        put("creep", "no holds", "no record holds the knob still after a move, where creep shows itself")
-    if "envelope" not in have and float(np.ptp(val.cmd_deg)) < FULL_SPAN * span_deg:
-        put("envelope", "not the full amplitude",
-            f"the validation record spans {np.ptp(val.cmd_deg):.3g} of the {span_deg:.3g} deg the model was fitted "
-            "on: the stiffening at large bends is not tested")
+    for x in getattr(scan, "lookalikes", ()):  # a suggestion its look-alike is not told from: separate them
+        if not x.settled:
+            put(x.lookalike, "look-alike", x.words())
+    for name, cls in EFFECTS.items():  # what --next considers whatever validate said (rate, delay: the speeds)
+        if cls.at_stake is not None and name not in suggested:
+            put(name, *cls.at_stake)
+    for name, cls in EFFECTS.items():  # what the effect needs to be told from a wider loop, in no record
+        if name in have or cls.at_stake is not None:
+            continue
+        for req in cls.requires:
+            if req.to == "test" and req.check(train) is not None and req.check(val) is not None:
+                put(name, req.status, f"no record holds {req.words}, where {name} shows itself")
+                break
+    for name, cls in EFFECTS.items():  # what only the next records can reach (the full amplitude)
+        if name in have:
+            continue
+        for req in cls.requires:
+            if req.to == "next" and (why := req.check(val, span_deg=span_deg)) is not None:
+                put(name, req.status, f"{why[0]}: {name} is not tested there")
+                break
     if result.unexplained and not result.suspects:
         put("shape", "unexplained", result.unexplained)
     return out
@@ -509,10 +615,11 @@ def design_next(model: HysteresisModel, result, train: HysteresisData, val: Hyst
     others = [a for a in probe.bending_axes if a != axis]
     other = others[0] if others else None
     fs = 100.0
-    plan = _Plan(axis, other, e_lo, e_hi, *(probe.knob_limits_deg[other] if other else (0.0, 0.0)),
-                 max_speed_dps=LIMIT_SHARE * probe.max_knob_speed_dps,
-                 max_start_dps=LIMIT_SHARE * probe.max_knob_accel_dps2 / fs,
-                 max_accel_dps2=LIMIT_SHARE * probe.max_knob_accel_dps2, f_typ_hz=0.0)
+    plan = Design(axis, other, e_lo, e_hi, *(probe.knob_limits_deg[other] if other else (0.0, 0.0)),
+                  max_speed_dps=LIMIT_SHARE * probe.max_knob_speed_dps,
+                  max_start_dps=LIMIT_SHARE * probe.max_knob_accel_dps2 / fs,
+                  max_accel_dps2=LIMIT_SHARE * probe.max_knob_accel_dps2, f_typ_hz=0.0, probe=probe.name,
+                  train=train, val=val, bending_axes=tuple(probe.bending_axes))
     # the motions are played at the validation record's typical speed (over the full range: a lower frequency)
     plan.f_typ_hz = min(_typical_speed_dps(val) / (2.0 * math.pi * plan.amplitude), plan.cap_hz(plan.amplitude))
     m = max(1, sum(1 for e in EFFECTS if e not in {lab.partition(":")[0] for lab in effect_labels(model)}))
@@ -541,37 +648,27 @@ def design_next(model: HysteresisModel, result, train: HysteresisData, val: Hyst
         return n_default, unseen
 
     c, A = plan.centre, plan.amplitude
-    for effect, (status, why) in targets.items():
+    # each effect's own segment (Effect.segment), in its segment_order: the shared speed ladder after the
+    # dedicated motions, then more of the validation record's motion for candidates short of units, then
+    # the segments that reuse the others' (the full amplitude, a condition of the whole run)
+    order = sorted(targets, key=lambda e: EFFECTS[e].segment_order if e in EFFECTS else 50)
+    own: set[str] = set()
+    phase = {"speeds": False, "short": False}
+
+    def flush(upto: int) -> None:
+        if upto > 60 and not phase["speeds"]:
+            phase["speeds"] = True
+            if plan.speed_requests:
+                at_stake = {e: (*targets[e], n, size(e)[1]) for e, n in plan.speed_requests.items()}
+                _speed_segment(plan, model, train, val, at_stake, scan, notes, max_samples, best_deg)
+        if upto > 80 and not phase["short"]:
+            phase["short"] = True
+            _short_segment(plan, val, targets, own, size)
+
+    for effect in order:
+        status, why = targets[effect]
         n, sized = size(effect)
-        if effect == "coupling":
-            if other is None:
-                notes.append(f"coupling: probe '{probe.name}' has one knob, so nothing can couple")
-                continue
-            # one figure centre on both knobs: inside this axis's range and the other knob's limits
-            amp = min(A, plan.other_hi - c, c - plan.other_lo)
-            if amp < MIN_AMPLITUDE_DEG:
-                notes.append(f"coupling: the other knob's limits leave no room about this axis's centre {c:.3g} deg")
-                continue
-            f1 = min(plan.f_typ_hz, plan.cap_hz(amp, start=False) / 1.5)
-            duration = math.ceil(n / (2.0 * f1)) + 2.0 * FADE_S
-            k = plan.add("lissajous", axes=[axis, other], amplitude_deg=amp, offset_deg=c,
-                         frequencies_hz=[round(f1, 6), round(1.5 * f1, 6)], duration_s=float(duration), fade_s=FADE_S)
-            plan.tests.append(PlannedTest(effect, status, why, k, int(2 * f1 * (duration - 2 * FADE_S)), sized))
-        elif effect in ("rate", "delay"):
-            continue  # together, below
-        elif effect == "creep":
-            speed = min(2.0 * math.pi * plan.f_typ_hz * A, plan.max_start_dps)
-            cycles = max(1, math.ceil(n / 2))
-            k = plan.add("staircase", axes=[axis], amplitude_deg=A, offset_deg=c, steps=1, hold_s=HOLD_S,
-                         step_rate_dps=round(speed, 3), cycles=cycles)
-            plan.tests.append(PlannedTest(effect, status, why, k, 2 * cycles, sized))
-        elif effect == "drift":
-            k = plan.add("hold", axes=[axis], offset_deg=c, duration_s=DRIFT_HOLD_S)
-            plan.tests.append(PlannedTest(effect, status, why, k, 1, f"a hold of {DRIFT_HOLD_S:g} s: the knob still, "
-                                          "a drift keeps going where creep stops"))
-        elif effect == "load":
-            continue  # a condition, below
-        elif effect == "shape":
+        if effect == "shape":  # a residual no catalogue effect lowers: the loop at two amplitudes and three speeds
             f = plan.f_typ_hz
             periods = [round(1.0 / f2, 3) for f2 in (f / 2.0, f, min(2.0 * f, plan.cap_hz(A)))]
             cycles = max(1, math.ceil(n / (2 * 2 * len(periods))))
@@ -579,70 +676,54 @@ def design_next(model: HysteresisModel, result, train: HysteresisData, val: Hyst
                          cycles=cycles, offset_deg=c)
             plan.tests.append(PlannedTest(effect, status, why, k, 2 * 2 * len(periods) * cycles,
                                           f"the loop at two amplitudes and three speeds ({sized})"))
-    at_stake = [e for e in ("rate", "delay") if e in targets]
-    if at_stake:
-        _speed_segment(plan, model, train, val, {e: (*targets[e], *size(e)) for e in at_stake}, scan, notes,
-                       max_samples, best_deg)
-    # a candidate short of units: more of the validation record's kind of motion, as long as its power asks
-    short = [(e, st, w) for e, (st, w) in targets.items() if st == "not significant" and e.partition(":")[0]
-             not in ("coupling", "rate", "delay", "creep", "drift")]
-    if short:
-        durations, _ = _half_cycles(val)
-        n = max(size(e)[0] for e, _, _ in short)
-        med = float(np.median(durations)) if durations.size else 1.0 / (2.0 * plan.f_typ_hz)
-        f_hi = min(1.0 / (2.0 * float(np.percentile(durations, 10))) if durations.size else 2 * plan.f_typ_hz,
-                   plan.cap_hz(A))
-        f_lo = min(1.0 / (2.0 * float(np.percentile(durations, 90))) if durations.size else plan.f_typ_hz / 4, f_hi / 2)
-        duration = max(math.ceil(n * med), math.ceil(2.0 / f_lo))
-        k = plan.add("random", axes=[axis], amplitude_deg=A, offset_deg=c, f_lo_hz=round(f_lo, 6),
-                     f_hi_hz=round(f_hi, 6), duration_s=float(duration))
-        for e, st, w in short:
-            plan.tests.append(PlannedTest(e, st, w, k, int(duration / med), size(e)[1]))
-    if "envelope" in targets:
-        status, why = targets["envelope"]
-        on_axis = [i for i, s in enumerate(plan.segments, 1) if axis in s["axes"] and s["signal"] != "hold"]
-        if on_axis:
-            k = on_axis[0]
-            plan.tests.append(PlannedTest("envelope", status, why, k, next(t.half_cycles for t in plan.tests
-                                                                          if t.segment == k),
-                                          f"segment {k} sweeps the full fitted range [{plan.lo:.4g}, {plan.hi:.4g}] "
-                                          "deg, as every segment does"))
-        else:
-            n, sized = size("envelope")
-            f = min(plan.f_typ_hz, plan.cap_hz(A))
-            cycles = max(1, math.ceil(n / 2))
-            k = plan.add("sine", axes=[axis], amplitude_deg=A, offset_deg=c, frequency_hz=round(f, 6), cycles=cycles)
-            plan.tests.append(PlannedTest("envelope", status, why, k, 2 * cycles, sized))
-    conditions = {}
-    if "load" in targets:
-        status, why = targets["load"]
-        col, recorded = _condition_column(train, val, probe.bending_axes)
-        if col == CONDITION:
-            instruction = ("change a condition the friction of the tendons depends on (the insertion tube's "
-                           "curvature, a tendon's pretension, the lubrication) to a value unlike the earlier records', "
-                           "and give a number that measures it; log it as a column of every record from now on "
-                           "(rename the column to say its unit)")
-        else:
-            instruction = (f"change the condition '{col}' measures to a value unlike the earlier records' (for the "
-                           "sheath's wrap: curve the insertion tube differently), and give the value it has in this run")
-        conditions[col] = {"instruction": instruction, "recorded": recorded}
-        if not plan.segments:  # the condition alone: the validation record's kind of motion at the new condition
-            n, sized = size("load")
-            f = min(plan.f_typ_hz, plan.cap_hz(A))
-            cycles = max(1, math.ceil(n / 2))
-            plan.add("sine", axes=[axis], amplitude_deg=A, offset_deg=c, frequency_hz=round(f, 6), cycles=cycles)
-        plan.tests.append(PlannedTest(f"load:{col}", status, why, None, 0,  # every half-cycle: counted when built
-                                      f"the whole run at the new condition; with the earlier records at "
-                                      f"{', '.join(f'{x:g}' for x in recorded) or 'theirs'}, load:{col} can be fitted "
-                                      "across the records"))
+            continue
+        cls = EFFECTS[effect]
+        flush(cls.segment_order)
+        try:
+            inst = make_effect(effect)
+        except ModelError:  # an effect that takes its column (load): the class's segment names it
+            inst = cls.__new__(cls)
+        got = inst.segment(plan, n)
+        if got is None:
+            if status != "not significant":  # more of the validation record's motion covers that one
+                notes.append(f"{effect}: no segment of its own; record {cls.protocol}")
+            continue
+        if cls.segment_order <= 80:
+            own.add(effect)
+        if got.note:
+            notes.append(f"{effect}: {got.note}")
+        elif not got.deferred:
+            plan.tests.append(PlannedTest(got.effect or effect, status, why, got.segment, got.half_cycles,
+                                          got.sized if got.sized is not None else sized))
+    flush(100)
     if not plan.segments:
         raise NothingSuspectedError(
             "nothing the next experiment can test: " + "; ".join(notes) + "; no protocol written")
     plan.tests = [dataclasses.replace(t, **_at_gain_seen(seen.get(t.effect), scan)) for t in plan.tests]
-    return _finish(plan, name, conditions, model, model_path, probe, notes, alpha, power)
+    return _finish(plan, name, plan.conditions, model, model_path, probe, notes, alpha, power)
 
 
-def _speed_segment(plan: _Plan, model, train, val, at_stake: dict, scan, notes, max_samples, best_deg) -> None:
+def _short_segment(plan: Design, val: HysteresisData, targets: dict, own: set, size) -> None:
+    """More of the validation record's kind of motion (``random`` in its band), as long as the power
+    calculation asks, for the candidates short of units that have no dedicated segment of their own."""
+    short = [(e, st, w) for e, (st, w) in targets.items() if st == "not significant" and e not in own]
+    if not short:
+        return
+    A, c = plan.amplitude, plan.centre
+    durations, _ = _half_cycles(val)
+    n = max(size(e)[0] for e, _, _ in short)
+    med = float(np.median(durations)) if durations.size else 1.0 / (2.0 * plan.f_typ_hz)
+    f_hi = min(1.0 / (2.0 * float(np.percentile(durations, 10))) if durations.size else 2 * plan.f_typ_hz,
+               plan.cap_hz(A))
+    f_lo = min(1.0 / (2.0 * float(np.percentile(durations, 90))) if durations.size else plan.f_typ_hz / 4, f_hi / 2)
+    duration = max(math.ceil(n * med), math.ceil(2.0 / f_lo))
+    k = plan.add("random", axes=[plan.axis], amplitude_deg=A, offset_deg=c, f_lo_hz=round(f_lo, 6),
+                 f_hi_hz=round(f_hi, 6), duration_s=float(duration))
+    for e, st, w in short:
+        plan.tests.append(PlannedTest(e, st, w, k, int(duration / med), size(e)[1]))
+
+
+def _speed_segment(plan: Design, model, train, val, at_stake: dict, scan, notes, max_samples, best_deg) -> None:
     """The same sine at several frequencies, up to the probe's limits, for the effects at stake (``rate``,
     ``delay``: ``effect -> (status, why, half-cycles, sized)``) that, fitted on the estimation data,
     change the prediction somewhere within the limits by what the gain bar asks of a record where the
@@ -700,7 +781,7 @@ def _speed_segment(plan: _Plan, model, train, val, at_stake: dict, scan, notes, 
         plan.tests.append(PlannedTest(effect, status, why, k, 2 * cycles * len(freqs), sized))
 
 
-def _finish(plan: _Plan, name, conditions, model, model_path, probe, notes, alpha, power) -> NextExperiment:
+def _finish(plan: Design, name, conditions, model, model_path, probe, notes, alpha, power) -> NextExperiment:
     axes = [plan.axis] + ([plan.other] if plan.other and any(plan.other in s["axes"] for s in plan.segments) else [])
     tests = tuple(plan.tests)
     suspects = list(dict.fromkeys(t.effect for t in tests))
@@ -785,12 +866,20 @@ class NextOutcome:
 
 def excite_args(path: str | Path, nx: NextExperiment) -> tuple[tuple[str, ...], ...]:
     """The ``endocal excite`` argument lists that record ``nx`` written at ``path``: ``STEM-fit``
-    (estimation) and ``STEM-val`` (validation, seed 1), run folders beside the protocol file."""
+    (estimation) and ``STEM-val`` (validation, seed 1), run folders beside the protocol file; with a
+    condition, a third, ``STEM-fit-earlier``: the same motion (the same seed) at the value the earlier
+    records hold (``VALUE0`` when they log none: a second value of the user's choosing), so the
+    estimation data hold the same motion at two values of the condition (:meth:`Design.condition`)."""
     path = Path(path)
     args = ["endocal", "excite", str(path)] + (["--probe", nx.probe] if nx.probe != "tee" else [])
     sets = [a for k in nx.conditions for a in ("--set", f"{k}=VALUE")]
-    return ((*args, "--out", str(path.with_name(f"{path.stem}-fit")), *sets),
-            (*args, "--out", str(path.with_name(f"{path.stem}-val")), "--seed", "1", *sets))
+    out = ((*args, "--out", str(path.with_name(f"{path.stem}-fit")), *sets),
+           (*args, "--out", str(path.with_name(f"{path.stem}-val")), "--seed", "1", *sets))
+    if not nx.conditions:
+        return out
+    earlier = [a for k, c in nx.protocol.conditions.items()
+               for a in ("--set", f"{k}={c['recorded'][0]:g}" if c["recorded"] else f"{k}=VALUE0")]
+    return (*out, (*args, "--out", str(path.with_name(f"{path.stem}-fit-earlier")), *earlier))
 
 
 def write_next(model: HysteresisModel, result, tables: Sequence, train_tables: Sequence | None, planes,

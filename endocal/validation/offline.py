@@ -7,14 +7,17 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 
 from endocal.errors import ModelError
+from endocal.messages import Message, key_of
 from endocal.models import HysteresisData
 from endocal.models.base import HysteresisModel
 from endocal.runs.aligned import AlignedData
+from endocal.validation.bases import minor_loops
 from endocal.validation.data import axis_data, check_columns, glitch_note, load_candidates, min_cmd_span
 from endocal.validation.metrics import ErrorMetrics, error_metrics
 from endocal.validation.regimes import RegimeBreakdown, error_by_regime
@@ -45,6 +48,8 @@ class Comparison:
         Held-out RMSE of each model structure under the scan's scheme: refitted on the same
         estimation data and scored on the validation data, or refitted on the same
         rolling-origin folds (deg).
+    old_path : str or None
+        The previous model's file (None for a model held in memory).
     """
 
     old_label: str
@@ -53,6 +58,7 @@ class Comparison:
     new_rmse_deg: float
     old_heldout_rmse_deg: float
     new_heldout_rmse_deg: float
+    old_path: str | None = None
 
     @property
     def change_pct(self) -> float:
@@ -62,7 +68,8 @@ class Comparison:
     def to_dict(self) -> dict:
         return {"old_label": self.old_label, "new_label": self.new_label, "old_rmse_deg": self.old_rmse_deg,
                 "new_rmse_deg": self.new_rmse_deg, "old_heldout_rmse_deg": self.old_heldout_rmse_deg,
-                "new_heldout_rmse_deg": self.new_heldout_rmse_deg, "change_pct": self.change_pct}
+                "new_heldout_rmse_deg": self.new_heldout_rmse_deg, "change_pct": self.change_pct,
+                "path": self.old_path}
 
 
 @dataclass(frozen=True)
@@ -110,6 +117,13 @@ class ValidationResult:
         The validation data of the axis as scored (not serialised: for figures).
     predicted_deg : (n,) array or None
         The model's prediction of it, what every metric above scores (deg; not serialised).
+    request : ValidationRequest or None
+        What :func:`validate_records` was asked (the summary's next commands repeat it).
+    next : NextOutcome or None
+        With ``next_path``: the next experiment written, or why none was
+        (:class:`~endocal.validation.next_experiment.NextOutcome`).
+    compare_found : bool
+        ``compare`` was not named but found: the model this one was refitted from.
     """
 
     axis: str
@@ -128,6 +142,9 @@ class ValidationResult:
     beyond_samples: int = 0
     hdata: HysteresisData | None = field(default=None, repr=False, compare=False)
     predicted_deg: np.ndarray | None = field(default=None, repr=False, compare=False)
+    request: ValidationRequest | None = None
+    next: object = None
+    compare_found: bool = False
 
     @property
     def suspects(self):
@@ -142,16 +159,17 @@ class ValidationResult:
     @property
     def clean(self) -> bool:
         """True when nothing is missing: the scan ran on blocks where the axis moves, found no
-        suspect and no candidate that clears the gain bar, and the residual points at no effect."""
+        suspect, no candidate that clears the gain bar and no other base to suggest, and the residual
+        points at no effect."""
         unsettled = any(s.gain_pct >= self.scan.min_gain_pct for s in self.scan.tested)
-        return (not self.suspects and not self.pointers and not unsettled and self.scan.scheme != "none"
+        return (not self.suspects and not self.scan.base_suggestions and not self.pointers and not unsettled and self.scan.scheme != "none"
                 and not self.scan.still_blocks and not self.unexplained)
 
     def to_dict(self) -> dict:
         """One JSON-able object: ``metrics``, ``regimes``, ``residuals``, ``suspects``, ``notes`` and more."""
         return {
             "axis": self.axis,
-            "model": dict(self.model),
+            "model": {**self.model, "fit_warning_keys": [key_of(w) for w in self.model.get("fit_warnings", [])]},
             "data": list(self.data),
             "metrics": self.metrics.to_dict(),
             "heldout_rmse_deg": self.scan.baseline_rmse_heldout_deg,
@@ -167,8 +185,153 @@ class ValidationResult:
             "unexplained": self.unexplained,
             "beyond_samples": self.beyond_samples,
             "notes": list(self.notes),
+            "note_keys": [key_of(n) for n in self.notes],
             "compare": None if self.compare is None else self.compare.to_dict(),
+            **({} if self.next is None else {"next": self.next.to_dict()}),
         }
+
+
+@dataclass(frozen=True)
+class ValidationRequest:
+    """What a validation was asked, as the summary's next commands repeat it.
+
+    Attributes
+    ----------
+    model_path : str or None
+        The model's file (None: a model held in memory).
+    data : tuple of str
+        The validation records.
+    train : tuple of str
+        Estimation data given explicitly (``--train``).
+    cv, probe : str
+    planes : str or None
+        Planes given explicitly (``--planes``).
+    folded : bool
+        ``refit_on="all"``: the refits fold the validation data in.
+    next_possible : bool
+        ``--next`` can design for this model and these records (a knob's axis of the probe, a
+        fitted range a motion fits in).
+    """
+
+    model_path: str | None
+    data: tuple[str, ...]
+    train: tuple[str, ...] = ()
+    cv: str = "auto"
+    planes: str | None = None
+    probe: str = "tee"
+    folded: bool = False
+    next_possible: bool = False
+
+
+def previous_model_path(model_path: str | Path, effects: Sequence[str]) -> Path | None:
+    """The model ``model_path`` was refitted from, by the naming of the refit command (``M-EFFECT.json``, or
+    ``M-EFFECT-all.json`` under ``refit_on="all"``, ``M-EFFECT-insample.json`` from estimation data that
+    holds the validated record, from ``M.json``), when that file exists."""
+    model_path = Path(model_path)
+    name = model_path.name
+    if not name.endswith(".json"):
+        return None
+    stem = name[:-5].removesuffix("-all").removesuffix("-insample")
+    for e in effects:
+        tag = "-" + e.replace(":", "-")
+        if stem.endswith(tag):
+            cand = model_path.with_name(stem[: -len(tag)] + ".json")
+            if cand.is_file():
+                return cand
+    return None
+
+
+def validate_records(model: HysteresisModel, tables: Sequence[AlignedData], *, model_path: str | Path | None = None,
+                     train_paths: Sequence[str | Path] = (), cv: str = "auto", planes_path: str | Path | None = None,
+                     compare: HysteresisModel | None = None, compare_path: str | Path | None = None,
+                     find_previous: bool = True, refit_on: str = "estimation", folds: int = 5, seed: int = 0,
+                     load_columns: Sequence[str] | None = None, next_path: str | Path | None = None,
+                     probe: str | Path = "tee") -> ValidationResult:
+    """``endocal validate MODEL DATA...`` offline, and :func:`endocal.api.validate`: the one pipeline both call.
+
+    Decides the estimation data (:func:`~endocal.validation.estimation.plan_estimation`), finds the model
+    to compare with, validates (:func:`validate_offline`) and, with ``next_path``, writes the next
+    experiment (:func:`~endocal.validation.next_experiment.write_next`). Every view (the terminal
+    summary, ``--explain``, ``--json``, the API's objects) renders the result it returns.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+    tables : sequence of AlignedData
+        The validation records, loaded.
+    model_path : path, optional
+        The model's file: recorded estimation data and planes are looked up beside it, refits start
+        from it and are named after it.
+    train_paths : sequence of path
+        Estimation data given explicitly (default: the records the model file names).
+    cv : {"auto", "rolling", "split"}
+    planes_path : path, optional
+        Overrides the bending planes the model was fitted through.
+    compare, compare_path : optional
+        A previous model (and its file) to show beside this one.
+    find_previous : bool
+        Without ``compare``: compare with the model this one was refitted from, found by the refit
+        command's naming (:func:`previous_model_path`).
+    refit_on : {"estimation", "all"}
+        What the suggestions' refits fit on.
+    folds, seed, load_columns
+        As :func:`validate_offline`.
+    next_path : path, optional
+        Write the next experiment there.
+    probe : str or path
+        The probe the next experiment is for when the records name none.
+
+    Raises
+    ------
+    ModelError
+        Bad ``folds`` or ``refit_on``, a ``compare`` model of another axis, and what
+        :func:`validate_offline`, ``plan_estimation`` and (with ``next_path``) ``check_next`` raise.
+    """
+    from endocal.errors import EndocalError
+    from endocal.models import load_model
+    from endocal.validation.estimation import plan_estimation
+    from endocal.validation.next_experiment import check_next
+
+    if folds < 2:
+        raise ModelError(f"folds must be 2 or more (held-out blocks of the rolling-origin scan), got {folds}")
+    if refit_on not in ("estimation", "all"):
+        raise ModelError(f"refit_on must be 'estimation' or 'all', got {refit_on!r}")
+    try:  # a fitted range no motion fits in: with next_path refused before the validation
+        check_next(model, tables, probe)
+        next_possible = True
+    except EndocalError:
+        if next_path is not None:
+            raise
+        next_possible = False
+    plan = plan_estimation(model, tables, model_path=model_path, train_paths=list(train_paths), cv=cv,
+                           planes_path=planes_path)
+    found = False
+    if compare is None and find_previous and model_path is not None:
+        compare_path = previous_model_path(model_path, effect_labels(model))
+        compare, found = (None, False) if compare_path is None else (load_model(compare_path), True)
+    if compare is not None and compare.axis != model.axis:
+        raise ModelError(f"compare {compare_path or 'model'} is a model of axis '{compare.axis}', but "
+                         f"{model_path or 'this model'} is of axis '{model.axis}': compare with a model of the same axis")
+    data_paths = [str(a.source) for a in tables]
+    refit_paths, suffix = plan.train_paths, ""
+    if refit_on == "all" and plan.train is not None:  # asked for: the validation data folded into the refits
+        refit_paths, suffix = list(dict.fromkeys([*plan.train_paths, *data_paths])), "-all"
+    result = validate_offline(model, tables, train=plan.train, train_paths=refit_paths, planes=plan.planes,
+                              planes_path=plan.planes_path, scheme_reason=plan.reason, folds=folds, seed=seed,
+                              compare=compare, compare_path=None if compare_path is None else str(compare_path),
+                              model_path=None if model_path is None else str(model_path), data_paths=data_paths,
+                              load_columns=load_columns, refit_suffix=suffix)
+    outcome = None
+    if next_path is not None:
+        from endocal.validation.next_experiment import write_next
+
+        outcome = write_next(model, result, tables, plan.train, plan.planes, next_path, probe=probe,
+                             model_path=model_path)
+    request = ValidationRequest(model_path=None if model_path is None else str(model_path), data=tuple(data_paths),
+                                train=tuple(map(str, train_paths)), cv=cv,
+                                planes=None if planes_path is None else str(planes_path), probe=str(probe),
+                                folded=bool(suffix), next_possible=next_possible)
+    return replace(result, request=request, next=outcome, compare_found=found)
 
 
 def model_label(model: HysteresisModel) -> str:
@@ -219,6 +382,22 @@ def _no_scan(reason: str, alpha: float, min_gain_pct: float) -> ScanResult:
                       scheme_reason=reason)
 
 
+def slow_clock(n_samples: int, span_s: float) -> str:
+    """A ``slow-clock`` warning when records of ``n_samples`` over ``span_s`` hold under one sample per second,
+    else ``""`` (``fit`` says it too).
+
+    Knob loops are logged at tens of Hz or more; a clock in ms written as ``t_s`` reads 1000x too
+    slow and would make every time-based effect (delay, creep, drift) meaningless.
+    """
+    from endocal.runs.format import LOG_RATE_RANGE_HZ
+
+    rate = n_samples / span_s if span_s > 0 else 0.0
+    if not 0 < rate < LOG_RATE_RANGE_HZ[0]:
+        return ""
+    return Message(f"{rate:.3g} samples per second: is t_s in seconds? (a clock in ms reads 1000x too slow; endocal "
+                   "import csv converts units)", "slow-clock")
+
+
 #: Fewest validation samples: the whiteness test (Ljung-Box) needs a lag-1 autocorrelation of the
 #: residual over a few samples (a record of one back-and-forth sweep has hundreds).
 MIN_VALIDATION_SAMPLES = 4
@@ -226,7 +405,8 @@ MIN_VALIDATION_SAMPLES = 4
 
 def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | None = None, folds: int = 5,
                      seed: int = 0, alpha: float = 0.05, min_gain_pct: float = 10.0,
-                     compare: HysteresisModel | None = None, model_path: str | None = None,
+                     compare: HysteresisModel | None = None, compare_path: str | None = None,
+                     model_path: str | None = None,
                      data_paths: Sequence[str] | None = None, train_paths: Sequence[str] | None = None,
                      planes=None, planes_path: str | None = None, scheme_reason: str | None = None,
                      load_columns: Sequence[str] | None = None, bending_axes: Sequence[str] | None = None,
@@ -265,6 +445,8 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
         Significance level (Holm) and smallest held-out gain of a suspect.
     compare : HysteresisModel, optional
         A previous model: its error is shown beside this one's, under the same scheme.
+    compare_path : str, optional
+        Its file, recorded in the comparison.
     model_path : str, optional
         Where the model came from (the suspects' refits start from it and name their output after it).
     data_paths, train_paths : sequence of str, optional
@@ -336,12 +518,16 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     regimes = error_by_regime(data, pred, seed=seed)
     load_cols = list(dict.fromkeys([*(load_columns or []), *load_candidates(data, axes_all)[0]]))
     resid = residual_tests(data, data.meas_deg - pred, alpha=alpha, load_columns=load_cols)
-    notes = [val_glitches, cut_start(data, data.meas_deg - pred, starts=starts)]
+    loops = minor_loops(model, data, data.meas_deg - pred)
+    notes = [slow_clock(sum(d["n_samples"] for d in info), sum(d.get("duration_s") or 0.0 for d in info)),
+             val_glitches, cut_start(data, data.meas_deg - pred, starts=starts),
+             Message(loops.note, "minor-loops") if loops and loops.note else ""]
     if est is not None:
         same = {d["sha256"] for d in est_info if d["sha256"]} & {d["sha256"] for d in info if d["sha256"]}
         if same:
-            notes.append("the estimation data includes the validation data itself: the scores are in-sample and "
-                         "flatter the model; validate on a record the model was not fitted on")
+            notes.append(Message("the estimation data includes the record validated here: the scores are in-sample "
+                                 "and flatter the model; validate on a record the model was not fitted on",
+                                 "in-sample"))
             # the refit is fitted on the validated record too: not under the name a refit on
             # estimation data alone would take (that model, if made, is the one to keep)
             refit_suffix = refit_suffix or "-insample"
@@ -365,9 +551,10 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
                                 scheme_reason=reason)
     if beyond:
         lo, hi = model.cmd_range_deg_
-        notes.append(f"{beyond} samples command beyond the model's fitted range [{lo:.3g}, {hi:.3g}] "
-                     f"{model.drive_unit_}: predicted by "
-                     "continuing the model there (an extrapolation); refit on data that covers them")
+        notes.append(Message(f"{beyond} of {data.n_samples} samples command beyond the model's fitted range "
+                             f"[{lo:.3g}, {hi:.3g}] "
+                             f"{model.drive_unit_}: predicted by continuing the model there (an extrapolation); refit "
+                             "on data that covers them", "beyond-range"))
     pointers = residual_pointers(model, data, resid, regimes, scan)
     shift = None
     if scan.scheme == "estimation/validation":
@@ -397,11 +584,16 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
             old_label=model_label(compare), new_label=model_label(model),
             old_rmse_deg=float(np.sqrt(np.mean((old_pred - data.meas_deg) ** 2))), new_rmse_deg=metrics.rmse_deg,
             old_heldout_rmse_deg=float(np.sqrt(np.mean(old_err**2))),
-            new_heldout_rmse_deg=scan.baseline_rmse_heldout_deg)
+            new_heldout_rmse_deg=scan.baseline_rmse_heldout_deg,
+            old_path=None if compare_path is None else str(compare_path))
     rep = getattr(model, "fit_report_", None)
+    fit_warnings = list(rep.warnings) if rep is not None else []
+    if rep is not None and rep.status <= 0:  # said by `fit`, and again here: the scores are of unfinished values
+        fit_warnings.insert(0, Message(
+            f"the model's fit stopped before converging ({rep.message}), refit it from its own values with "
+            f"--start-from {model_path or 'the model'}: its parameters may not be final", "not-converged"))
     model_info = {"path": model_path, "base": model.base_name, "effects": labels, "label": model_label(model),
-                  "equation": model.equation(), "drive_unit": model.drive_unit_,
-                  "fit_warnings": list(rep.warnings) if rep is not None else []}
+                  "equation": model.equation(), "drive_unit": model.drive_unit_, "fit_warnings": fit_warnings}
     return ValidationResult(axis=ax, model=model_info, data=info, metrics=metrics, regimes=regimes,
                             residuals=resid, scan=scan, notes=tuple(notes), compare=comp, pointers=tuple(pointers),
                             estimation=est_info, shift=shift,

@@ -3,9 +3,17 @@
 The scan tests each candidate by refitting the model's structure with it; a
 :class:`Refit` records that fit for the user to make: the estimation data, the axis, the
 base and its settings, the effects, the bending planes, the model it starts from and a
-suggested output file. It is data, not a command line: the command line renders it as
-``endocal fit hysteresis ...`` (:func:`endocal.cli.refit.refit_command`), a notebook calls
-the library with its fields.
+suggested output file. It is data, not a command line: :func:`endocal.shell.refit_command` renders it as the
+``endocal fit hysteresis ...`` a user types (the terminal summary, ``validate --json``'s
+``command`` and the API's ``Suggestion.command`` alike), and ``Suggestion.refit()`` calls the
+library with its fields.
+
+A refit is a promise: it rebuilds the candidate the scan scored, with the same resolved
+structure (:func:`~endocal.validation.structure.resolved_settings`: a ``weights="auto"`` fitted
+as ``exponential`` is refitted as ``exponential``), the same settings and the same start (the
+validated model). Where the scan fitted its candidates on 1 estimation sample in N and the
+refit fits every sample, the refit's RMSE on the validation data is not the scan's number, and
+:attr:`Refit.expected_rmse_deg` gives the range to expect.
 """
 
 from __future__ import annotations
@@ -33,8 +41,9 @@ class Refit:
     effects : tuple of str
         Every effect of the refit, as ``--effects`` writes them (the model's own, then the candidate).
     settings : dict
-        Base settings that differ from their defaults (``n_knots``, ...), so the refit keeps the
-        model's structure.
+        Base settings, as the model's fit resolved them, that differ from their defaults
+        (``n_knots``, ``weights``, ...; :func:`~endocal.validation.structure.changed_settings`),
+        so the refit keeps the structure the scan scored.
     planes_path : str or None
         The bending planes the model was fitted through.
     start_from : str or None
@@ -43,6 +52,14 @@ class Refit:
         fit the scan scored rather than a fit from scratch that may stop in another local minimum.
     out_path : str
         Suggested model file (:func:`refit_path`).
+    scan_stride : int
+        The scan fitted the candidate on 1 estimation sample in this many (1: every sample, as
+        the refit does).
+    expected_rmse_deg : (float, float) or None
+        When ``scan_stride`` > 1: the validation RMSE (deg) to expect of the refit on every
+        sample, from the candidate fitted on two interleaved subsamples of the estimation data
+        (:func:`~endocal.validation.scan.scan_split`); None when the scan fitted every sample (its
+        RMSE is the promise) or under rolling origin (the refit's own validation repeats the folds).
     """
 
     data_paths: tuple[str, ...]
@@ -53,11 +70,14 @@ class Refit:
     settings: dict = field(default_factory=dict)
     planes_path: str | None = None
     start_from: str | None = None
+    scan_stride: int = 1
+    expected_rmse_deg: tuple[float, float] | None = None
 
     def to_dict(self) -> dict:
         return {"data_paths": list(self.data_paths), "axis": self.axis, "base": self.base,
                 "effects": list(self.effects), "settings": dict(self.settings), "planes_path": self.planes_path,
-                "start_from": self.start_from, "out_path": self.out_path}
+                "start_from": self.start_from, "out_path": self.out_path, "scan_stride": self.scan_stride,
+                "expected_rmse_deg": None if self.expected_rmse_deg is None else list(self.expected_rmse_deg)}
 
 
 def refit_path(model_path: str | None, effect: str, suffix: str = "") -> str:

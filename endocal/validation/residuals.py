@@ -24,6 +24,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy.stats import chi2, norm
 
+from endocal.messages import Message
 from endocal.models.data import OTHER_CMD, HysteresisData
 from endocal.models.start import RecordStart
 from endocal.validation.data import is_constant, speed_dps
@@ -239,7 +240,8 @@ def unexplained_shape(data: HysteresisData, resid: ResidualTests, frac: float = 
         return ""
     return (f"the residual is not noise: it stays correlated for {w.correlation_time_s:.3g} s, "
             f"{100 * w.correlation_time_s / half:.0f} % of a half-cycle ({half:.3g} s), so the model misses a shape that "
-            "follows the loop; look at the loop (endocal report) and at another base (--model)")
+            "follows the loop; look at the loop (endocal report), at another base (--model), or add your own "
+            "effect (docs/how-to/add-effect.md)")
 
 
 
@@ -308,19 +310,19 @@ def cut_start(data: HysteresisData, resid_deg: np.ndarray, what: str = "validati
     if starts:
         st = max(starts, key=lambda s: s.rmse_rest_deg - s.rmse_estimated_deg)
         which = f"the {what}" if data.n_runs == 1 else f"{len(starts)} of {data.n_runs} {what}s (the largest gain)"
-        return (f"{which} {_start_words(data.cmd_deg[runs[st.run]], data.cmd_unit)}: run from an estimated start, "
-                f"{st.describe(data.cmd_unit)}: a record cut from a longer motion starts where that motion left the "
-                "knob, not in the relaxed state a model assumes; every model here, candidates too, runs it from the "
-                "start that predicts it best")
+        return Message(f"{which} {_start_words(data.cmd_deg[runs[st.run]], data.cmd_unit)}: run from an estimated "
+                       f"start, {st.describe(data.cmd_unit)}: a record cut from a longer motion starts where that "
+                       "motion left the knob, not in the relaxed state a model assumes; every model here, candidates "
+                       "too, runs it from the start that predicts it best", "start-estimated")
     found = _unexplained_starts(data, resid_deg)
     if not found:
         return ""
     _, rb, ra, a = max(found)
     which = f"the {what}" if data.n_runs == 1 else f"{len(found)} of {data.n_runs} {what}s (the worst)"
     u = data.cmd_deg[next(sl for sl in runs if sl.start == a)]
-    return (f"{which} {_start_words(u, data.cmd_unit)}: its error before the first reversal is {rb:.3g} deg RMS, "
-            f"{rb / ra:.1f}x the {ra:.3g} deg after it. No start tried predicts it (relaxed, from 0, cut from a "
-            "periodic motion, after a sweep the other way): a step, a first sweep from a relaxed sheath, or a tip "
-            "still bent where the model never saw the knob starts a record so; that stretch measures the start, not "
-            "the physics, and a candidate may fit it; cut the records at their first reversal, or move the knob "
-            "through its range before each acquisition")
+    return Message(f"{which} {_start_words(u, data.cmd_unit)}: its error before the first reversal is {rb:.3g} deg "
+                   f"RMS, {rb / ra:.1f}x the {ra:.3g} deg after it. No start tried predicts it (relaxed, from 0, cut "
+                   "from a periodic motion, after a sweep the other way): a step, a first sweep from a relaxed sheath, "
+                   "or a tip still bent where the model never saw the knob starts a record so; that stretch measures "
+                   "the start, not the physics, and a candidate may fit it; cut the records at their first reversal, "
+                   "or move the knob through its range before each acquisition", "start-cut")

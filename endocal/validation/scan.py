@@ -12,7 +12,8 @@ data. Two schemes make the held-out data:
   (:mod:`endocal.validation.folds`), block by block
   (:func:`~endocal.validation.paired.paired_test`).
 
-The p-values of all candidates are Holm-corrected. A candidate is a *suspect* when its
+The p-values of all candidates are Holm-corrected. The other bases of the catalogue are scored the
+same way, with the model's effects (:mod:`endocal.validation.bases`). A candidate is a *suspect* when its
 corrected p-value is below ``alpha`` *and* it cuts the held-out RMSE by at least
 ``min_gain_pct``: with thousands of samples, statistics alone would flag a term that absorbs
 a sliver of a model's structural mismatch; the effect size keeps a model that already
@@ -25,16 +26,19 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
 from endocal.errors import ModelError
+from endocal.messages import Message
 from endocal.models import EFFECTS, HysteresisData
 from endocal.models.base import HysteresisModel
-from endocal.validation.ambiguity import ambiguities, demoted
+from endocal.validation.ambiguity import ambiguities, demoted, settle_lookalikes
+from endocal.validation.bases import scan_bases_rolling, scan_bases_split
 from endocal.validation.candidates import candidate_effects
 from endocal.validation.folds import check_cv_data, fold_bounds, fold_errors, fold_split, still_blocks
-from endocal.validation.identifiability import creep_reason
+from endocal.validation.identifiability import unheld_cautions
 from endocal.validation.paired import holm, min_units_for, paired_test, unit_test
 from endocal.validation.parallel import map_jobs, one_blas_thread
 from endocal.validation.power import estimate_power, evidence_phrase
@@ -88,13 +92,8 @@ def _split_candidate(model: HysteresisModel, effects: Sequence[str], train: Hyst
     cautions = [w for w in m.fit_report_.warnings if prefixes and w.startswith(prefixes)
                 and (b := _AT_BOUND.search(w)) and float(b.group(1)) != 0.0]
     cautions += [c for e in new if (c := e.implausible(m.effect_params(e), train))]
-    if any(e.name == "creep" for e in new) and creep_reason(train) and creep_reason(val):
-        # creep shows itself where the knob rests after a move; fitted and scored on motion alone
-        # its slow memory takes up smoother reversals, a lag or how the records start, and its
-        # refits failed on other records of the same plant (red-team runs, README known gaps)
-        cautions.append("no record holds the knob still after a move, where creep shows itself (the tip still "
-                        "moving after the knob stops): fitted on motion alone it may stand for smoother reversals, a "
-                        "lag or how the records start; record a `staircase` to confirm it")
+    # an effect fitted on records that lack what shows it (creep without a hold) may stand for something else
+    cautions += [c for e in new for c in unheld_cautions(e, train, val)]
     return predict_errors(m, val), cautions
 
 
@@ -225,19 +224,66 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     suspects = [s for s in tested if s.significant] or [s for s in tested if s.gain_pct >= min_gain_pct]
     # a candidate with a caution (a delay at its -0.5 s bound, a drift too fast to be one) ranks after the others
     suspects.sort(key=lambda s: bool(s.caution))
-    notes = demoted(suspects) + (ambiguities(suspects, errs, alpha) if any(s.significant for s in suspects) else [])
-    notes += [f"{k}: {v}" for k, v in untestable.items()]
+    # the first suggestion against the look-alikes it declares, on records that separate them
+    suspects, settled = settle_lookalikes(suspects, tested, errs, dt, val, units, alpha, min_gain_pct,
+                                          lambda effects: _split_candidate(model, effects, dt, val)[0], have)
+    if stride > 1 and suspects:
+        ranges = expected_ranges(model, [s.effect for s in suspects], train, val, stride,
+                                 [s.rmse_heldout_deg for s in suspects], jobs)
+        suspects = [replace(s, refit=replace(s.refit, scan_stride=stride, expected_rmse_deg=r))
+                    for s, r in zip(suspects, ranges)]
+        tested = [next((x for x in suspects if x.effect == s.effect), s) for s in tested]
+    # ambiguity.py words these notes, one kind per function: each gets its key as it enters the result
+    notes = [Message(n, "demoted") for n in demoted(suspects)] + (
+        [Message(n, "alike") for n in ambiguities(suspects, errs, alpha)] if any(s.significant for s in suspects)
+        else [])
+    notes += [Message(x.words(), "alike") for x in settled]
+    notes += [Message(f"{k}: {v}", "untestable") for k, v in untestable.items()]
     if thin and fitted:
-        notes.append(f"the validation data holds {units.n} {units.kind}s; with {len(fitted)} candidates at least "
-                     f"{need} are needed before any can be significant at {alpha:g}: candidates are ranked by their "
-                     "validation gain alone; validate on a longer record (or more records) to test them")
+        notes.append(Message(f"the validation data holds {units.n} {units.kind}s; with {len(fitted)} candidates at "
+                             f"least {need} are needed before any can be significant at {alpha:g}: candidates are "
+                             "ranked by their validation gain alone; validate on a longer record (or more records) to "
+                             "test them", "few-units"))
     if stride > 1:
-        notes.append(f"candidates fitted on 1 estimation sample in {stride} ({dt.n_samples} of {train.n_samples}) to "
-                     "keep the scan quick; the printed refit fits every sample, so its validation RMSE can differ "
-                     "from the candidate's by a few per cent")
+        expect = ""
+        if suspects and suspects[0].refit.expected_rmse_deg is not None:
+            lo, hi = suspects[0].refit.expected_rmse_deg
+            expect = (f"; expect {suspects[0].effect}'s refit at {lo:.3g} .. {hi:.3g} deg validation RMSE (the "
+                      "candidate fitted on two interleaved subsamples)")
+        notes.append(Message(f"candidates fitted on 1 estimation sample in {stride} ({dt.n_samples} of "
+                             f"{train.n_samples}) to keep the scan quick; the printed refit fits every sample, so its "
+                             f"validation RMSE differs from the candidate's{expect}", "subsampled"))
+    bases = () if candidates is not None else scan_bases_split(
+        model, dt, val, err_base, units, alpha=alpha, min_gain_pct=min_gain_pct, data_paths=data_paths,
+        model_path=model_path, planes_path=planes_path, suffix=refit_suffix, jobs=jobs)
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), 0, stride,
                       dt.n_samples, alpha, min_gain_pct, scheme="estimation/validation", scheme_reason=scheme_reason,
-                      units=units.to_dict(), min_units=need)
+                      units=units.to_dict(), min_units=need, lookalikes=tuple(settled), bases=bases)
+
+
+def expected_ranges(model: HysteresisModel, effects: Sequence[str], train: HysteresisData, val: HysteresisData,
+                    stride: int, rmse_scanned: Sequence[float], jobs: int | None = None) -> list[tuple[float, float]]:
+    """The validation RMSE (deg) to expect of each refit ``base + effects + effect`` on every sample of ``train``,
+    when the scan fitted it on 1 sample in ``stride``.
+
+    The scan fitted each candidate on the samples ``0, stride, 2 stride, ...``; this fits it once more on the
+    samples halfway between (``stride // 2, ...``) and scores it on ``val``. A refit on every sample sees both
+    subsamples, so its RMSE is expected between the two: the range is theirs (``rmse_scanned`` the first), widened
+    by half their gap on each side, as two draws pin a spread only roughly. A candidate the second subsample cannot
+    fit keeps the scanned RMSE alone.
+    """
+    phase = stride // 2
+    dt2 = train.take([np.arange(sl.start + phase, sl.stop, stride) for sl in train.run_slices()])
+    have = effect_labels(model)
+    with one_blas_thread():
+        again = map_jobs(lambda e: _split_candidate(model, have + [e], dt2, val)[0], list(effects), jobs)
+    out = []
+    for r0, err in zip(rmse_scanned, again):
+        r1 = r0 if isinstance(err, Exception) else float(np.sqrt(np.mean(err**2)))
+        lo, hi = min(r0, r1), max(r0, r1)
+        pad = 0.5 * (hi - lo)
+        out.append((max(lo - pad, 0.0), hi + pad))
+    return out
 
 
 def check_fit_data(data: HysteresisData, what: str = "data") -> None:
@@ -368,16 +414,19 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
             errs[c] = err
     tested.sort(key=lambda s: -s.gain_pct)
     suspects = [s for s in tested if s.significant]
-    notes = ambiguities(suspects, errs, alpha)
-    notes += [f"{k}: {v}" for k, v in untestable.items()]
+    notes = [Message(n, "alike") for n in ambiguities(suspects, errs, alpha)]
+    notes += [Message(f"{k}: {v}", "untestable") for k, v in untestable.items()]
     if stride > 1:
-        notes.append(f"scanned 1 sample in {stride} ({d.n_samples} of {data.n_samples})")
+        notes.append(Message(f"scanned 1 sample in {stride} ({d.n_samples} of {data.n_samples})", "subsampled"))
     still = still_blocks(d, bounds)
     if still:
         where = (f"all {folds} held-out blocks hold" if still == folds else f"{still} of the {folds} held-out blocks hold")
-        notes.insert(0, f"{where} no motion of this axis (its knob rests while the record goes on): there the scan "
-                        "scores only where the model puts the resting bend, not its hysteresis; validate on a record "
-                        "where this axis moves throughout")
+        notes.insert(0, Message(f"{where} no motion of this axis (its knob rests while the record goes on): there the "
+                                "scan scores only where the model puts the resting bend, not its hysteresis; validate "
+                                "on a record where this axis moves throughout", "still-blocks"))
+    bases = () if candidates is not None else scan_bases_rolling(
+        model, d, bounds, err_base, base_train_rmse, alpha=alpha, min_gain_pct=min_gain_pct, screen_pct=screen_pct,
+        data_paths=data_paths, model_path=model_path, planes_path=planes_path, jobs=jobs)
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), folds, stride,
                       d.n_samples, alpha, min_gain_pct, scheme="rolling-origin", scheme_reason=scheme_reason,
-                      still_blocks=still)
+                      still_blocks=still, bases=bases)

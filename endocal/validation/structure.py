@@ -14,10 +14,25 @@ from endocal.models import HysteresisData, make_model
 from endocal.models.base import HysteresisModel
 
 
+def resolved_settings(model: HysteresisModel) -> dict:
+    """``model``'s base settings with every ``"auto"`` replaced by what its fit resolved it to
+    (``structure_``): a PI model's ``weights="auto"`` fitted as ``exponential`` stays exponential.
+
+    Refitting ``"auto"`` would resolve it afresh, on other data or with another effect in the
+    chain, and may pick another structure than the one scored: a `pi` + `envelope` model of a
+    tendon log kept ``exponential`` in the scan and went ``free`` (21 weights) in the printed
+    refit, which then delivered -8 % where the scan promised -45 % (issue 33). The scan's
+    candidates and the refit it prints both take these settings.
+    """
+    structure = getattr(model, "structure_", None) or {}
+    return {k: (structure[k] if v == "auto" and k in structure else v) for k, v in model.get_settings().items()}
+
+
 def template(model: HysteresisModel, effects: Sequence[str]) -> HysteresisModel:
-    """An unfitted ``base + effects`` with ``model``'s base, settings, fixed parameters and axis,
-    continued beyond its fitted range (a held-out block may command beyond a training block's)."""
-    return make_model(model.base_name, list(effects), **model.get_settings(), fixed=model.fixed, axis=model.axis,
+    """An unfitted ``base + effects`` with ``model``'s base, resolved settings (:func:`resolved_settings`),
+    fixed parameters and axis, continued beyond its fitted range (a held-out block may command beyond
+    a training block's)."""
+    return make_model(model.base_name, list(effects), **resolved_settings(model), fixed=model.fixed, axis=model.axis,
                       out_of_range="extrapolate")
 
 
@@ -28,13 +43,13 @@ def effect_labels(model: HysteresisModel) -> list[str]:
 
 
 def changed_settings(model: HysteresisModel) -> dict:
-    """The base settings of ``model`` that differ from their defaults (``n_knots``, ``n_operators``, ...),
-    so a refit keeps the model's structure."""
+    """The resolved base settings of ``model`` (:func:`resolved_settings`) that differ from their
+    defaults (``n_knots``, ``n_operators``, ``weights``...), so a refit keeps the model's structure."""
     import inspect
 
     sig = inspect.signature(type(model).__init__)
     out = {}
-    for k, v in model.get_settings().items():
+    for k, v in resolved_settings(model).items():
         default = sig.parameters[k].default
         if default is not inspect.Parameter.empty and v != default:
             out[k] = v

@@ -121,6 +121,12 @@ class ScanResult:
         Fewest units with which the best candidate could reach significance.
     still_blocks : int
         Rolling-origin held-out blocks in which this axis's knob rests (:func:`still_blocks`).
+    lookalikes : tuple of Settlement
+        The first suggestion against each of its declared look-alikes
+        (:func:`~endocal.validation.ambiguity.settle_lookalikes`).
+    bases : tuple of BaseCandidate
+        The other bases of the catalogue with the model's effects, tested the same way, by decreasing
+        gain (:mod:`endocal.validation.bases`); empty when the scan tested given candidates only.
     """
 
     suspects: tuple[Suspect, ...]
@@ -138,6 +144,13 @@ class ScanResult:
     units: dict | None = None
     min_units: int = 0
     still_blocks: int = 0
+    lookalikes: tuple = ()
+    bases: tuple = ()
+
+    @property
+    def base_suggestions(self) -> tuple:
+        """The base candidates that clear both bars (corrected p below ``alpha``, gain at least ``min_gain_pct``)."""
+        return tuple(b for b in self.bases if b.significant)
 
     @property
     def thin_evidence(self) -> bool:
@@ -151,6 +164,7 @@ class ScanResult:
         return {
             "suspects": [s.to_dict() for s in self.suspects],
             "tested": [s.to_dict() for s in self.tested],
+            "bases": [b.to_dict() for b in self.bases],
             "baseline_rmse_heldout_deg": self.baseline_rmse_heldout_deg,
             "untestable": dict(self.untestable),
             "notes": list(self.notes),
@@ -158,4 +172,5 @@ class ScanResult:
                    "n_samples": self.n_samples, "alpha": self.alpha, "min_gain_pct": self.min_gain_pct,
                    "units": self.units, "min_units": self.min_units, "test": test,
                    "still_blocks": self.still_blocks},
+            "lookalikes": [x.to_dict() for x in self.lookalikes],
         }

@@ -33,6 +33,7 @@ from dataclasses import asdict, dataclass
 from endocal.models import EFFECTS
 from endocal.models.base import HysteresisModel
 from endocal.models.data import HysteresisData
+from endocal.validation.candidates import takes_column
 
 #: Smallest |cross-correlation| that counts as pointing at an effect. With thousands of
 #: samples a correlation of 0.05 is "significant" yet explains 0.25 % of the residual's
@@ -47,13 +48,34 @@ MIN_CORR_SHORT = 0.5
 #: Smallest regime error relative to the whole record's that counts as pointing at an effect.
 MIN_RATIO = 1.5
 
-_BY_SIGNAL = {
-    "other command": (("coupling",), "the other knob's command"),
-    "time": (("drift",), "time"),
-    "speed": (("delay", "rate"), "the signed knob speed"),
-    "abs speed": (("rate",), "how fast the knob moves"),
+#: What each residual signal is, in words (the signals of :mod:`endocal.validation.residuals`; the
+#: effects that a signal points at declare it in ``Effect.residual``).
+SIGNAL_WORDS = {
+    "other command": "the other knob's command",
+    "time": "time",
+    "speed": "the signed knob speed",
+    "abs speed": "how fast the knob moves",
 }
-_BY_REGIME = {"other axis": "coupling", "hold": "creep"}
+
+
+def _alike_words(name: str, alike: list[str]) -> str:
+    """Why a term and its look-alikes are not told apart where the records do not separate them."""
+    return f"where the records do not separate them, {name} looks like {' or '.join(alike)}"
+
+
+def declaring(signal: str) -> list[str]:
+    """Catalogue effects that declare ``signal`` in ``residual``, in catalogue order."""
+    return [name for name, cls in EFFECTS.items() if signal in cls.residual]
+
+
+def _pointed_at(kind: str) -> dict[str, list[str]]:
+    """Signal (or ``regime:NAME``) -> the catalogue effects that declare it in ``residual``, in catalogue order."""
+    out: dict[str, list[str]] = {}
+    for name, cls in EFFECTS.items():
+        for r in cls.residual:
+            if isinstance(r, str) and r.startswith("regime:") == (kind == "regime"):
+                out.setdefault(r, []).append(name)
+    return out
 
 
 @dataclass(frozen=True)
@@ -87,6 +109,7 @@ class Pointer:
 
 def _evidence(resid, regimes) -> dict[str, list[str]]:
     out: dict[str, list[str]] = {}
+    by_signal = _pointed_at("signal")
     for x in resid.cross:
         if x.significant and x.max_abs_corr >= MIN_CORR:
             r, lag, untested = x.max_abs_corr, x.lag_s, ""
@@ -102,20 +125,30 @@ def _evidence(resid, regimes) -> dict[str, list[str]]:
         else:
             continue
         if x.signal.startswith("load:"):
-            effects, words = (x.signal,), f"'{x.signal.partition(':')[2]}' times the direction of motion"
-        elif x.signal in _BY_SIGNAL:
-            effects, words = _BY_SIGNAL[x.signal]
+            # a condition column: the effects that declare "load" read it, written NAME:COLUMN
+            column = x.signal.partition(":")[2]
+            effects, words = ([f"{e}:{column}" for e in by_signal.get("load", [])],
+                              f"'{column}' times the direction of motion")
+        elif x.signal in by_signal:
+            effects, words = by_signal[x.signal], SIGNAL_WORDS.get(x.signal, x.signal)
         else:
             continue
         for e in effects:
             out.setdefault(e, []).append(f"the residual follows {words} (|r| = {r:.2f} at lag {lag:+.3g} s{untested})")
+    by_regime = _pointed_at("regime")
     for r in regimes.regimes:
-        key = r.group if r.group in _BY_REGIME else ("hold" if r.name.startswith("hold") else None)
-        if key is None or r.ratio < MIN_RATIO:
+        key = f"regime:{r.group}" if f"regime:{r.group}" in by_regime else (
+            "regime:hold" if r.name.startswith("hold") else None)
+        if key is None or key not in by_regime or r.ratio < MIN_RATIO:
             continue
-        out.setdefault(_BY_REGIME[key], []).append(
-            f"the error in '{r.name}' is {r.ratio:.2f}x the whole record's ({r.metrics.rmse_deg:.3g} deg)")
-    return out
+        for e in by_regime[key]:
+            out.setdefault(e, []).append(
+                f"the error in '{r.name}' is {r.ratio:.2f}x the whole record's ({r.metrics.rmse_deg:.3g} deg)")
+    for name, cls in EFFECTS.items():  # an effect's own statistic of the residual
+        for f in cls.residual:
+            if callable(f):
+                out.setdefault(name, []).extend(f(resid, regimes) or [])
+    return {k: v for k, v in out.items() if v}
 
 
 def residual_pointers(model: HysteresisModel, data: HysteresisData, resid, regimes, scan) -> list[Pointer]:
@@ -139,8 +172,9 @@ def residual_pointers(model: HysteresisModel, data: HysteresisData, resid, regim
     list of Pointer
         In the order of the table in the module docstring.
     """
-    def key(label: str) -> str:  # load is per column; every other effect is one term whatever its column
-        return label if label.startswith("load:") else label.partition(":")[0]
+    def key(label: str) -> str:  # an effect that needs its column is one term per column (load:COLUMN)
+        name = label.partition(":")[0]
+        return label if name in EFFECTS and takes_column(name) else name
 
     have = {key(e.label) for e in model.effects_}
     confirmed = {key(s.effect) for s in scan.suspects}
@@ -154,7 +188,7 @@ def residual_pointers(model: HysteresisModel, data: HysteresisData, resid, regim
         experiment = f"record {EFFECTS[name].protocol}"
         if effect in untestable:
             status, why = "untested", untestable[effect]
-        elif name == "load" and "load" in untestable:
+        elif ":" in effect and name in untestable:
             col = effect.partition(":")[2]
             status, why = "untested", (f"'{col}' varies here but not in the data the candidates are fitted on: "
                                        f"{effect} cannot be fitted there")
@@ -167,9 +201,9 @@ def residual_pointers(model: HysteresisModel, data: HysteresisData, resid, regim
                    f"({s.base_rmse_heldout_deg:.3g} -> {s.rmse_heldout_deg:.3g} deg, p = {s.p_value:.2g}): ")
             if s.gain_pct < 0 and scan.scheme == "estimation/validation":
                 # a term that makes unseen data worse was fitted to something else in the estimation data
+                alike = [other for other in EFFECTS[name].lookalikes if other in EFFECTS]
                 why += ("the estimation data does not pin it down"
-                        + (" (at one speed a lag or speed-dependent friction looks like a wider loop)"
-                           if name in ("delay", "rate") else "")
+                        + (f" ({_alike_words(name, alike)})" if alike else "")
                         + ", or the catalog term does not capture what the residual shows here")
                 experiment = f"record estimation data with {EFFECTS[name].protocol}"
             else:
@@ -230,9 +264,10 @@ def shift_pointers(shift, scan, covariates: list[str] = (), speeds_dps: tuple[fl
         return []
     fitted = f"with the estimation record's parameters the validation RMSE is {base:.3g} deg"
     seen = ("; " + "; ".join(covariates)) if covariates else ""
+    zero_effects, friction_effects = declaring("time"), declaring("load")
     if base - zr >= 0.75 * (base - fr):  # the zero alone does most of it
         return [Pointer(
-            "drift",
+            effect,
             f"{fitted}; shifting the prediction by {shift.zero_deg:+.3g} deg, fitted on this record alone, brings it "
             f"to {zr:.3g} deg (-{100 * (1 - zr / base):.0f} %){seen}",
             "untested",
@@ -240,7 +275,7 @@ def shift_pointers(shift, scan, covariates: list[str] = (), speeds_dps: tuple[fl
             "a knob re-homed, the probe re-seated): a drift fitted within the estimation record cannot know it",
             "home the knobs and keep the base sensor fixed the same way before every record, and record estimation "
             "and validation data back to back; a drift that goes on across records shows in one long record with "
-            "drift fitted on its first part")]
+            "drift fitted on its first part") for effect in zero_effects]
     wider = "wider" if shift.width_deg > 0 else "narrower"
     evidence = (f"{fitted}; a loop {abs(shift.width_deg):.3g} knob {shift.cmd_unit} per side {wider} with "
                 f"{100 * (shift.gain - 1):+.0f} % slope, fitted on this record alone, brings it to {fr:.3g} deg "
@@ -250,7 +285,7 @@ def shift_pointers(shift, scan, covariates: list[str] = (), speeds_dps: tuple[fl
         ratio = speeds_dps[1] / speeds_dps[0]
         if (shift.width_deg > 0 and ratio >= SPEED_RATIO) or (shift.width_deg < 0 and ratio <= 1 / SPEED_RATIO):
             pace = f"{ratio:.2g} times as fast" if ratio > 1 else f"{1 / ratio:.2g} times slower"
-            for effect in ("delay", "rate"):
+            for effect in declaring("speed"):
                 out.append(Pointer(
                     effect,
                     f"{evidence}; the knob moves {pace} here ({speeds_dps[1]:.3g} vs {speeds_dps[0]:.3g} "
@@ -264,21 +299,23 @@ def shift_pointers(shift, scan, covariates: list[str] = (), speeds_dps: tuple[fl
                     "and validate again"))
             if not covariates:
                 return out
+    # a condition constant within each record is confounded with the records (their motion, their
+    # start, the base's misfit): only the same motion at two of its values, or a change within a run, shows it
+    same = ("record the same motion at the earlier value and at a new one (or change it during a run)")
     if covariates:
         column = covariates[0].split("'")[1]
-        experiment = (f"record two or more conditions with '{column}' logged as here, fit load:{column} on them and "
-                      "validate on another")
+        experiment = (f"{same} with '{column}' logged as here, fit {{effect}}:{column} on them and validate on another")
     elif held:
         experiment = (f"{'; '.join(held)}, so what changed is not what is logged: log that condition (tendon "
-                      "pretension, insertion-tube shape, lubrication) as a column of every record, record two or "
-                      "more conditions, fit load:COLUMN on them and validate on another")
+                      "pretension, insertion-tube shape, lubrication) as a column of every record, "
+                      f"{same}, fit {{effect}}:COLUMN on them and validate on another")
     else:
-        experiment = ("log the condition as a column of every record (e.g. sheath_wrap_deg), record two or more "
-                      "conditions, fit load:COLUMN on them and validate on another")
+        experiment = (f"log the condition as a column of every record (e.g. sheath_wrap_deg), {same}, fit "
+                      "{effect}:COLUMN on them and validate on another")
     return out + [Pointer(
-        "load",
+        effect,
         f"{evidence}{seen}",
         "untested",
         "the friction changed between the records (insertion-tube curvature, tendon tension, lubrication): every "
         "candidate is fitted on the estimation record, which holds one condition",
-        experiment)]
+        experiment.format(effect=effect)) for effect in friction_effects]

@@ -13,7 +13,7 @@ applied in that order), filters on the base's output (:class:`OutputFilter`: ``c
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 from endocal.errors import ModelError
 from endocal.models.effects.base import Effect, InputEffect, OutputEffect, OutputFilter
@@ -53,6 +53,11 @@ class EffectInfo:
         What the data must carry besides command and measurement (``t_s``, a column).
     streamable : bool
         Whether the streaming compensator can undo it one sample at a time.
+    requires : list of str
+        What the records must hold to fit it or to tell it from a wider loop, in words
+        (``Effect.requires``).
+    lookalikes : dict
+        Effect name -> the records that separate the two, in words (``Effect.lookalikes``).
     """
 
     name: str
@@ -64,14 +69,14 @@ class EffectInfo:
     parameters: list[str]
     needs: list[str]
     streamable: bool
+    requires: list[str] = field(default_factory=list)
+    lookalikes: dict[str, str] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return asdict(self)
 
 
-_USAGE = {"load": "load:COLUMN", "coupling": "coupling[:COLUMN]"}
-_NEEDS = {"rate": ["t_s"], "delay": ["t_s"], "drift": ["t_s"], "creep": ["t_s"],
-          "coupling": ["other_cmd_deg (or the named column)"], "load": ["the named column, not constant"]}
+_PURPOSE = {"fit": "to fit it", "test": "to tell it from a wider loop", "next": "for the next experiment to test it"}
 
 
 def catalog() -> list[EffectInfo]:
@@ -79,9 +84,10 @@ def catalog() -> list[EffectInfo]:
     out = []
     for name, cls in EFFECTS.items():
         out.append(EffectInfo(
-            name=name, usage=_USAGE.get(name, name), kind=cls.kind, cause=cls.cause, signature=cls.signature,
-            protocol=cls.protocol, parameters=list(cls.units), needs=list(_NEEDS.get(name, [])),
+            name=name, usage=cls.usage, kind=cls.kind, cause=cls.cause, signature=cls.signature,
+            protocol=cls.protocol, parameters=list(cls.units), needs=list(cls.needs),
             streamable=bool(cls.streamable),
+            requires=[f"{r.words} ({_PURPOSE[r.to]})" for r in cls.requires], lookalikes=dict(cls.lookalikes),
         ))
     return out
 

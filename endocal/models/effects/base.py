@@ -38,11 +38,53 @@ class Effect(ABC):
     kind: ClassVar[str] = ""
     cause: ClassVar[str] = ""
     signature: ClassVar[str] = ""
+    #: the experiment that reveals it, in words (what ``--next`` prints when :meth:`segment` has none)
     protocol: ClassVar[str] = ""
     #: short parameter names (without prefix) and their units for printing
     units: ClassVar[dict[str, str]] = {}
     #: True when the effect can be compensated one sample at a time (streaming loop)
     streamable: ClassVar[bool] = False
+    #: how ``--effects`` writes it (``load:COLUMN``); a subclass that leaves it out gets its ``name``
+    usage: ClassVar[str] = ""
+    #: what the data must carry besides command and measurement, in words (``t_s``, a column)
+    needs: ClassVar[tuple[str, ...]] = ()
+    #: whether :meth:`invert` undoes it (feedforward compensation); False: the inverse refuses it
+    has_inverse: ClassVar[bool] = True
+    #: what the records must hold to fit it (``to="fit"``) and to test it (``to="test"``):
+    #: :class:`~endocal.models.effects.requirements.Requirement` (ready-made ones in that module)
+    requires: ClassVar[tuple] = ()
+    #: what in the residual points at it: signal names of the residual's cross-correlation
+    #: (``"other command"``, ``"time"``, ``"speed"``, ``"abs speed"``), regimes whose error stands
+    #: out (``"regime:other axis"``, ``"regime:hold"``), or callables ``f(resid, regimes) -> list[str]``
+    #: returning evidence in words (empty: nothing points)
+    residual: ClassVar[tuple] = ()
+    #: other effect name -> the records that separate the two, in words
+    lookalikes: ClassVar[dict[str, str]] = {}
+    #: short names of parameters whose bounds are open on purpose (a drift rate, a position);
+    #: every other parameter has at least one finite bound
+    open_bounds: ClassVar[tuple[str, ...]] = ()
+    #: the simulator's config section that produces it (``None``: the simulator has no such physics;
+    #: a user effect gives a :meth:`simulate` method instead)
+    sim_section: ClassVar[str | None] = None
+    #: an input effect that is a static, monotone map of the knob position (the base's input range
+    #: is its image of the command range: the numerical inverse searches there)
+    position_map: ClassVar[bool] = False
+    #: ``(status, why)`` when ``--next`` considers it whatever ``validate`` said (its segment then decides
+    #: whether the records at stake can tell it from a look-alike); None: only when something points at it
+    at_stake: ClassVar[tuple[str, str] | None] = None
+    #: ``--next`` plans segments in ascending ``segment_order`` (those that reuse the others'
+    #: motions, e.g. the full amplitude or a condition for the whole run, come last)
+    segment_order: ClassVar[int] = 50
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if not cls.__dict__.get("usage"):
+            cls.usage = cls.name
+
+    #: optional: ``simulate(self, data: HysteresisData, rng: numpy.random.Generator) -> ndarray``,
+    #: the measured angle (deg, (n,)) of ``data.meas_deg`` with this effect added, for a simulator
+    #: that hides a user's effect in a record (defined by subclasses that can; absent otherwise)
+    simulate = None
 
     @property
     def prefix(self) -> str:
@@ -90,6 +132,46 @@ class Effect(ABC):
         """Why values fitted on ``data`` cannot be this effect's physics (so the term stands in for
         something else); ``""`` when they can. Default: no physical bound to check."""
         return ""
+
+    def segment(self, design, n_half_cycles: int):
+        """The protocol segment of ``validate --next`` that shows this effect (None: it has none, and
+        ``--next`` prints :attr:`protocol` in words).
+
+        Parameters
+        ----------
+        design : endocal.validation.next_experiment.Design
+            The experiment being designed: its knob range, speed limits and typical frequency, and
+            builders of the motions (``design.add``, ``design.lissajous``, ``design.staircase``, ...);
+            see that class.
+        n_half_cycles : int
+            Half-cycles the paired test of the next ``validate`` needs (the power calculation of
+            :mod:`endocal.validation.power`), with ``design.sized(self.name)`` saying how in words.
+
+        Returns
+        -------
+        endocal.validation.next_experiment.Planned or None
+            What a builder of ``design`` returned (a segment, a deferred one shared with other
+            effects, or a note why it cannot be designed on this probe), or None.
+        """
+        return None
+
+    def gauge(self, base_absorbs: str) -> dict[str, float]:
+        """Parameters (full names) a model holds fixed so the fit has one solution (default: none).
+
+        ``base_absorbs`` says which maps of its input the base takes up exactly: ``"scale"`` (the
+        play operators of ``pi`` are homogeneous, ``Phi_{c r}[c x] = c Phi_r[x]``) or ``"affine"``
+        (free branch functions); an effect whose output such a map can trade off against fixes
+        the matching parameters.
+        """
+        return {}
+
+    def shapes_base(self) -> dict:
+        """Settings a base resolves from ``"auto"`` when this effect shapes its loop (default: none).
+
+        ``pi`` reads ``{"weights": "exponential", "offset": False}`` (the modified PI of the
+        duodenoscope paper when an envelope shapes the input).
+        """
+        return {}
 
     def _bracket(self, p: dict, se: dict) -> str:
         parts = [f"{k}={fmt_value(p[k], se.get(k), self.units.get(k, ''))}" for k in self.param_names()]

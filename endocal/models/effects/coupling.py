@@ -47,6 +47,7 @@ from numba import njit
 from endocal.errors import ModelError
 from endocal.models.data import OTHER_CMD, HysteresisData
 from endocal.models.effects.base import OutputFilter
+from endocal.models.effects.requirements import other_knob_moving
 from endocal.models.params import Parameter
 
 _D2R = math.pi / 180.0
@@ -136,6 +137,10 @@ def coupling_inverse(theta_deg, x_deg, a, b, g, c_pos, c_neg):
     return out
 
 
+#: Fade in and out of the both-knob figure of ``--next`` (s).
+FADE_S = 5.0
+
+
 class Coupling(OutputFilter):
     """Cross-coupling from the other axis through the shared tip position (module docstring).
 
@@ -159,6 +164,27 @@ class Coupling(OutputFilter):
                  "axis's angle, not this axis's command alone")
     protocol = "move the other knob alone, or both knobs at different frequencies (circle, lissajous)"
     units = {"linear": "deg/deg", "abs": "deg/deg", "gain": "deg/deg", "tilt_pos": "", "tilt_neg": ""}
+    usage = "coupling[:COLUMN]"
+    needs = ("other_cmd_deg (or the named column)",)
+    requires = (other_knob_moving(),)
+    residual = ("other command", "regime:other axis")
+    lookalikes = {}
+    sim_section = "coupling"
+
+    def segment(self, design, n_half_cycles: int):
+        """Both knobs at once (a Lissajous figure): the other bend moves this one only when it moves."""
+        if design.other is None:
+            return design.cannot(f"probe '{design.probe}' has one knob, so nothing can couple")
+        c = design.centre
+        # one figure centre on both knobs: inside this axis's range and the other knob's limits
+        amp = min(design.amplitude, design.other_hi - c, c - design.other_lo)
+        if amp < design.min_amplitude_deg:
+            return design.cannot(f"the other knob's limits leave no room about this axis's centre {c:.3g} deg")
+        f1 = min(design.f_typ_hz, design.cap_hz(amp, start=False) / 1.5)
+        duration = math.ceil(n_half_cycles / (2.0 * f1)) + 2.0 * FADE_S
+        k = design.add("lissajous", axes=[design.axis, design.other], amplitude_deg=amp, offset_deg=c,
+                       frequencies_hz=[round(f1, 6), round(1.5 * f1, 6)], duration_s=float(duration), fade_s=FADE_S)
+        return design.planned(k, int(2 * f1 * (duration - 2 * FADE_S)))
 
     def __init__(self, column: str = OTHER_CMD):
         if not isinstance(column, str) or not column:

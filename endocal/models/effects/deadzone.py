@@ -216,6 +216,10 @@ class Deadzone(InputEffect):
                  "a wide band): the angle stays flat while the command moves, then catches up")
     protocol = "large sines or triangles crossing neutral, and small loops around neutral"
     units = {"slack_deg": "deg", "band_deg": "deg", "center_deg": "deg"}
+    requires = ()
+    residual = ()
+    lookalikes = {"envelope": 'a dead zone appears after every reversal, wherever it happens, while the envelope depends on the knob position only: run `sine` with an offset (reversals away from neutral)'}
+    sim_section = "deadzone"
 
     @staticmethod
     def _center_start(data: HysteresisData, u: np.ndarray) -> float:

@@ -19,6 +19,8 @@ from numba import njit
 
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import InputEffect
+from endocal.models.effects.rate import Rate
+from endocal.models.effects.requirements import TIME_STAMPS, speeds_spanning
 from endocal.models.params import Parameter
 
 
@@ -74,6 +76,18 @@ class Delay(InputEffect):
                  "peaking where the motion is fastest, cross-correlated with the input at a lag")
     protocol = "fast motions, steps and chirps (the lag shows against speed)"
     units = {"s": "s"}
+    needs = ("t_s",)
+    requires = (TIME_STAMPS, speeds_spanning("at one frequency a time shift looks like a wider loop: run `chirp` or "
+                                             "`random`"))
+    residual = ("speed",)
+    lookalikes = {"rate": 'a delay shifts the whole response in time at every speed, while speed-dependent friction widens the loop only when the knob moves fast: run `chirp` (or `sine-set`) and compare the loop at low and high frequency, or `staircase`: a delay shows as the same lag at the start of every step'}
+    sim_section = "delay"
+    at_stake = Rate.at_stake
+    segment_order = 60
+
+    def segment(self, design, n_half_cycles: int):
+        """The same sine at several frequencies up to the probe's limits (shared with ``rate``)."""
+        return design.speeds(self.name, n_half_cycles)
 
     def param_names(self) -> list[str]:
         return ["s"]

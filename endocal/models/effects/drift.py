@@ -10,6 +10,7 @@ import numpy as np
 
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import OutputEffect
+from endocal.models.effects.requirements import TIME_STAMPS
 from endocal.models.params import Parameter, fmt_value
 
 
@@ -21,6 +22,11 @@ def _elapsed_s(data: HysteresisData) -> np.ndarray:
     return out
 
 
+#: ``--next`` tests a drift by holding the knob still this long (s): a drift of 1 deg/min moves the
+#: zero by 1 deg, three times a tracker's noise.
+DRIFT_HOLD_S = 60.0
+
+
 class Drift(OutputEffect):
     """Linear zero drift over each run; parameter ``drift_rate_dps`` (deg/s)."""
 
@@ -30,6 +36,18 @@ class Drift(OutputEffect):
     signature = "residual mean that changes steadily over time within a run"
     protocol = "long runs, or the same motion repeated at the start and end of a run"
     units = {"rate_dps": "deg/s"}
+    open_bounds = ("rate_dps",)  # either sign, any size: implausible() says when it is too fast to be a drift
+    needs = ("t_s",)
+    requires = (TIME_STAMPS,)
+    residual = ("time",)
+    lookalikes = {"creep": 'creep relaxes after each motion and stops, drift keeps going at a constant rate: run `staircase` (creep restarts at every step) and `hold` (drift keeps going with the knob still)'}
+    sim_section = "drift"
+
+    def segment(self, design, n_half_cycles: int):
+        """A long hold: the knob still, a drift keeps going where creep stops."""
+        k = design.add("hold", axes=[design.axis], offset_deg=design.centre, duration_s=DRIFT_HOLD_S)
+        return design.planned(k, 1, f"a hold of {DRIFT_HOLD_S:g} s: the knob still, a drift keeps going where creep "
+                              "stops")
 
     def check(self, data: HysteresisData) -> None:
         data.require_time("effect 'drift'")

@@ -20,9 +20,12 @@ import numpy as np
 from endocal.errors import ModelError
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import InputEffect
+from endocal.models.effects.requirements import full_amplitude
 from endocal.models.params import Parameter
 
 _K_MIN = 1e-12
+#: The validation records test the stiffening at large bends when they sweep this share of the fitted range.
+FULL_SPAN = 0.9
 #: :meth:`Envelope.why_loose`: outer slopes this many times the middle one make the middle a dead band
 #: (the tip moves 5 % as much per knob degree there as outside it)
 DEAD_BAND_RATIO = 20.0
@@ -101,6 +104,34 @@ class Envelope(InputEffect):
     signature = "residual that is a function of the command amplitude alone, the same on both branches (S-shaped vs command)"
     protocol = "large-amplitude sweeps through neutral (damped sine)"
     units = {"theta0_deg": "deg", "theta1_deg": "deg", "theta2_deg": "deg", "k0": "", "k1": "", "k2": ""}
+    open_bounds = ("theta1_deg",)  # the zero of f: anywhere (a flat middle puts it far out)
+    requires = (full_amplitude(FULL_SPAN),)
+    residual = ()  # a static shape: the residual tests look at time, speed and the other knob, not at it
+    lookalikes = {"deadzone": (
+        "a dead zone appears after every reversal, wherever it happens, while the envelope depends on the "
+        "knob position only: run `sine` with an offset (reversals away from neutral)")}
+    sim_section = "envelope"
+    position_map = True
+    segment_order = 90  # every other segment sweeps the full range already: it reuses theirs
+
+    def segment(self, design, n_half_cycles: int):
+        """The full amplitude of the fitted range: any segment on this axis (every one sweeps it), else a sine."""
+        return design.full_range(n_half_cycles)
+
+    def gauge(self, base_absorbs: str) -> dict[str, float]:
+        # A homogeneous base (the play operator, Phi_{c r}[c x] = c Phi_r[x]): with exponential weights
+        # the envelope's scale trades off exactly against r, w and beta, so one scale parameter is
+        # fixed; k1 = 1 makes f read in degrees around neutral. Branches that absorb any affine map
+        # of their input: the middle slope and the zero are fixed, so f only carries the shape.
+        if base_absorbs == "scale":
+            return {f"{self.prefix}_k1": 1.0}
+        if base_absorbs == "affine":
+            return {f"{self.prefix}_k1": 1.0, f"{self.prefix}_theta1_deg": 0.0}
+        return {}
+
+    def shapes_base(self) -> dict:
+        # the modified PI of the duodenoscope paper: exponential weights on the envelope, no offset
+        return {"weights": "exponential", "offset": False}
 
     def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
         # theta0 <= theta2 (eq. 10 inverts only then) is held by a bound between them: neutral

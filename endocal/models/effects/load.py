@@ -40,6 +40,7 @@ from endocal.errors import ModelError
 from endocal.models._kernels import causal_play_inverse, varplay_forward_jac
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import InputEffect
+from endocal.models.effects.requirements import condition_varying
 from endocal.models.params import Parameter, fmt_value
 
 
@@ -61,6 +62,19 @@ class Load(InputEffect):
     protocol = "the same motion repeated while the covariate changes (e.g. different sheath curvatures)"
     units = {"up": "deg/unit", "down": "deg/unit", "up_amp": "1/unit", "down_amp": "1/unit", "gain": "1/unit",
              "lo": "", "hi": ""}
+    usage = "load:COLUMN"
+    needs = ("the named column, not constant",)
+    open_bounds = ("lo", "hi")  # the covariate's range, set from the data and held fixed
+    requires = (condition_varying("log the condition as a column, and record the same motion at two of its values, "
+                                  "or change it during a run", to="fit"),)
+    residual = ("load",)
+    lookalikes = {}
+    sim_section = "load"
+    segment_order = 95  # a condition for the whole run, after every motion is planned
+
+    def segment(self, design, n_half_cycles: int):
+        """The same motion at the earlier value of the condition and at a new one (a condition of the run)."""
+        return design.condition(n_half_cycles)
 
     def __init__(self, column: str | None = None):
         if not isinstance(column, str) or not column.strip():

@@ -47,6 +47,7 @@ from endocal.errors import ModelError
 from endocal.models._kernels import varplay_forward_jac
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import InputEffect
+from endocal.models.effects.requirements import TIME_STAMPS, speeds_spanning
 from endocal.models.params import Parameter
 
 
@@ -204,6 +205,21 @@ class Rate(InputEffect):
                  "stops; loops wider at high frequency than at low")
     protocol = "the same motion at several frequencies (a chirp, or slow and fast sines)"
     units = {"gain_s": "s", "amp_s_per_deg": "s/deg", "capstan_s_per_deg": "s/deg"}
+    needs = ("t_s",)
+    requires = (TIME_STAMPS, speeds_spanning("speed-dependent friction needs the same motion at several frequencies: "
+                                             "run `chirp` or `sine-set`"))
+    residual = ("speed", "abs speed")
+    lookalikes = {"delay": 'a delay shifts the whole response in time at every speed, while speed-dependent friction widens the loop only when the knob moves fast: run `chirp` (or `sine-set`) and compare the loop at low and high frequency, or `staircase`: a delay shows as the same lag at the start of every step'}
+    sim_section = "rate"
+    #: --next considers it whatever validate said: a lag and friction growing with speed both widen the loop
+    #: with speed, and the records may not reach the speeds at which the two differ
+    at_stake = ("speeds", "a lag and friction growing with speed both widen the loop with speed; the records may "
+                "not reach the speeds at which the two differ")
+    segment_order = 60
+
+    def segment(self, design, n_half_cycles: int):
+        """The same sine at several frequencies up to the probe's limits (shared with ``delay``)."""
+        return design.speeds(self.name, n_half_cycles)
 
     def __init__(self, speed_filter_s: float = 0.1):
         if not (isinstance(speed_filter_s, (int, float)) and math.isfinite(speed_filter_s) and speed_filter_s > 0):

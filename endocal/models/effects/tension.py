@@ -52,6 +52,9 @@ class Tension(InputEffect):
                  "too narrow and small loops too wide (a damped sine's late, small cycles over-predicted)")
     protocol = "cycles of several amplitudes (damped sine, random)"
     units = {"friction": ""}
+    requires = ()
+    residual = ()
+    lookalikes = {}
 
     def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
         return [Parameter(f"{self.prefix}_friction", 0.02, 0.0, C_MAX)]

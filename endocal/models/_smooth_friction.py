@@ -1,0 +1,198 @@
+"""Compiled recursions of the smooth friction bases without return-point memory (``bouc-wen``, ``dahl``).
+
+Both bases carry one internal state ``w`` (dimensionless, in ``[-1, 1]``) driven by the input ``v``
+and rate-independent: ``dw/dv`` depends on ``w`` and on the direction of motion ``s = sign(dv)``
+only. Written with ``u = s w`` (the state measured in the direction of motion) and the path length
+``l = |dv|``, both laws are one ordinary differential equation in ``l``:
+
+- normalised Bouc-Wen (Ikhouane & Rodellar, Systems with Hysteresis, 2007; the form reviewed by
+  Ismail, Ikhouane & Rodellar, Arch. Comput. Methods Eng. 16, 2009, eq. 13)::
+
+      dw/dt = rho (dv/dt - sigma |dv/dt| |w|^(n-1) w + (sigma - 1) dv/dt |w|^n)
+      =>  du/dl = rho (1 - u^n)                   for u >= 0
+          du/dl = rho (1 + (2 sigma - 1) |u|^n)   for u <  0
+
+- Dahl (Dahl, Aerospace Corp. report TOR-0158(3107-18)-1, 1968; AIAA J. 14, 1976, eq. 1)::
+
+      dF/dx = sigma0 |1 - F/Fc sgn(dx)|^i sgn(1 - F/Fc sgn(dx)),  w = F/Fc, rho = sigma0/Fc
+      =>  du/dl = rho |1 - u|^i sgn(1 - u)
+
+For ``n = 1`` (Bouc-Wen) and ``i = 1`` (Dahl) the equation is linear on each sign of ``u`` and is
+solved exactly (an exponential in ``l``); other exponents are integrated by classical Runge-Kutta
+in sub-steps of at most ``MAX_RHO_L`` in ``rho * l`` times the law's steepest slope. Each run starts at ``w = 0`` (the
+relaxed state, as the play operators start at 0). A small reversal inside the loop does not
+return to the branch it left (no return-point memory): the state after a minor loop is not the
+state before it, unlike a bank of plays.
+
+The inverse is numerical: per sample, the step map ``v -> k_lin v + k_hys w(v_prev, w_prev, v)`` is
+non-decreasing in ``v`` (strictly when ``k_lin > 0``), so bisection finds the unique input.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+#: Family codes of the kernels.
+BOUC_WEN = 0
+DAHL = 1
+#: Largest step of ``rho * l`` in one Runge-Kutta sub-step (exponents other than 1).
+MAX_RHO_L = 0.05
+
+
+@njit(cache=True)
+def _rate(family, u, rho, sigma, expo):
+    """``du/dl`` of the state in the direction of motion."""
+    if family == BOUC_WEN:
+        if u >= 0.0:
+            return rho * (1.0 - u ** expo)
+        return rho * (1.0 + (2.0 * sigma - 1.0) * (-u) ** expo)
+    d = 1.0 - u
+    if d >= 0.0:
+        return rho * d ** expo
+    return -rho * (-d) ** expo
+
+
+@njit(cache=True)
+def _advance(family, u, ell, rho, sigma, expo):
+    """State in the direction of motion after a path length ``ell >= 0`` from ``u``."""
+    if ell <= 0.0:
+        return u
+    if expo == 1.0:
+        if family == DAHL:
+            return 1.0 - (1.0 - u) * math.exp(-rho * ell)
+        if u < 0.0:
+            c = 2.0 * sigma - 1.0
+            # du/dl = rho (1 - c u) until u reaches 0 (c >= 0: the fit bounds sigma >= 1/2)
+            if c > 1e-12:
+                ell0 = math.log(1.0 - c * u) / (rho * c)
+                if ell < ell0:
+                    return 1.0 / c + (u - 1.0 / c) * math.exp(-rho * c * ell)
+            else:
+                ell0 = -u / rho
+                if ell < ell0:
+                    return u + rho * ell
+            ell = ell - ell0
+            u = 0.0
+        return 1.0 - (1.0 - u) * math.exp(-rho * ell)
+    steep = 1.0 if family == DAHL else max(1.0, 2.0 * sigma)  # the largest |du/dl| / rho on the way
+    m = int(math.ceil(steep * rho * ell / MAX_RHO_L))
+    if m < 1:
+        m = 1
+    h = ell / m
+    for _ in range(m):
+        k1 = _rate(family, u, rho, sigma, expo)
+        k2 = _rate(family, u + 0.5 * h * k1, rho, sigma, expo)
+        k3 = _rate(family, u + 0.5 * h * k2, rho, sigma, expo)
+        k4 = _rate(family, u + h * k3, rho, sigma, expo)
+        u = u + h * (k1 + 2.0 * k2 + 2.0 * k3 + k4) / 6.0
+    return u
+
+
+@njit(cache=True)
+def state_step(family, w, dv, rho, sigma, expo):
+    """The state ``w`` after an input step ``dv`` (any sign)."""
+    if dv > 0.0:
+        return _advance(family, w, dv, rho, sigma, expo)
+    if dv < 0.0:
+        return -_advance(family, -w, -dv, rho, sigma, expo)
+    return w
+
+
+@njit(cache=True)
+def friction_states(family, v, rho, sigma, expo, run_starts):
+    """The internal state ``w`` (n,) driven by ``v`` (n,), restarting at 0 on each run."""
+    n = v.shape[0]
+    w = np.empty(n)
+    n_runs = run_starts.shape[0]
+    for q in range(n_runs):
+        a = run_starts[q]
+        b = run_starts[q + 1] if q + 1 < n_runs else n
+        if a >= b:
+            continue
+        wk = 0.0
+        w[a] = 0.0
+        for k in range(a + 1, b):
+            wk = state_step(family, wk, v[k] - v[k - 1], rho, sigma, expo)
+            w[k] = wk
+    return w
+
+
+@njit(cache=True)
+def inverse_step(family, y, v_prev, w_prev, k_lin, k_hys, rho, sigma, expo, v_lo, v_hi):
+    """The input ``v`` whose output ``k_lin v + k_hys w`` is ``y`` one step after ``(v_prev, w_prev)``,
+    and the state there: ``(v, w, miss)``, ``miss`` the output error left (deg; 0 when reached).
+
+    Bisection on ``[v_lo, v_hi]``: the step map is non-decreasing in ``v``.
+    """
+    y_prev = k_lin * v_prev + k_hys * w_prev
+    if y == y_prev:
+        return v_prev, w_prev, 0.0
+    lo = v_lo
+    hi = v_hi
+    if y > y_prev:
+        lo = v_prev
+    else:
+        hi = v_prev
+    if lo > hi:
+        lo = hi
+    g_lo = k_lin * lo + k_hys * state_step(family, w_prev, lo - v_prev, rho, sigma, expo)
+    g_hi = k_lin * hi + k_hys * state_step(family, w_prev, hi - v_prev, rho, sigma, expo)
+    if y <= g_lo:
+        return lo, state_step(family, w_prev, lo - v_prev, rho, sigma, expo), g_lo - y
+    if y >= g_hi:
+        return hi, state_step(family, w_prev, hi - v_prev, rho, sigma, expo), y - g_hi
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid <= lo or mid >= hi:
+            break
+        g = k_lin * mid + k_hys * state_step(family, w_prev, mid - v_prev, rho, sigma, expo)
+        if g < y:
+            lo = mid
+        else:
+            hi = mid
+    g_lo = k_lin * lo + k_hys * state_step(family, w_prev, lo - v_prev, rho, sigma, expo)
+    g_hi = k_lin * hi + k_hys * state_step(family, w_prev, hi - v_prev, rho, sigma, expo)
+    if abs(g_hi - y) <= abs(g_lo - y):
+        return hi, state_step(family, w_prev, hi - v_prev, rho, sigma, expo), abs(g_hi - y)
+    return lo, state_step(family, w_prev, lo - v_prev, rho, sigma, expo), abs(g_lo - y)
+
+
+@njit(cache=True)
+def first_input(y, k_lin, v_lo, v_hi):
+    """The input of a run's first sample (state 0): ``v = y / k_lin``, clipped to ``[v_lo, v_hi]``; and the miss."""
+    if k_lin > 0.0:
+        v = y / k_lin
+        if v < v_lo:
+            v = v_lo
+        elif v > v_hi:
+            v = v_hi
+        return v, abs(k_lin * v - y)
+    return 0.0, abs(y)
+
+
+@njit(cache=True)
+def friction_inverse(family, y, k_lin, k_hys, rho, sigma, expo, v_lo, v_hi, run_starts):
+    """The input (n,) whose output follows ``y`` (n,, offset removed) and the largest miss (deg)."""
+    n = y.shape[0]
+    v = np.empty(n)
+    worst = 0.0
+    n_runs = run_starts.shape[0]
+    for q in range(n_runs):
+        a = run_starts[q]
+        b = run_starts[q + 1] if q + 1 < n_runs else n
+        if a >= b:
+            continue
+        vk, miss = first_input(y[a], k_lin, v_lo, v_hi)
+        wk = 0.0
+        v[a] = vk
+        if miss > worst:
+            worst = miss
+        for k in range(a + 1, b):
+            vk, wk, miss = inverse_step(family, y[k], vk, wk, k_lin, k_hys, rho, sigma, expo, v_lo, v_hi)
+            v[k] = vk
+            if miss > worst:
+                worst = miss
+    return v, worst

@@ -1,0 +1,196 @@
+"""Every promise kept: the refit `validate` prints delivers the fall it promised (issue 33).
+
+`validate` says "missing: rate: -45 % validation RMSE (2.45 -> 1.33 deg)" and prints the
+`endocal fit hysteresis ...` that adds it. Here that command is run as printed, the model it
+writes is validated on the same records, and the error must fall by at least 75 % of the
+promised fall (the bar the issue sets: a refit fits every sample where the scan fitted a
+subsample, and under rolling origin the new model's own folds start from its own values).
+
+The records: a real-shaped linear-drive log (a tendon pulled by a stage, in mm; the bench of
+tests/test_linear_drive.py) cut in two, fitted on the first half with the duodenoscope paper's
+modified PI (`pi` + `envelope`, whose `weights="auto"` the refit must keep as the fit resolved
+it) and validated on the second; the real piezo recording (data_samples/piezo); and, marked
+slow, the simulator's records of every hidden-effect case of tests/test_validation_hidden.py.
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from endocal.models import load_model
+from tests._cli import endocal
+from tests.test_linear_drive import tendon_log
+
+ROOT = Path(__file__).resolve().parents[1]
+PIEZO = ROOT / "data_samples" / "piezo" / "piezo_aligned.csv"
+#: Share of the promised fall the printed refit must deliver (issue 33's bar).
+KEPT = 0.75
+
+
+def _validate(model: Path, data: list[Path], out: Path) -> tuple[dict, str]:
+    proc = endocal("validate", model, *data, "--json-out", out)
+    assert proc.returncode == 0, proc.stderr
+    return json.loads(out.read_text()), proc.stdout
+
+
+def keep_promises(model: Path, data: list[Path], tmp: Path, first_only: bool = False) -> list[tuple]:
+    """Validate ``model``, run each suggestion's printed command, validate what it wrote: (effect,
+    promised %, delivered %, new RMSE, expected range) per suggestion; asserts each is kept."""
+    d, stdout = _validate(model, data, tmp / "v.json")
+    assert d["suspects"], [(s["effect"], round(s["gain_pct"], 1)) for s in d["scan"]["tested"]]
+    assert "  " + d["suspects"][0]["command"] in stdout.splitlines(), stdout  # the command printed is the JSON's
+    kept = []
+    for s in d["suspects"][:1] if first_only else d["suspects"]:
+        argv = shlex.split(s["command"])
+        assert argv[:3] == ["endocal", "fit", "hysteresis"] and s["refit"]["out_path"] == argv[-1]
+        proc = endocal(*argv[1:], "--force")
+        assert proc.returncode == 0, (s["command"], proc.stderr)
+        new = Path(s["refit"]["out_path"])
+        # the same resolved structure as the model validated: its settings, "auto" resolved as its fit did
+        old_m, new_m = load_model(model), load_model(new)
+        for k in ("weights", "offset"):
+            if k in old_m.structure_:
+                assert new_m.structure_[k] == old_m.structure_[k], (k, s["command"])
+        d2, _ = _validate(new, data, tmp / f"v-{s['effect'].replace(':', '-')}.json")
+        c = d2["compare"]
+        assert c is not None and c["path"] == str(model), c
+        promised, delivered = s["gain_pct"], -c["change_pct"]
+        kept.append((s["effect"], promised, delivered, c["new_heldout_rmse_deg"], s["refit"]["expected_rmse_deg"]))
+        assert delivered >= KEPT * promised, kept[-1]
+    return kept
+
+
+@pytest.fixture(scope="module")
+def tendon(tmp_path_factory):
+    """A linear drive's log cut in two, as a user does with one recording: the first half (damped
+    sweeps) to fit on, the second (a chirp of varying amplitude) to validate on; 30 s each at 50 Hz."""
+    tmp = tmp_path_factory.mktemp("promise-tendon")
+    parts = {"fit": tendon_log(1, "damped", duration_s=30.0), "check": tendon_log(2, "chirp", duration_s=30.0)}
+    for name, df in parts.items():
+        pd.DataFrame({"t_s": df["Time"], "ap_cmd_mm": df["Tendon Disp."], "ap_meas_deg": df["Angle y"]}).to_csv(
+            tmp / f"{name}.csv", index=False)
+    proc = endocal("fit", "hysteresis", tmp / "fit.csv", "--axis", "ap", "--model", "pi", "--effects", "envelope",
+                   "--out", tmp / "s-pi.json")
+    assert proc.returncode == 0, proc.stderr
+    return tmp
+
+
+@pytest.mark.slow  # two validations of a 21-weight PI: ~30 s of CPU
+def test_a_linear_drive_logs_suggestion_delivers_what_validate_promised(tendon):
+    # the bench's tendon slack is what pi + envelope lacks: deadzone, -42 % promised
+    kept = keep_promises(tendon / "s-pi.json", [tendon / "check.csv"], tendon, first_only=True)
+    assert kept[0][0] == "deadzone", kept
+
+
+@pytest.mark.slow
+def test_every_suggestion_on_a_longer_linear_drive_log_delivers_what_validate_promised(tmp_path):
+    # 100 Hz sweeps for 80 s: the scan fits 1 estimation sample in 2, and each promise gives the range to expect
+    parts = {"fit": tendon_log(3, "damped", rate_hz=100.0, duration_s=80.0),
+             "check": tendon_log(4, "chirp", rate_hz=50.0, duration_s=60.0)}
+    for name, df in parts.items():
+        pd.DataFrame({"t_s": df["Time"], "ap_cmd_mm": df["Tendon Disp."], "ap_meas_deg": df["Angle y"]}).to_csv(
+            tmp_path / f"{name}.csv", index=False)
+    proc = endocal("fit", "hysteresis", tmp_path / "fit.csv", "--axis", "ap", "--model", "linear", "--out",
+                   tmp_path / "m.json")
+    assert proc.returncode == 0, proc.stderr
+    kept = keep_promises(tmp_path / "m.json", [tmp_path / "check.csv"], tmp_path)
+    assert json.loads((tmp_path / "v.json").read_text())["scan"]["cv"]["stride"] > 1
+    assert all(expected is not None for *_, expected in kept), kept
+
+
+def test_the_real_piezo_recordings_suggestion_delivers_what_validate_promised(tmp_path):
+    # a straight-line base misses the piezo loop's rounded ends (test_validation_hidden's real-data case);
+    # fitted on the very record, validate scores it by rolling origin, and so does the refit's validation
+    proc = endocal("fit", "hysteresis", PIEZO, "--axis", "piezo", "--model", "linear", "--out", tmp_path / "m.json")
+    assert proc.returncode == 0, proc.stderr
+    keep_promises(tmp_path / "m.json", [PIEZO], tmp_path, first_only=True)
+
+
+def test_a_subsampled_scan_promises_the_range_its_refit_on_every_sample_lands_in():
+    """The scan fits its candidates on 1 estimation sample in N; the refit fits every sample. The
+    promise then gives a range (the candidate fitted on two interleaved subsamples, widened by half
+    their gap), and the refit the suggestion names, fitted on every sample, lands in it, give or
+    take 2 % (the noise of one fit's end point: two draws pin a spread only roughly)."""
+    import numpy as np
+
+    from endocal.models import HysteresisData, make_model
+    from endocal.validation.offline import validate_offline
+    from endocal.validation.predict import predict_errors
+
+    def data(seed, kind):
+        df = tendon_log(seed, kind, duration_s=40.0)
+        return HysteresisData(cmd_deg=df["Tendon Disp."].to_numpy(), meas_deg=df["Angle y"].to_numpy(),
+                              t_s=df["Time"].to_numpy(), drive_unit="mm")
+
+    fit, check = data(5, "damped"), data(6, "chirp")
+    model = make_model("linear", axis="ap").fit(fit)
+    result = validate_offline(model, check, train=fit, max_scan_samples=700, model_path="m.json")
+    assert result.scan.stride == 3, result.scan.stride
+    s = result.suspects[0]
+    lo, hi = s.refit.expected_rmse_deg
+    assert s.refit.scan_stride == 3 and lo <= s.rmse_heldout_deg <= hi
+    p = s.refit
+    refit = make_model(p.base, list(p.effects), **p.settings, axis=p.axis).fit_from(model, fit)
+    rmse = float(np.sqrt(np.mean(predict_errors(refit, check) ** 2)))
+    assert 0.98 * lo <= rmse <= 1.02 * hi, (rmse, lo, hi, s.rmse_heldout_deg)
+    # the promise in words: the subsampled note says what to expect
+    note = next(n for n in result.notes if getattr(n, "key", "") == "subsampled")
+    assert f"{lo:.3g} .. {hi:.3g} deg" in note, note
+
+
+def test_the_refit_keeps_the_structure_the_fit_resolved():
+    """A `weights="auto"` PI fitted as `exponential` (the paper's law, with the envelope) is refitted as
+    `exponential`: the scan's candidates (`template`) and the printed refit (`Refit.settings`, as
+    `--set weights=exponential --set offset=false`) take the resolved settings, never "auto" again."""
+    from endocal.models import make_model
+    from endocal.validation.refit import suggest_refit
+    from endocal.validation.structure import resolved_settings, template
+    from tests._models_signals import PAPER_TABLE1
+
+    model = make_model("pi", ["envelope"], axis="ap").set_parameters(PAPER_TABLE1)
+    assert model.get_settings()["weights"] == "auto" and model.structure_["weights"] == "exponential"
+    assert resolved_settings(model) == {"n_operators": 20, "weights": "exponential", "offset": False}
+    assert template(model, ["envelope", "delay"]).weights == "exponential"
+    refit = suggest_refit(model, "delay", ["fit.csv"], model_path="m.json")
+    assert refit.settings == {"weights": "exponential", "offset": False}
+    from endocal.shell import refit_argv
+
+    argv = refit_argv(refit)
+    assert argv[argv.index("--set") + 1] == "weights=exponential" and "offset=false" in argv
+    from endocal.protocols import parse_overrides
+
+    assert parse_overrides([a for a in argv if "=" in a]) == refit.settings  # read back as written
+
+
+def test_a_setting_the_base_lacks_is_one_line(tmp_path):
+    from tests._cli import one_line_exit_2
+
+    df = tendon_log(1, "damped", duration_s=10.0)
+    pd.DataFrame({"t_s": df["Time"], "ap_cmd_mm": df["Tendon Disp."], "ap_meas_deg": df["Angle y"]}).to_csv(
+        tmp_path / "fit.csv", index=False)
+    one_line_exit_2(endocal("fit", "hysteresis", tmp_path / "fit.csv", "--axis", "ap", "--model", "linear", "--set",
+                            'weights="exponential"', "--out", tmp_path / "x.json"),
+                    "--set weights", "model 'linear' has no such setting")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("hidden", ["drift", "delay", "rate", "creep", "load", "deadzone", "envelope", "coupling"])
+def test_every_hidden_effect_suggestion_delivers_what_validate_promised(hidden, tmp_path):
+    from tests.test_validation_hidden import CASES, NO_SLACK, SimConfig, simulate
+
+    sections, protocol, overrides, n_runs, base, effects = CASES[hidden]
+    cfg = SimConfig.default().replace(**NO_SLACK).replace(**sections)
+    paths = []
+    for seed in range(n_runs):
+        aligned, _ = simulate(cfg, protocol, overrides, seed=seed)
+        paths.append(tmp_path / f"{protocol}-{seed}.csv")
+        aligned.table.to_csv(paths[-1], index=False)
+    proc = endocal("fit", "hysteresis", *paths, "--axis", "ap", "--model", base,
+                   *(["--effects", ",".join(effects)] if effects else []), "--out", tmp_path / "m.json")
+    assert proc.returncode == 0, proc.stderr
+    keep_promises(tmp_path / "m.json", paths, tmp_path)

@@ -1,0 +1,64 @@
+"""validate scores the other bases (endocal/validation/bases.py): on a plant whose friction has no return-point
+memory it names the base change with its refit and says that the base's memory rule misses the minor loops;
+on a plant with it, it names none."""
+
+from __future__ import annotations
+
+import numpy as np
+from endocal.models import HysteresisData, make_model
+from endocal.validation.bases import minor_loop_mask, minor_loops, scan_bases_split
+from endocal.validation.offline import validate_offline
+from endocal.validation.predict import predict_errors
+from endocal.validation.units import make_units
+
+NOISE_DEG = 0.3
+#: A Bouc-Wen plant whose tip holds at a reversal from saturation (k_lin = k_hys * rho * 2 sigma), as in the issue.
+BOUC_WEN = {"bouc-wen_k_lin": 1.0, "bouc-wen_k_hys_deg": 8.0, "bouc-wen_rho": 0.0625, "bouc-wen_sigma": 1.0,
+            "bouc-wen_offset_deg": 0.0}
+#: A bank of plays (return-point memory), the same loop height.
+PLAYS = {"pi_r": 0.8, "pi_w": 0.12, "pi_beta": 0.05}
+
+
+def _records(plant):
+    """Estimation: a decaying sine (large sweeps, few small reversals); validation: three sines laid over each
+    other (many small reversals inside the loop). 10 Hz (the loops are below 0.25 Hz), 0.3 deg noise."""
+    t = np.arange(0.0, 90.0, 0.1)
+    est = 55.0 * np.sin(2 * np.pi * 0.04 * t) * (1.0 - t / 140.0)
+    val = 30 * np.sin(2 * np.pi * 0.03 * t) + 15 * np.sin(2 * np.pi * 0.11 * t + 1) + 8 * np.sin(2 * np.pi * 0.23 * t + 2)
+    rng = np.random.default_rng(3)
+    return [HysteresisData(cmd_deg=u, meas_deg=plant.predict(u) + NOISE_DEG * rng.standard_normal(u.size), t_s=t)
+            for u in (est, val)]
+
+
+def _plant(name: str):
+    return (make_model("bouc-wen").set_parameters(BOUC_WEN) if name == "bouc-wen" else
+            make_model("pi", weights="exponential", offset=False).set_parameters(PLAYS))
+
+
+def test_a_plant_without_return_point_memory_gets_the_base_change_and_its_refit():
+    est, val = _records(_plant("bouc-wen"))
+    model = make_model("bspline", axis="ap").fit(est)
+    res = validate_offline(model, val, train=est, model_path="m.json", n_boot=50)
+    assert minor_loop_mask(val)[1] >= 3  # the validation record has the small reversals the estimation lacks
+    change = res.scan.base_suggestions[0]
+    assert change.base in ("bouc-wen", "dahl") and not change.return_point_memory
+    # the B-spline's branches fit the sweeps and miss the minor loops; the right family reaches the noise
+    assert change.gain_pct >= 50.0 and change.p_value < 0.05 and change.rmse_heldout_deg < 1.2 * NOISE_DEG
+    assert (change.refit.base, change.refit.effects, change.refit.out_path) == (change.base, (), f"m-{change.base}.json")
+    assert change.line().startswith(f"base: {change.base} lowers the validation RMSE by ")
+    assert not res.clean
+    assert any("misses the plant's minor loops" in n and "bspline base's memory rule" in n for n in res.notes), res.notes
+
+
+def test_a_plant_with_return_point_memory_gets_no_base_change_and_no_minor_loop_note():
+    """The plays' own base (`pi`) on a bank of plays: no other base gains (and a B-spline model there would
+    rightly be told to take `pi`: its rule returns to the branch, its branch shapes are not the plays')."""
+    est, val = _records(_plant("plays"))
+    model = make_model("pi", axis="ap").fit(est)
+    err = predict_errors(model, val)
+    units = make_units(val, [err])
+    bases = scan_bases_split(model, est, val, err, units, alpha=0.05, min_gain_pct=10.0, data_paths=["est"])
+    assert {b.base for b in bases} == {"linear", "bspline", "bouc-wen", "dahl"}
+    assert not any(b.significant for b in bases), [b.line() for b in bases]
+    loops = minor_loops(model, val, err)
+    assert loops.n_loops >= 3 and loops.ratio < 1.3 and not loops.note
