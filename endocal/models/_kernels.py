@@ -460,6 +460,8 @@ def pi_exp_forward_jac(x, r, w, beta, n_ops, G, run_starts):
             acc = 0.0
             d_r = 0.0
             d_b = 0.0
+            cur = -1
+            wsum = 0.0
             for i in range(m):
                 lo = xk - thr[i]
                 hi = xk + thr[i]
@@ -475,11 +477,19 @@ def pi_exp_forward_jac(x, r, w, beta, n_ops, G, run_starts):
                 acc += wz
                 d_r += wi[i] * cr[i] - beta * idx[i] * wz
                 d_b -= thr[i] * wz
+                # plays pushed at the same sample share its sensitivities: sum their weights, then one
+                # row of G per anchor (a few per sample) instead of one per play (m)
                 ai = anchor[i]
-                if ai >= 0:
-                    wgt = wi[i]
-                    for j in range(q):
-                        gacc[j] += wgt * G[ai, j]
+                if ai != cur:
+                    if cur >= 0:
+                        for j in range(q):
+                            gacc[j] += wsum * G[cur, j]
+                    cur = ai
+                    wsum = 0.0
+                wsum += wi[i]
+            if cur >= 0:
+                for j in range(q):
+                    gacc[j] += wsum * G[cur, j]
             for j in range(q):
                 J[k, j] = gacc[j]
                 gacc[j] = 0.0

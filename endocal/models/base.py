@@ -286,6 +286,15 @@ class HysteresisModel(ABC):
     def _forward_jac(self, data: HysteresisData, base_p: dict, eff_p: dict[int, dict], structure: dict,
                      effects: list[Effect]):
         """Output and full Jacobian ``(y, J, names)`` when every part is differentiable analytically, else None."""
+        res = self._forward_jac_blocks(data, base_p, eff_p, structure, effects)
+        if res is None:
+            return None
+        y, blocks, names = res
+        return y, np.column_stack(blocks), names
+
+    def _forward_jac_blocks(self, data: HysteresisData, base_p: dict, eff_p: dict[int, dict], structure: dict,
+                            effects: list[Effect]):
+        """:meth:`_forward_jac` with the Jacobian as its column blocks (base, upstream, filters, terms), unjoined."""
         inputs = [e for e in effects if isinstance(e, InputEffect)]
         filters = [e for e in effects if isinstance(e, OutputFilter)]
         outputs = [e for e in effects if isinstance(e, OutputEffect)]
@@ -296,7 +305,8 @@ class HysteresisModel(ABC):
         up_names: list[str] = []
         for e in inputs:
             u, own, prev = e.apply_jac(eff_p[id(e)], u, data, M)
-            M = np.column_stack([prev, own])
+            # the first input effect has no upstream columns: its own are the whole Jacobian so far
+            M = np.column_stack([prev, own]) if prev.shape[1] else np.ascontiguousarray(own, dtype=float)
             up_names += e.full_names()
         res = self._base_forward_jac(structure, base_p, u, data.run_starts, M)
         if res is None:
@@ -313,7 +323,7 @@ class HysteresisModel(ABC):
             y = y + t
             blocks.append(Jo)
             names += e.full_names()
-        return y, np.column_stack(blocks), names
+        return y, blocks, names
 
     @staticmethod
     def _ordered(effects: list[Effect]) -> list[Effect]:
@@ -433,19 +443,17 @@ class HysteresisModel(ABC):
         stride = d.n_samples // 20000
         dd = d.decimate(stride) if stride >= 2 else d
         initials: dict = {}  # the output effects' start values on dd, the same for every start tried below
-        start, structure, owners = self._start(dd, effects, fixed, {}, initials)
         # Effects whose nonlinear parameters (a delay, a time constant, a play width) need a
         # good start offer a few candidates: each is tried with the base re-started on the
         # command it produces, and the one with the lowest start cost is kept (greedy, in
-        # chain order).
+        # chain order). An effect whose every free parameter the warm start gives starts there.
         overrides: dict[str, float] = {}
         warm = warm_start or {}
         for e in effects:
             known = [n for n in e.full_names() if n not in fixed]
             if known and all(n in warm for n in known):
                 overrides.update({n: float(warm[n]) for n in known})
-        if overrides:
-            start, structure, owners = self._start(dd, effects, fixed, overrides, initials)
+        start, structure, owners = self._start(dd, effects, fixed, overrides, initials)
         ds = _subsample(dd)
         for e in effects:
             if not hasattr(e, "start_candidates") or all(n in overrides for n in e.full_names() if n not in fixed):
@@ -612,17 +620,33 @@ class HysteresisModel(ABC):
             base_p, eff_p = self._grouped(values)
             return self._forward(data, base_p, eff_p, structure, effects)[rows] - meas
 
-        analytic = self._forward_jac(data, *self._grouped(values), structure, effects)
+        analytic = self._forward_jac_blocks(data, *self._grouped(values), structure, effects)
         if analytic is None:
             return residual, "2-point"
-        col = {n: i for i, n in enumerate(analytic[2])}
-        free_cols = [col[n] for n in free]
+        # where each free parameter's column sits: (block, column in it, column of the fit's Jacobian); the
+        # Jacobian is assembled from the blocks directly (joining them first, then picking the free columns,
+        # copied every column twice: several per cent of a scan candidate's time)
+        where = [(b, c) for b, block in enumerate(analytic[1]) for c in range(_columns(block).shape[1])]
+        col = {n: where[i] for i, n in enumerate(analytic[2])}
+        picks: dict[int, tuple[list[int], list[int]]] = {}
+        for k, n in enumerate(free):
+            b, c = col[n]
+            picks.setdefault(b, ([], []))[0].append(c)
+            picks[b][1].append(k)
+        n_rows = meas.size
 
         def jac(x):
             for n, v in zip(free, x):
                 values[n] = float(v)
             base_p, eff_p = self._grouped(values)
-            return self._forward_jac(data, base_p, eff_p, structure, effects)[1][rows][:, free_cols]
+            blocks = self._forward_jac_blocks(data, base_p, eff_p, structure, effects)[1]
+            # Fortran order, as picking the columns gave it before: LAPACK's SVD in the solver rounds
+            # differently on the other layout, and fits on the edge of a tie (the scan's) went the other way
+            J = np.empty((n_rows, len(free)), order="F")
+            for b, (src, dst) in picks.items():
+                block = _columns(blocks[b])
+                J[:, dst] = (block if keep is None else block[keep])[:, src]
+            return J
 
         return residual, jac
 
@@ -636,9 +660,16 @@ class HysteresisModel(ABC):
         initials = {} if initials is None else initials
         start: dict[str, Parameter] = {}
         u = dd.cmd_deg
+        unmeasured = None
         for e in effects:
             if isinstance(e, InputEffect):
-                for prm in e.initial(dd, u):
+                # an effect whose every free parameter is given needs only its bounds: it sees the data
+                # without the measured angle, so it skips its start search (an envelope's hinge grid,
+                # a fifth of a warm-started scan candidate's time); an effect's bounds never depend on it
+                given = all(n in overrides for n in e.full_names() if n not in fixed)
+                if given and unmeasured is None:
+                    unmeasured = dd.with_cmd(dd.cmd_deg)
+                for prm in e.initial(unmeasured if given else dd, u):
                     start[prm.name] = prm
                 e.adapt_start(start, fixed)
                 self._apply_fixed(start, fixed, e)
@@ -993,6 +1024,11 @@ def _solve(residual, x0: np.ndarray, jac, bounds: tuple, max_nfev: int | None):
     """
     return least_squares(residual, x0, jac=jac, bounds=bounds, method="trf", x_scale="jac", ftol=FTOL,
                          max_nfev=max_nfev)
+
+
+def _columns(block: np.ndarray) -> np.ndarray:
+    """A Jacobian block as :func:`numpy.column_stack` reads it: a 1-D array is one column."""
+    return block[:, None] if np.ndim(block) == 1 else block
 
 
 def _subsample(d: HysteresisData) -> HysteresisData:
