@@ -122,6 +122,9 @@ class ProbeConfig:
     def from_dict(cls, d: dict, where: str = "probe") -> ProbeConfig:
         known = {"name", "bending_axes", "knob_limits_deg", "bending_length_mm",
                  "translation_limits_mm", "rotation_limits_deg", "max_knob_speed_dps", "max_knob_accel_dps2"}
+        if not isinstance(d, dict):
+            raise ConfigError(f"{where}: the probe must be a table of its keys ({', '.join(sorted(known))}), "
+                              f"got {type(d).__name__}; restore it (or record the run again)")
         unknown = set(d) - known
         if unknown:
             raise ConfigError(f"{where}: unknown key(s) {sorted(unknown)}; known keys are {sorted(known)}")
@@ -138,6 +141,8 @@ class ProbeConfig:
             )
         except KeyError as exc:
             raise ConfigError(f"{where}: missing key {exc.args[0]!r}") from None
+        except (TypeError, ValueError, AttributeError, IndexError) as exc:
+            raise ConfigError(f"{where}: a key of the probe has the wrong type or shape ({exc}); restore it") from None
         except (TypeError, ValueError, IndexError) as exc:
             raise ConfigError(f"{where}: {exc}") from None
 

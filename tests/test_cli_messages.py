@@ -14,7 +14,7 @@ from endocal import messages
 from endocal.cli._common import slow_clock_warning
 from endocal.cli.messages import KEYS, Message, capped, head, key_of, keyed, keyed_lines
 
-PKG = Path(messages.__file__).parents[1]
+PKG = Path(messages.__file__).parent  # endocal/: every module of the package
 
 
 def test_every_key_a_message_is_made_with_is_explained():

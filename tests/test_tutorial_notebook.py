@@ -46,11 +46,12 @@ def test_the_tutorial_notebook_runs_and_shows_the_error_falling(tmp_path):
     errors = [o for c in code for o in c.get("outputs", []) if o.get("output_type") == "error"]
     assert not errors
     # the verdict of the first validation names a suggestion; the second one compares with the first
-    first = next(t for t in texts if t.startswith("Validation of pi+envelope"))
-    assert "missing: add " in first
-    second = next(t for t in texts if t.startswith("Validation of pi+") and " vs pi+envelope: " in t)
-    fell = re.search(r"validation RMSE ([\d.]+) -> ([\d.]+) deg \(fell (\d+) %\)", second)
-    assert fell and float(fell[2]) < float(fell[1])
+    # (a Validation's repr is the command's summary: endocal.views.validation_summary)
+    first = next(t for t in texts if t.startswith("pi+envelope on axis ap: "))
+    assert re.search(r"^missing: \S+: -\d+ % validation RMSE", first, re.M), first
+    second = next(t for t in texts if re.match(r"pi\+\S+ on axis ap: ", t) and " since pi+envelope" in t)
+    fell = re.search(r"error fell (\d+) % since pi\+envelope: validation RMSE ([\d.]+) -> ([\d.]+) deg", second)
+    assert fell and float(fell[3]) < float(fell[2]), second
     # the ladder of the report: three rungs on each validation record
     report = next(t for t in texts if t.startswith("Report: 3 model(s) on 2 record(s)"))
     assert report.count("ladder ") == 2
@@ -68,6 +69,6 @@ def test_the_tutorial_notebook_runs_and_shows_the_error_falling(tmp_path):
     assert all((index.parent / o["image"]).is_file() for c in kept for o in c["outputs"] if "image" in o)
     text = index.read_text()
     assert str(tmp_path) not in text and str(ROOT) not in text and str(Path.home()) + "/" not in text
-    assert "Validation of pi+envelope on axis ap" in text and "Run 'tutorial-out/train'" in text
+    assert "pi+envelope on axis ap: " in text and "Run 'tutorial-out/train'" in text
     page = hooks.notebook_markdown(NOTEBOOK, "docs/tutorial/notebook.py")
     assert "differ from the ones that ran" not in page and page.count("](notebook_outputs/cell-") == pngs

@@ -74,7 +74,8 @@ def test_a_sheath_curved_differently_between_the_records_is_named(sheaths):
     # record and the two records differ in their motion (60 deg at 0.05 Hz, 55 at 0.06 Hz), so a load
     # term could stand for any difference between them; it says so, and what would show it
     tested = {s["effect"]: s for s in without["scan"]["tested"]}
-    assert "load:sheath_wrap_deg" not in tested and not without["suspects"], sorted(tested)
+    assert "load:sheath_wrap_deg" not in tested, sorted(tested)
+    assert all(not x["effect"].startswith("load") for x in without["suspects"]), without["suspects"]
     why = without["scan"]["untestable"]["load:sheath_wrap_deg"]
     assert why.startswith("'sheath_wrap_deg' is constant within each record and the records at its 2 values differ "
                           "in their motion"), why
