@@ -112,6 +112,8 @@ LONGEST_FIRST = (
     "test_validate_split_conditions.py", "test_import_csv_variety.py", "test_cli_excite.py", "test_real_data.py", "test_real_data_followed.py",
     "test_compensation.py", "test_api.py", "test_validate_dirty.py", "test_tutorial_notebook.py",
     "test_hardware_wire.py", "test_mutations_commands.py", "test_next_experiment.py", "test_validation_units.py",
+    "test_user_effects.py", "test_validate_promise.py", "test_validation_bases.py", "test_effects_contract.py",
+    "test_export_c.py", "test_check_wear.py", "test_models_boucwen.py",
 )
 
 
