@@ -201,3 +201,25 @@ def test_float_warns_where_it_cannot_follow_double(fitted):
     # the inverse PI's plays and the creep filter are continuous: nothing to warn of
     assert generate_c(_effect_model(["creep"]), real="float", dt_s=DT_S).warnings == []
     assert "linear base's backlash" in generate_c(fitted["linear"], real="float").warnings[0][1]
+
+
+@needs_cc
+def test_float_cannot_follow_a_reversal_below_its_resolution_a_finding(tmp_path):
+    """Why the float bar (1e-3 deg) cannot hold on every trajectory (issue 34: a bar the arithmetic cannot
+    meet). A play's inverse (tension here) moves the knob by the play's full width on the sign of each step
+    of the desired angle. At 50 deg float resolves steps of about 4e-6 deg; a reversal of 1e-6 deg is seen
+    by double (Python and the C double build) and not by float, which then holds the other branch: the two
+    builds part by the play's width, not by a rounding error."""
+    m = _effect_model(["tension"])
+    up = np.linspace(0.0, 50.0, 501)
+    y = np.concatenate([up, [50.0 - 1e-6] * 5])  # sweep up, then step back by 1e-6 deg and hold
+    ulp_at_50 = float(np.spacing(np.float32(50.0)))
+    assert 1e-6 < ulp_at_50  # below float's resolution at 50 deg, far above double's (7e-15)
+    ref = _python(m, y, DT_S)
+    c_double = compile_c(generate_c(m, real="double", dt_s=DT_S), tmp_path / "d").run(y)[0]
+    c_float = compile_c(generate_c(m, real="float", dt_s=DT_S), tmp_path / "f").run(y)[0]
+    assert np.max(np.abs(c_double - ref)) <= TOL_DEG["double"]
+    width = abs(ref[-1] - ref[-7])  # the play's width: what double's knob travels on the reversal
+    assert width > 0.1  # a visible step back in double ...
+    assert abs(c_float[-1] - ref[-1]) > 100 * TOL_DEG["float"]  # ... that float does not take
+    assert abs(c_float[-7] - ref[-7]) <= TOL_DEG["float"]  # while before it the two agree
