@@ -39,7 +39,7 @@ from endocal.sim import SimConfig
 from endocal.validation.data import axis_data
 from endocal.validation.next_experiment import NothingSuspectedError, design_next
 from endocal.validation.offline import validate_offline
-from tests.test_validation_closed_loop import MAX_ADDED, SCAN_SAMPLES, TEE, _record, start_for
+from tests.test_validation_closed_loop import MAX_ADDED, SCAN_SAMPLES, TEE, _record, _refit, start_for
 from tests.test_validation_hidden import NO_SLACK, simulate
 from tests.test_validation_user_style import HIDDEN
 
@@ -96,8 +96,7 @@ def run_loop(hidden: str | None) -> BaseLoop:
         if res.suspects:
             effect = res.suspects[0].effect
             out.named.append(effect)
-            model = make_model(base, [e.label for e in model.effects_] + [effect], axis="ap").fit_from(
-                model, axis_data(est, "ap"))
+            model = _refit(base, [e.label for e in model.effects_] + [effect], model, est)
             continue
         if out.added == MAX_ADDED:
             break
@@ -110,8 +109,10 @@ def run_loop(hidden: str | None) -> BaseLoop:
         out.added += 1
         path = plan.write(tmp / f"next-{out.added}.toml")
         est = est + [_record(cfg, path, 100 + out.added, tmp / f"fit-{out.added}")]
+        if plan.conditions:  # the same motion at the earlier value of the condition, as --next asks (issue 32)
+            est = est + [_record(cfg, path, 100 + out.added, tmp / f"fit-{out.added}-earlier", earlier=True)]
         val = [_record(cfg, path, 200 + out.added, tmp / f"val-{out.added}")]
-        model = make_model(base, [e.label for e in model.effects_], axis="ap").fit_from(model, axis_data(est, "ap"))
+        model = _refit(base, [e.label for e in model.effects_], model, est)
     out.clean = bool(res.clean)
     final = validate_offline(model, val, train=est, max_scan_samples=SCAN_SAMPLES)
     out.end_label, out.end_deg = final.model["label"], final.scan.baseline_rmse_heldout_deg
