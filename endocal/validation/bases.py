@@ -41,7 +41,7 @@ from endocal.validation.parallel import map_jobs
 from endocal.validation.predict import predict_errors
 from endocal.validation.refit import Refit, refit_path
 from endocal.validation.regimes import turning_points
-from endocal.validation.structure import effect_labels
+from endocal.validation.structure import SCAN_FTOL, effect_labels
 from endocal.validation.units import Units
 
 #: A half-cycle shorter than this share of its record's span is a small reversal inside the loop.
@@ -158,12 +158,19 @@ def _warm(model: HysteresisModel) -> dict:
     return {k: v for k, v in model.params_.items() if not k.startswith(own)}
 
 
-def base_fit(model: HysteresisModel, base: str, train: HysteresisData) -> HysteresisModel:
+def base_fit(model: HysteresisModel, base: str, train: HysteresisData, ftol: float | None = None) -> HysteresisModel:
     """``base`` with ``model``'s effects fitted on ``train``, its effects starting from ``model``'s values;
-    continued beyond its fitted range as validation scores it."""
+    continued beyond its fitted range as validation scores it. ``ftol``: the fit's stopping rule
+    (:func:`~endocal.validation.structure.scan_ftol`; None: the fit's own)."""
     proxy = _proxy(model, base)
     m = make_model(base, effect_labels(model), axis=model.axis, fixed=proxy.fixed, out_of_range="extrapolate")
-    return m.fit(train, warm_start=_warm(model))
+    return m.fit(train, warm_start=_warm(model), ftol=ftol)
+
+
+def base_errors(model: HysteresisModel, base: str, train: HysteresisData, val: HysteresisData,
+                ftol: float | None = None) -> np.ndarray:
+    """Validation errors ``pred - meas`` (deg) on ``val`` of ``base`` with ``model``'s effects fitted on ``train``."""
+    return predict_errors(base_fit(model, base, train, ftol), val)
 
 
 def _refit(model: HysteresisModel, base: str, data_paths: Sequence[str], model_path: str | None,
@@ -202,11 +209,16 @@ def _rank(model, rows, err_base: np.ndarray, alpha: float, min_gain_pct: float, 
 def scan_bases_split(model: HysteresisModel, train: HysteresisData, val: HysteresisData, err_base: np.ndarray,
                      units: Units, *, alpha: float, min_gain_pct: float, data_paths: Sequence[str],
                      model_path: str | None = None, planes_path: str | None = None, suffix: str = "",
-                     jobs: int | None = None) -> tuple[BaseCandidate, ...]:
+                     jobs: int | None = None, errors: Sequence | None = None) -> tuple[BaseCandidate, ...]:
     """Every other base with the model's effects, fitted on ``train`` (the scan's decimated estimation
-    data), scored on ``val`` unit by unit against ``err_base`` (the model's validation errors)."""
+    data), scored on ``val`` unit by unit against ``err_base`` (the model's validation errors).
+
+    ``errors``: per base of :func:`other_bases`, its :func:`base_errors` (or the ModelError it raised),
+    when the caller fitted them among its own jobs (the effect scan fits them beside its candidates,
+    so both cores stay busy); else they are fitted here.
+    """
     bases = other_bases(model)
-    results = map_jobs(lambda b: predict_errors(base_fit(model, b, train), val), bases, jobs)
+    results = errors if errors is not None else map_jobs(lambda b: base_errors(model, b, train, val), bases, jobs)
     rows, failed = [], {}
     for b, err in zip(bases, results):
         if isinstance(err, ModelError):
@@ -226,7 +238,7 @@ def scan_bases_rolling(model: HysteresisModel, data: HysteresisData, bounds: Seq
 
     def one(b: str):
         proxy = _proxy(model, b)
-        first = fold_errors(proxy, have, data, bounds[0])
+        first = fold_errors(proxy, have, data, bounds[0], SCAN_FTOL)
         gain = 100.0 * (1.0 - first[1].fit_report_.rmse_deg / base_train_rmse) if base_train_rmse > 0 else 0.0
         if gain < screen_pct * min_gain_pct:
             e0 = first[0]
@@ -234,7 +246,7 @@ def scan_bases_rolling(model: HysteresisModel, data: HysteresisData, bounds: Seq
             rmse0 = float(np.sqrt(np.mean(e0**2)))
             rmse_base = float(np.sqrt(np.mean(err_base**2)))
             return b, (rmse0 * rmse_base / base0 if base0 > 0 else rmse0), 1.0, True
-        err = np.concatenate([first[0]] + [fold_errors(proxy, have, data, bd)[0] for bd in bounds[1:]])
+        err = np.concatenate([first[0]] + [fold_errors(proxy, have, data, bd, SCAN_FTOL)[0] for bd in bounds[1:]])
         return b, float(np.sqrt(np.mean(err**2))), paired_test(err_base, err)[0], False
 
     bases = other_bases(model)

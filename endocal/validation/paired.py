@@ -19,7 +19,6 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.stats import wilcoxon
 
 from endocal.validation.metrics import block_length
 from endocal.validation.units import Units
@@ -45,6 +44,8 @@ def paired_test(err_base: np.ndarray, err_cand: np.ndarray) -> tuple[float, int]
     means = d[: nb * L].reshape(nb, L).mean(axis=1)
     if nb < 2 or not np.any(means):
         return 1.0, nb
+    from scipy.stats import wilcoxon  # here: validate's scan never calls it, and scipy.stats takes 0.2 s to import
+
     return float(wilcoxon(means, alternative="greater").pvalue), nb
 
 

@@ -42,7 +42,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import norm
+from scipy.special import ndtri  # norm.ppf, without scipy.stats' import (0.2 s)
 
 from endocal.validation.paired import min_units_for
 
@@ -90,8 +90,8 @@ def units_for_power(mean: float, sd: float, alpha: float, n_candidates: int = 1,
     floor = min_units_for(n_candidates, alpha)  # the exact test's 2^-N
     if sd <= 0:
         return floor
-    z_a = float(norm.ppf(1.0 - alpha / max(n_candidates, 1)))
-    z_b = float(norm.ppf(power))
+    z_a = float(ndtri(1.0 - alpha / max(n_candidates, 1)))
+    z_b = float(ndtri(power))
     root = (z_b * sd + z_a * math.hypot(sd, mean)) / mean
     return max(floor, int(math.ceil(root * root)))
 

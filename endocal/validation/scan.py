@@ -35,7 +35,7 @@ from endocal.messages import Message
 from endocal.models import EFFECTS, HysteresisData
 from endocal.models.base import HysteresisModel
 from endocal.validation.ambiguity import ambiguities, demoted, settle_lookalikes
-from endocal.validation.bases import scan_bases_rolling, scan_bases_split
+from endocal.validation.bases import base_errors, other_bases, scan_bases_rolling, scan_bases_split
 from endocal.validation.candidates import candidate_effects
 from endocal.validation.folds import check_cv_data, fold_bounds, fold_errors, fold_split, still_blocks
 from endocal.validation.identifiability import unheld_cautions
@@ -45,7 +45,7 @@ from endocal.validation.power import estimate_power, evidence_phrase
 from endocal.validation.predict import predict_errors
 from endocal.validation.refit import suggest_refit
 from endocal.validation.regimes import turning_points
-from endocal.validation.structure import effect_labels, fitted_on, split_fit, template
+from endocal.validation.structure import SCAN_FTOL, effect_labels, fitted_on, scan_ftol, split_fit, template
 from endocal.validation.suspects import ScanResult, Suspect
 from endocal.validation.units import make_units
 
@@ -82,10 +82,10 @@ _AT_BOUND = re.compile(r"sits at its (?:lower|upper) bound (\S+):")
 
 
 def _split_candidate(model: HysteresisModel, effects: Sequence[str], train: HysteresisData,
-                     val: HysteresisData) -> tuple[np.ndarray, list[str]]:
-    """Validation errors of ``base + effects`` fitted on ``train``, and the cautions about the
-    effects ``model`` lacks (:attr:`Suspect.caution`)."""
-    m = split_fit(model, effects, train)
+                     val: HysteresisData, ftol: float | None = None) -> tuple[np.ndarray, list[str]]:
+    """Validation errors of ``base + effects`` fitted on ``train`` (stopping at ``ftol``: :func:`scan_ftol`),
+    and the cautions about the effects ``model`` lacks (:attr:`Suspect.caution`)."""
+    m = split_fit(model, effects, train, ftol=ftol)
     have = set(effect_labels(model))
     new = [e for e in m.effects_ if e.label not in have]
     prefixes = tuple(e.prefix + "_" for e in new)
@@ -100,7 +100,7 @@ def _split_candidate(model: HysteresisModel, effects: Sequence[str], train: Hyst
 def split_errors(model: HysteresisModel, effects: Sequence[str], train: HysteresisData, val: HysteresisData,
                  stride: int = 1) -> np.ndarray:
     """Validation errors ``pred - meas`` (deg) of ``base + effects`` fitted on ``train`` (every ``stride``-th sample)."""
-    return predict_errors(split_fit(model, effects, train, stride), val)
+    return predict_errors(split_fit(model, effects, train, stride, ftol=scan_ftol(stride)), val)
 
 
 def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisData, *, alpha: float = 0.05,
@@ -172,9 +172,14 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     # the model as it stands, fitted on this very estimation data, is scored as it is (a refit of
     # the same structure on the same data could only stop elsewhere); else its structure is refitted
     as_is = fitted_on(model, train)
+    # the other bases (scored after the effects) are fitted among the same jobs, so both cores stay busy
+    bases_fitted = other_bases(model) if candidates is None else []
+    structures = ([] if as_is else [have]) + [have + [c] for c in tested_cands]
+    ftol = scan_ftol(stride)
     with one_blas_thread():
-        results = map_jobs(lambda effects: _split_candidate(model, effects, dt, val),
-                           ([] if as_is else [have]) + [have + [c] for c in tested_cands], jobs)
+        results = map_jobs(lambda job: _split_candidate(model, job, dt, val, ftol) if isinstance(job, list)
+                           else base_errors(model, job, dt, val, ftol), structures + bases_fitted, jobs)
+    results, base_results = results[:len(structures)], results[len(structures):]
     if as_is:
         results = [(predict_errors(model, val), [], dict(model.params_))] + results
     if isinstance(results[0], ModelError):
@@ -227,7 +232,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     suspects.sort(key=lambda s: bool(s.caution))
     # the first suggestion against the look-alikes it declares, on records that separate them
     suspects, settled = settle_lookalikes(suspects, tested, errs, dt, val, units, alpha, min_gain_pct,
-                                          lambda effects: _split_candidate(model, effects, dt, val)[0], have)
+                                          lambda effects: _split_candidate(model, effects, dt, val, ftol)[0], have)
     if stride > 1 and suspects:
         ranges = expected_ranges(model, [s.effect for s in suspects], train, val, stride,
                                  [s.rmse_heldout_deg for s in suspects], jobs,
@@ -257,7 +262,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
                              f"validation RMSE differs from the candidate's{expect}", "subsampled"))
     bases = () if candidates is not None else scan_bases_split(
         model, dt, val, err_base, units, alpha=alpha, min_gain_pct=min_gain_pct, data_paths=data_paths,
-        model_path=model_path, planes_path=planes_path, suffix=refit_suffix, jobs=jobs)
+        model_path=model_path, planes_path=planes_path, suffix=refit_suffix, jobs=jobs, errors=base_results)
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), 0, stride,
                       dt.n_samples, alpha, min_gain_pct, scheme="estimation/validation", scheme_reason=scheme_reason,
                       units=units.to_dict(), min_units=need, lookalikes=tuple(settled), bases=bases)
@@ -286,8 +291,9 @@ def expected_ranges(model: HysteresisModel, effects: Sequence[str], train: Hyste
 
     def again_errors(k: int) -> np.ndarray:
         if starts[k]:
-            return predict_errors(template(model, have + [effects[k]]).fit(dt2, warm_start=starts[k]), val)
-        return _split_candidate(model, have + [effects[k]], dt2, val)[0]
+            return predict_errors(template(model, have + [effects[k]]).fit(dt2, warm_start=starts[k], ftol=SCAN_FTOL),
+                                 val)
+        return _split_candidate(model, have + [effects[k]], dt2, val, SCAN_FTOL)[0]
 
     with one_blas_thread():
         again = map_jobs(again_errors, list(range(len(effects))), jobs)
@@ -381,7 +387,7 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
                                                  train=first_train, rolling=True)
 
     with one_blas_thread():
-        base_folds = map_jobs(lambda bd: fold_errors(model, have, d, bd), bounds, jobs)
+        base_folds = map_jobs(lambda bd: fold_errors(model, have, d, bd, SCAN_FTOL), bounds, jobs)
         for f in base_folds:
             if isinstance(f, ModelError):
                 raise f
@@ -390,7 +396,7 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
         rmse_base = float(np.sqrt(np.mean(err_base**2)))
 
         def candidate(c: str):
-            first = fold_errors(model, have + [c], d, bounds[0])
+            first = fold_errors(model, have + [c], d, bounds[0], SCAN_FTOL)
             train_gain = 100.0 * (1.0 - first[1].fit_report_.rmse_deg / base_train_rmse) if base_train_rmse > 0 else 0.0
             if train_gain < screen_pct * min_gain_pct:
                 # screened on its training fit alone: no held-out data was looked at to decide
@@ -398,7 +404,7 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
                 rmse0 = float(np.sqrt(np.mean(e0**2)))
                 base0 = float(np.sqrt(np.mean(err_base[:e0.size] ** 2)))
                 return (c, None, rmse0 * rmse_base / base0 if base0 > 0 else rmse0, 1.0, 0)
-            rest = [fold_errors(model, have + [c], d, bd) for bd in bounds[1:]]
+            rest = [fold_errors(model, have + [c], d, bd, SCAN_FTOL) for bd in bounds[1:]]
             err = np.concatenate([first[0]] + [e for e, _ in rest])
             p, nb = paired_test(err_base, err)
             return (c, err, float(np.sqrt(np.mean(err**2))), p, nb)
