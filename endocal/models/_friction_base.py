@@ -208,9 +208,10 @@ class SmoothFrictionModel(HysteresisModel):
         return _Stepper(self, self._law(structure, p), v_range)
 
     def _gauge(self, effects: list[Effect]) -> dict[str, float]:
-        # the state's law is invariant to no scaling of its input (rho sets the scale), but an envelope's
-        # middle slope and zero trade off against k_lin, k_hys, rho and the offset
+        # the state's law is invariant to no scaling of its input (rho sets the scale), but an affine map
+        # of it trades off against k_lin, k_hys, rho and the offset: an effect's own gauge fixes what would
+        # (the envelope's middle slope and zero), as for branches that absorb any affine map
         for e in effects:
-            if e.name == "envelope":
-                return {f"{e.prefix}_k1": 1.0, f"{e.prefix}_theta1_deg": 0.0}
+            if g := e.gauge("affine"):
+                return g
         return {}

@@ -723,9 +723,10 @@ class HysteresisModel(ABC):
 
         Successive halving (Jamieson & Talwalkar, AISTATS 2016): every candidate is refined with
         START_SCREEN_SHARE of :meth:`_start_cost`'s evaluations, the START_KEEP lowest go on with the
-        rest, and the lowest after that wins. A start that leads nowhere shows it early: on the demo's
-        records and the closed loop's plants the winner of the full refinement of every candidate was
-        among the two lowest after a quarter of it, at half the evaluations (six candidates).
+        rest, and the lowest after that wins. A start that leads nowhere shows it early: in the five
+        searches of ``validate`` on the demo's records (3 to 7 candidates each) the start kept ended within
+        0.25 % of the cost of the best of all candidates refined in full, with 10 to 60 % fewer evaluations
+        (where several candidates lead into one basin, it may be another of them than the full search's).
         """
         if len(tried) <= START_KEEP:
             kept = [(*self._start_cost(ds, st, stru, own, effects, fixed), trial, stru, own)
