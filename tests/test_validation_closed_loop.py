@@ -196,6 +196,18 @@ def _record(cfg: SimConfig, path: Path, seed: int, out: Path, earlier: bool = Fa
     return load_aligned(out)
 
 
+def record_next(cfg: SimConfig, model, res, est: list, val: list, tmp: Path, k: int) -> tuple[list, list]:
+    """The loop's k-th recording: the protocol `validate --next` writes for ``res``, recorded as it asks (once
+    to fit, and for a condition once more at the earlier value; once to validate on). Returns the estimation
+    records with the new ones, and the new validation record. Raises NothingSuspectedError."""
+    plan = design_next(model, res, axis_data(est, "ap"), axis_data(val, "ap"), TEE, model_path=str(tmp / "m.json"))
+    path = plan.write(tmp / f"next-{k}.toml")
+    est = est + [_record(cfg, path, 100 + k, tmp / f"fit-{k}")]
+    if plan.conditions:  # the same motion at the earlier value of the condition (issue 32)
+        est = est + [_record(cfg, path, 100 + k, tmp / f"fit-{k}-earlier", earlier=True)]
+    return est, [_record(cfg, path, 200 + k, tmp / f"val-{k}")]
+
+
 def _refit(base: str, effects: list[str], start, est):
     return make_model(base, effects, axis="ap").fit_from(start, axis_data(est, "ap"))
 
@@ -223,17 +235,11 @@ def run_loop(case: str | None) -> LoopResult:
         if out.added == MAX_ADDED:
             break
         try:
-            plan = design_next(model, res, axis_data(est, "ap"), axis_data(val, "ap"), TEE,
-                               model_path=str(tmp / "m.json"))
+            est, val = record_next(cfg, model, res, est, val, tmp, out.added + 1)
         except NothingSuspectedError as exc:
             out.next_said = str(exc)
             break
         out.added += 1
-        path = plan.write(tmp / f"next-{out.added}.toml")
-        est = est + [_record(cfg, path, 100 + out.added, tmp / f"fit-{out.added}")]
-        if plan.conditions:  # the same motion at the earlier value of the condition (issue 32)
-            est = est + [_record(cfg, path, 100 + out.added, tmp / f"fit-{out.added}-earlier", earlier=True)]
-        val = [_record(cfg, path, 200 + out.added, tmp / f"val-{out.added}")]
         model = _refit(base, [e.label for e in model.effects_], model, est)
     out.clean = bool(res.clean)
     final = validate_offline(model, val, train=est, max_scan_samples=SCAN_SAMPLES, compare=start)

@@ -37,9 +37,9 @@ import pytest
 from endocal.models import BASES, make_model
 from endocal.sim import SimConfig
 from endocal.validation.data import axis_data
-from endocal.validation.next_experiment import NothingSuspectedError, design_next
+from endocal.validation.next_experiment import NothingSuspectedError
 from endocal.validation.offline import validate_offline
-from tests.test_validation_closed_loop import MAX_ADDED, SCAN_SAMPLES, TEE, _record, _refit, start_for
+from tests.test_validation_closed_loop import MAX_ADDED, SCAN_SAMPLES, _refit, record_next, start_for
 from tests.test_validation_hidden import NO_SLACK, simulate
 from tests.test_validation_user_style import HIDDEN
 
@@ -101,17 +101,11 @@ def run_loop(hidden: str | None) -> BaseLoop:
         if out.added == MAX_ADDED:
             break
         try:
-            plan = design_next(model, res, axis_data(est, "ap"), axis_data(val, "ap"), TEE,
-                               model_path=str(tmp / "m.json"))
+            est, val = record_next(cfg, model, res, est, val, tmp, out.added + 1)
         except NothingSuspectedError as exc:
             out.next_said = str(exc)
             break
         out.added += 1
-        path = plan.write(tmp / f"next-{out.added}.toml")
-        est = est + [_record(cfg, path, 100 + out.added, tmp / f"fit-{out.added}")]
-        if plan.conditions:  # the same motion at the earlier value of the condition, as --next asks (issue 32)
-            est = est + [_record(cfg, path, 100 + out.added, tmp / f"fit-{out.added}-earlier", earlier=True)]
-        val = [_record(cfg, path, 200 + out.added, tmp / f"val-{out.added}")]
         model = _refit(base, [e.label for e in model.effects_], model, est)
     out.clean = bool(res.clean)
     final = validate_offline(model, val, train=est, max_scan_samples=SCAN_SAMPLES)

@@ -366,8 +366,8 @@ class HysteresisModel(ABC):
             structures that share the model's effects.
         ftol : float, optional
             Relative cost decrease per step under which the fit stops (default :data:`FTOL`).
-            ``validate`` fits its candidates with a looser one (``validation.structure.SCAN_FTOL``):
-            they are compared at 10 % of the RMSE, not at 1e-7.
+            ``validate`` fits its candidates on a subsample with a looser one
+            (``validation.structure.SCAN_FTOL``): they are compared at 10 % of the RMSE, not at 1e-7.
 
         Returns
         -------

@@ -13,12 +13,13 @@ from collections.abc import Sequence
 from endocal.models import HysteresisData, make_model
 from endocal.models.base import HysteresisModel
 
-#: The stopping rule of every fit validation makes (candidates, folds, bases, expected ranges):
-#: stop when a step lowers the cost by less than 1e-5 of itself. The scan decides at 10 % of the
-#: RMSE; the model's own fit keeps models.base.FTOL (1e-7). On the demo's records (scripts/demo.sh,
-#: pi + envelope, 6 candidates) the candidates ended within 0.06 % of their FTOL cost (0.03 % of
-#: the RMSE) with 2-15 times fewer evaluations: several crawl along a shallow valley (eq. 8's
-#: beta) for hundreds of steps that each lower the cost by under 1e-5 (bench/bench_loop.py).
+#: The stopping rule of the fits validation makes on a subsample of the estimation data (candidates,
+#: bases, expected ranges: :func:`scan_ftol`) and on rolling-origin folds: stop when a step lowers the
+#: cost by less than 1e-5 of itself. The scan decides at 10 % of the RMSE; the model's own fit keeps
+#: models.base.FTOL (1e-7). On the demo's records (scripts/demo.sh, pi + envelope, 6 candidates) the
+#: candidates ended within 0.13 % of their cost at FTOL (0.06 % of the RMSE) with 1.5-15 times fewer
+#: evaluations: several crawl along a shallow valley (eq. 8's beta) for hundreds of steps that each
+#: lower the cost by under 1e-5 (bench/bench_loop.py).
 SCAN_FTOL = 1e-5
 
 
