@@ -223,3 +223,29 @@ def test_float_cannot_follow_a_reversal_below_its_resolution_a_finding(tmp_path)
     assert width > 0.1  # a visible step back in double ...
     assert abs(c_float[-1] - ref[-1]) > 100 * TOL_DEG["float"]  # ... that float does not take
     assert abs(c_float[-7] - ref[-7]) <= TOL_DEG["float"]  # while before it the two agree
+
+
+@needs_cc
+@pytest.mark.parametrize("effect", ["tension", "rate"])
+def test_a_held_angle_with_rounding_dither_holds_the_knob(tmp_path, effect):
+    """A held desired angle that rounding makes wobble (3e-14 deg at 50 deg, a few of double's steps: an inverse
+    kinematics holding a pose) is a hold, not a reversal. The exact inverse of a play turns the knob across the play's whole width on the sign
+    of every step, so without a hold tolerance the knob swung by the width (0.98 deg with tension, 2.8 deg with
+    rate) at every wobble. The streaming compensator turns the knob as it does for the exact hold (within
+    1e-9 deg: the rate play still narrows as the knob's speed decays), the batch inverse and the generated C
+    (double) with it; a step back of 1e-6 deg is still a reversal (the float finding above)."""
+    m = _effect_model([effect])
+    up = np.linspace(0.0, 50.0, 501)
+    wobble = 3e-14 * np.tile([1.0, -1.0, 0.0, -1.0], 25)  # a few of double's steps at 50 deg (7e-15)
+    y = np.concatenate([up, 50.0 + wobble])
+    stream = _python(m, y, DT_S)
+    still = _python(m, np.concatenate([up, np.full(wobble.size, 50.0)]), DT_S)  # the same hold, exact
+    assert np.max(np.abs(stream - still)) <= 1e-9, np.max(np.abs(stream - still))
+    t = np.arange(y.size) * DT_S
+    batch = m.inverse(HysteresisData(cmd_deg=y, t_s=t))
+    assert np.max(np.abs(batch - stream)) <= 1e-9
+    c = compile_c(generate_c(m, real="double", dt_s=DT_S), tmp_path).run(y)[0]
+    assert np.max(np.abs(c - stream)) <= TOL_DEG["double"]
+    # a real step back, 1e-6 deg, still turns the knob back by the play's width
+    back = _python(m, np.concatenate([up, [50.0 - 1e-6] * 5]), DT_S)
+    assert abs(back[-1] - still[505]) > 0.1

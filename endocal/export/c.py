@@ -538,15 +538,35 @@ static real_t {f}_invert_step(STATE *s, real_t v)
                  call=f"v = {f}_invert_step(s, v);", needs={"rmin", "rmax"})
 
 
+def _play_reference_code() -> str:
+    return """
+/* relative: a target this close to where the drive is holds the knob (rounding, not a reversal) */
+#define PLAY_HOLD_TOL (1e-9)
+
+/* where the drive is after an inverse step: at v, unless a hold within the tolerance left the knob still
+   (endocal.models._kernels.play_reference) */
+static real_t play_reference(real_t v, real_t v_prev, real_t u, real_t u_prev)
+{
+    const real_t d = v - v_prev;
+    if (u == u_prev && (d < 0 ? -d : d) <= (real_t)PLAY_HOLD_TOL * rmax(1, v < 0 ? -v : v)) {
+        return v_prev;
+    }
+    return v;
+}
+"""
+
+
 def _play_inverse_step_code() -> str:
     return """
-/* one sample of a play's inverse: the knob that moves the drive from v_prev to v with half width w */
+/* one sample of a play's inverse: the knob that moves the drive from v_prev to v with half width w
+   (endocal.models._kernels.play_inverse_step) */
 static real_t play_inverse_step(real_t v, real_t v_prev, real_t u_prev, real_t w)
 {
-    if (v > v_prev) {
+    const real_t tol = (real_t)PLAY_HOLD_TOL * rmax(1, v < 0 ? -v : v);
+    if (v - v_prev > tol) {
         return v + w;
     }
-    if (v < v_prev) {
+    if (v_prev - v > tol) {
         return v - w;
     }
     return rmin(rmax(u_prev, v - w), v + w);
@@ -570,14 +590,14 @@ static real_t {f}_invert_step(STATE *s, real_t v)
     }}
     x = play_inverse_step(v, s->{f}_v_prev, s->{f}_x_prev,
                           {P}_FRICTION * (s->{f}_x_prev < 0 ? -s->{f}_x_prev : s->{f}_x_prev));
-    s->{f}_v_prev = v;
+    s->{f}_v_prev = play_reference(v, s->{f}_v_prev, x, s->{f}_x_prev);
     s->{f}_x_prev = x;
     return x;
 }}
 """)
     return _Part(fields=[f"int {f}_started;", f"real_t {f}_v_prev;", f"real_t {f}_x_prev;"],
                  init=[f"s->{f}_started = 0;", f"s->{f}_v_prev = 0;", f"s->{f}_x_prev = 0;"], code=code,
-                 call=f"v = {f}_invert_step(s, v);", needs={"rmin", "rmax", "play"})
+                 call=f"v = {f}_invert_step(s, v);", needs={"rmin", "rmax", "play", "play_hold"})
 
 
 def _rate(e, p: dict, state, real: str) -> _Part:
@@ -625,8 +645,8 @@ static real_t {f}_knob_for_drive(real_t v, real_t v_prev, real_t u_prev, real_t 
     const real_t c = {P}_ALPHA / {P}_DT;
     const real_t s_rest = (1 - {P}_ALPHA) * s_prev;
     const real_t w_rest = G * {f}_capstan_speed(s_rest);
-    real_t sig, x_prev, y, lo, hi, slope, d;
-    if (v == v_prev) {{
+    real_t sig, x_prev, y, lo, hi, slope, d = v - v_prev;
+    if ((d < 0 ? -d : d) <= (real_t)PLAY_HOLD_TOL * rmax(1, v < 0 ? -v : v)) {{  /* rounding, not a reversal */
         d = u_prev - v;
         if ((d < 0 ? -d : d) <= w_rest) {{
             return u_prev;
@@ -675,7 +695,7 @@ static real_t {f}_invert_step(STATE *s, real_t v)
                            {P}_G + {P}_H * (u_prev < 0 ? -u_prev : u_prev));
     du = u - u_prev;
     s->{f}_speed += {P}_ALPHA * ((du < 0 ? -du : du) / {P}_DT - s->{f}_speed);
-    s->{f}_v_prev = v;
+    s->{f}_v_prev = play_reference(v, s->{f}_v_prev, u, u_prev);
     s->{f}_u_prev = u;
     return u;
 }}
@@ -683,7 +703,7 @@ static real_t {f}_invert_step(STATE *s, real_t v)
     return _Part(fields=[f"int {f}_started;", f"real_t {f}_v_prev;", f"real_t {f}_u_prev;",
                          f"real_t {f}_speed;  /* the smoothed knob speed (deg/s) */"],
                  init=[f"s->{f}_started = 0;", f"s->{f}_v_prev = 0;", f"s->{f}_u_prev = 0;", f"s->{f}_speed = 0;"],
-                 code=code, call=f"v = {f}_invert_step(s, v);", needs={"rmax", "math"})
+                 code=code, call=f"v = {f}_invert_step(s, v);", needs={"rmax", "math", "play_hold"})
 
 
 def _emitters() -> dict:
@@ -909,6 +929,8 @@ def _source(name, real, parts, version) -> str:
     NAME = name.upper()
     needs = set().union(*(p.needs for p in parts))
     helpers = "".join(_HELPERS[k] for k in ("rmin", "rmax") if k in needs)
+    if "play_hold" in needs:
+        helpers += _play_reference_code()
     if "play" in needs:
         helpers += _play_inverse_step_code()
     init_lines = [line for part in parts for line in part.init]

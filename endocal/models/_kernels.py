@@ -243,7 +243,8 @@ def _gplay_g(u, u_prev, y_prev, slope, t_up, c_up, t_dn, c_dn, deg):
 
 
 #: Relative difference between a target and the present output below which the inverse holds
-#: the command (:func:`gplay_inverse_step`): rounding, not a request to move.
+#: the command (:func:`gplay_inverse_step`, :func:`play_inverse_step`, the rate play's inverse):
+#: rounding, not a request to move.
 HOLD_TOL = 1e-9
 
 
@@ -551,16 +552,30 @@ def play_inverse_step(v, v_prev, u_prev, w):
     """One sample of a play's inverse: the knob that moves the drive from ``v_prev`` to ``v`` with half width ``w``.
 
     The drive moving up means the knob pushes from below (``u = v + w``), down from above;
-    a drive at rest leaves the knob where it was unless the window forces it.
+    a drive at rest leaves the knob where it was unless the window forces it. A target within
+    :data:`HOLD_TOL` (relative) of ``v_prev`` is a drive at rest: rounding, not a reversal (a held
+    angle that wobbles by 1e-15 deg turned the knob across the whole play at every wobble). The
+    caller keeps ``v_prev`` where the drive is (:func:`play_reference`).
     """
-    if v > v_prev:
+    tol = HOLD_TOL * max(1.0, abs(v))
+    if v - v_prev > tol:
         return v + w
-    if v < v_prev:
+    if v_prev - v > tol:
         return v - w
     return min(max(u_prev, v - w), v + w)
 
 
+def play_reference(v, v_prev, u, u_prev):
+    """Where the drive is after an inverse step from ``v_prev`` to ``v`` that turned the knob from ``u_prev`` to
+    ``u``: at ``v``, unless the step was a hold within :data:`HOLD_TOL` that left the knob still (then where it
+    was, so that a slow creep of the target adds up until it moves the drive)."""
+    if u == u_prev and abs(v - v_prev) <= HOLD_TOL * max(1.0, abs(v)):
+        return v_prev
+    return v
+
+
 play_inverse_step_jit = njit(cache=True)(play_inverse_step)
+play_reference_jit = njit(cache=True)(play_reference)
 
 
 @njit(cache=True)
@@ -578,6 +593,8 @@ def causal_play_inverse(v, w0, w1, run_starts):
         a = run_starts[r]
         b = run_starts[r + 1] if r + 1 < n_runs else n
         u[a] = v[a]
+        ref = v[a]  # where the drive is (play_reference)
         for k in range(a + 1, b):
-            u[k] = play_inverse_step_jit(v[k], v[k - 1], u[k - 1], max(w0[k] + w1[k] * abs(u[k - 1]), 0.0))
+            u[k] = play_inverse_step_jit(v[k], ref, u[k - 1], max(w0[k] + w1[k] * abs(u[k - 1]), 0.0))
+            ref = play_reference_jit(v[k], ref, u[k], u[k - 1])
     return u

@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit
 
 from endocal.errors import ModelError
-from endocal.models._kernels import varplay_forward_jac
+from endocal.models._kernels import HOLD_TOL, play_reference, play_reference_jit, varplay_forward_jac
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import InputEffect
 from endocal.models.effects.requirements import TIME_STAMPS, speeds_spanning
@@ -130,12 +130,14 @@ def knob_for_drive(v, v_prev, u_prev, s_prev, alpha, dt, G, kappa):
     ``x - σv - G F`` rises while the knob turns back (``x < σ u_prev``) and is concave beyond;
     its smallest root is bracketed and bisected. Where the residual stays negative the
     desired drive is faster than the knob can push it (the friction the knob's speed adds
-    outgrows its travel): the knob goes to where the drive gets furthest.
+    outgrows its travel): the knob goes to where the drive gets furthest. A target within
+    :data:`~endocal.models._kernels.HOLD_TOL` of ``v_prev`` (where the drive is:
+    :func:`~endocal.models._kernels.play_reference`) is a drive at rest.
     """
     c = alpha / dt
     s_rest = (1.0 - alpha) * s_prev
     w_rest = G * capstan_speed(s_rest, kappa)
-    if v == v_prev:
+    if abs(v - v_prev) <= HOLD_TOL * max(1.0, abs(v)):  # rounding, not a reversal (play_inverse_step)
         if abs(u_prev - v) <= w_rest:
             return u_prev
         sig = 1.0 if u_prev > v else -1.0  # the window closed past the knob: move it back in
@@ -171,11 +173,13 @@ def rate_inverse(v, t, g, h, kappa, tau, run_starts):
         a = run_starts[r]
         b = run_starts[r + 1] if r + 1 < n_runs else n
         u[a] = v[a]
+        ref = v[a]  # where the drive is (play_reference)
         sk = 0.0
         for k in range(a + 1, b):
             dt = t[k] - t[k - 1]
             alpha = 1.0 - math.exp(-dt / tau)
-            u[k] = knob_for_drive(v[k], v[k - 1], u[k - 1], sk, alpha, dt, g + h * abs(u[k - 1]), kappa)
+            u[k] = knob_for_drive(v[k], ref, u[k - 1], sk, alpha, dt, g + h * abs(u[k - 1]), kappa)
+            ref = play_reference_jit(v[k], ref, u[k], u[k - 1])
             sk += alpha * (abs(u[k] - u[k - 1]) / dt - sk)
     return u
 
@@ -315,7 +319,7 @@ class Rate(InputEffect):
         g, h, kappa = self._gains(p)
         u = knob_for_drive(v, state[1], u_prev, state[3], alpha, dt, g + h * abs(u_prev), kappa)
         state[3] += alpha * (abs(u - u_prev) / dt - state[3])
-        state[1], state[2] = v, u
+        state[1], state[2] = play_reference(v, state[1], u, u_prev), u
         return u
 
     def wrap(self, inner: str) -> str:

@@ -24,7 +24,7 @@ then this, then eq. 10) and the effect streams.
 from __future__ import annotations
 
 import numpy as np
-from endocal.models._kernels import causal_play_inverse, play_inverse_step, varplay_forward_jac
+from endocal.models._kernels import causal_play_inverse, play_inverse_step, play_reference, varplay_forward_jac
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import InputEffect
 from endocal.models.params import Parameter
@@ -95,7 +95,7 @@ class Tension(InputEffect):
             state[0], state[1], state[2] = 1.0, v, v
             return v
         x = play_inverse_step(v, state[1], state[2], float(p["friction"]) * abs(state[2]))
-        state[1], state[2] = v, x
+        state[1], state[2] = play_reference(v, state[1], x, state[2]), x
         return x
 
     def wrap(self, inner: str) -> str:
