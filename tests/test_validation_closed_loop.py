@@ -208,6 +208,25 @@ def record_next(cfg: SimConfig, model, res, est: list, val: list, tmp: Path, k: 
     return est, [_record(cfg, path, 200 + k, tmp / f"val-{k}")]
 
 
+def follow(res, base: str, model, cfg: SimConfig, est: list, val: list, tmp: Path, out):
+    """One turn of the loop after a validate (``res``): refit with its first suggestion; else record what
+    `--next` asks (at most MAX_ADDED times, :func:`record_next`) and refit on it. Returns ``(model, est,
+    val)``, or None when the loop ends (``out.next_said`` says why when `--next` said it); counts in ``out``."""
+    if res.suspects:
+        effect = res.suspects[0].effect
+        out.named.append(effect)
+        return _refit(base, [e.label for e in model.effects_] + [effect], model, est), est, val
+    if out.added == MAX_ADDED:
+        return None
+    try:
+        est, val = record_next(cfg, model, res, est, val, tmp, out.added + 1)
+    except NothingSuspectedError as exc:
+        out.next_said = str(exc)
+        return None
+    out.added += 1
+    return _refit(base, [e.label for e in model.effects_], model, est), est, val
+
+
 def _refit(base: str, effects: list[str], start, est):
     return make_model(base, effects, axis="ap").fit_from(start, axis_data(est, "ap"))
 
@@ -227,20 +246,10 @@ def run_loop(case: str | None) -> LoopResult:
     for _ in range(12):  # a bound the loop never reaches: at most two recordings and a refit per effect
         res = validate_offline(model, val, train=est, model_path=str(tmp / "m.json"), max_scan_samples=SCAN_SAMPLES)
         out.history_deg.append(res.scan.baseline_rmse_heldout_deg)
-        if res.suspects:
-            effect = res.suspects[0].effect
-            out.named.append(effect)
-            model = _refit(base, [e.label for e in model.effects_] + [effect], model, est)
-            continue
-        if out.added == MAX_ADDED:
+        step = follow(res, base, model, cfg, est, val, tmp, out)
+        if step is None:
             break
-        try:
-            est, val = record_next(cfg, model, res, est, val, tmp, out.added + 1)
-        except NothingSuspectedError as exc:
-            out.next_said = str(exc)
-            break
-        out.added += 1
-        model = _refit(base, [e.label for e in model.effects_], model, est)
+        model, est, val = step
     out.clean = bool(res.clean)
     final = validate_offline(model, val, train=est, max_scan_samples=SCAN_SAMPLES, compare=start)
     out.start_deg, out.end_deg = final.compare.old_heldout_rmse_deg, final.compare.new_heldout_rmse_deg

@@ -37,9 +37,8 @@ import pytest
 from endocal.models import BASES, make_model
 from endocal.sim import SimConfig
 from endocal.validation.data import axis_data
-from endocal.validation.next_experiment import NothingSuspectedError
 from endocal.validation.offline import validate_offline
-from tests.test_validation_closed_loop import MAX_ADDED, SCAN_SAMPLES, _refit, record_next, start_for
+from tests.test_validation_closed_loop import SCAN_SAMPLES, follow, start_for
 from tests.test_validation_hidden import NO_SLACK, simulate
 from tests.test_validation_user_style import HIDDEN
 
@@ -93,20 +92,10 @@ def run_loop(hidden: str | None) -> BaseLoop:
             base = change.base
             model = make_model(base, list(change.refit.effects), axis="ap").fit(axis_data(est, "ap"))
             continue
-        if res.suspects:
-            effect = res.suspects[0].effect
-            out.named.append(effect)
-            model = _refit(base, [e.label for e in model.effects_] + [effect], model, est)
-            continue
-        if out.added == MAX_ADDED:
+        step = follow(res, base, model, cfg, est, val, tmp, out)
+        if step is None:
             break
-        try:
-            est, val = record_next(cfg, model, res, est, val, tmp, out.added + 1)
-        except NothingSuspectedError as exc:
-            out.next_said = str(exc)
-            break
-        out.added += 1
-        model = _refit(base, [e.label for e in model.effects_], model, est)
+        model, est, val = step
     out.clean = bool(res.clean)
     final = validate_offline(model, val, train=est, max_scan_samples=SCAN_SAMPLES)
     out.end_label, out.end_deg = final.model["label"], final.scan.baseline_rmse_heldout_deg

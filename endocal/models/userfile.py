@@ -343,20 +343,27 @@ def _clash(name: str, cls: type, table: dict, seen: dict, what: str) -> str | No
     return f"{what} '{name}' clashes with the {what} '{name}' of {src.path or src.module}; rename one of them"
 
 
+def _checked_name(cls: type, attr: str, what: str, where: str, label: str, table: dict, seen: dict, kind: str) -> str:
+    """``cls``'s name (its ``attr``), once it is concrete, one word and unlike the catalogue's and the other
+    files' (:func:`_clash`); else one line naming the file and the class."""
+    if inspect.isabstract(cls):
+        raise EffectFileError(f"{where}: {label} does not define {', '.join(sorted(cls.__abstractmethods__))}")
+    name = getattr(cls, attr)
+    if not isinstance(name, str) or not name.isidentifier():
+        raise EffectFileError(f"{where}: {label}: {what} must be one word (letters, digits, _), got {name!r}")
+    why = _clash(name, cls, table, seen, kind)
+    if why:
+        raise EffectFileError(f"{where}: {why}")
+    return name
+
+
 def _check_effect_class(cls: type, where: str, table: dict, seen: dict) -> None:
     from endocal.models.effects.base import InputEffect, OutputEffect, OutputFilter
 
     label = f"effect '{cls.__dict__.get('name') or cls.__name__}'"
     if not issubclass(cls, (InputEffect, OutputFilter, OutputEffect)):
         raise EffectFileError(f"{where}: {label}: subclass InputEffect, OutputFilter or OutputEffect, not Effect itself")
-    if inspect.isabstract(cls):
-        raise EffectFileError(f"{where}: {label} does not define {', '.join(sorted(cls.__abstractmethods__))}")
-    name = cls.name
-    if not isinstance(name, str) or not name.isidentifier():
-        raise EffectFileError(f"{where}: {label}: its name must be one word (letters, digits, _), got {name!r}")
-    why = _clash(name, cls, table, seen, "effect")
-    if why:
-        raise EffectFileError(f"{where}: {why}")
+    name = _checked_name(cls, "name", "its name", where, label, table, seen, "effect")
     from endocal.models.effects.contract import missing_declarations
 
     try:
@@ -379,14 +386,7 @@ def _check_base_class(cls: type, where: str, table: dict, seen: dict) -> None:
     from endocal.models.effects.contract import sample_data
 
     label = f"base '{cls.__dict__.get('base_name') or cls.__name__}'"
-    if inspect.isabstract(cls):
-        raise EffectFileError(f"{where}: {label} does not define {', '.join(sorted(cls.__abstractmethods__))}")
-    name = cls.base_name
-    if not isinstance(name, str) or not name.isidentifier():
-        raise EffectFileError(f"{where}: {label}: base_name must be one word (letters, digits, _), got {name!r}")
-    why = _clash(name, cls, table, seen, "base")
-    if why:
-        raise EffectFileError(f"{where}: {why}")
+    name = _checked_name(cls, "base_name", "base_name", where, label, table, seen, "base")
     data = sample_data()
     try:
         model = cls(axis="x").fit(data)
