@@ -15,6 +15,8 @@ Every effect also round-trips through save/load exactly, prints its term, and in
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -38,9 +40,11 @@ TRUTH = {
     "delay": ("delay", {"delay_s": 0.13}, "(t - tau)"),
     # 6 % of the bend as extra backlash: ~3.6 deg of knob at a 60 deg bend, ~0 near neutral
     "tension": ("tension", {"tension_friction": 0.06}, "tplay("),
-    # the other half-bend 0.8 deg per deg of the other knob, own half-planes deviated by +8.5 and -11.3 deg
+    # the other half-bend 0.8 deg per deg of the other knob, lagging it by a 3 deg play; own half-planes
+    # deviated by +8.5 and -11.3 deg
     "coupling": ("coupling", {"coupling_linear": 0.12, "coupling_abs": 0.06, "coupling_gain": 0.8,
-                              "coupling_tilt_pos": -0.15, "coupling_tilt_neg": 0.2}, "coupling["),
+                              "coupling_tilt_pos": -0.15, "coupling_tilt_neg": 0.2, "coupling_lag_deg": 3.0},
+                 "coupling["),
     "creep": ("creep", {"creep_fraction": 0.25, "creep_tau_s": 2.0}, "creep("),
     "load": ("load:wrap_deg", {"load_wrap_deg_up": 0.05, "load_wrap_deg_down": 0.0, "load_wrap_deg_up_amp": 0.0005,
                                "load_wrap_deg_down_amp": 0.0, "load_wrap_deg_gain": -0.0005,
@@ -209,6 +213,32 @@ def test_parameters_are_recovered():
     d = synthetic("deadzone")
     m = make_model("pi", ["envelope", "deadzone"]).fit(d)
     assert m.params_["deadzone_slack_deg"] == pytest.approx(4.0, abs=0.3)
+
+
+def test_the_other_bends_lag_is_recovered_and_matters():
+    """The other bend lags its knob by a 3 deg play (TRUTH): the fit finds it within five standard errors, and
+    the coupling without the lag (the form before it) leaves the two bends' loops in the residual."""
+    d = synthetic("coupling")
+    m = make_model("pi", ["envelope", "coupling"]).fit(d)
+    assert abs(m.params_["coupling_lag_deg"] - 3.0) < max(5 * m.stderr_["coupling_lag_deg"], 0.1)
+    without = make_model("pi", ["envelope", EFFECTS["coupling"](other_lag=False)]).fit(d)
+    rmse = [float(np.sqrt(np.mean((x.predict(d) - d.meas_deg) ** 2))) for x in (m, without)]
+    # with the lag: the noise; without: a play of 3 deg on a 0.8 gain, through the projections, is ~0.1-0.4 deg
+    assert rmse[0] < 1.05 * NOISE_DEG < rmse[1] / 1.1, rmse
+
+
+def test_a_coupling_model_file_written_before_the_lag_loads_as_it_was_fitted(tmp_path):
+    d = synthetic("coupling")
+    old = make_model("pi", ["envelope", EFFECTS["coupling"](other_lag=False)]).fit(d)
+    path = tmp_path / "old.json"
+    save_model(old, path)
+    doc = json.loads(path.read_text())
+    entry = next(e for e in doc["effects"] if e["name"] == "coupling")
+    del entry["settings"]["other_lag"]  # as the files before it were written
+    path.write_text(json.dumps(doc))
+    back = load_model(path)
+    assert "coupling_lag_deg" not in back.params_
+    assert np.max(np.abs(back.predict(d) - old.predict(d))) <= 1e-12
 
 
 def test_streaming_compensator_matches_the_batch_inverse_or_refuses():

@@ -131,7 +131,7 @@ def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
         for e in d["effects"]:
             if e["name"] not in EFFECTS:
                 raise ModelError(f"{where}: unknown effect '{e['name']}' (known: {', '.join(sorted(EFFECTS))})")
-            effects.append(EFFECTS[e["name"]](**e["settings"]))
+            effects.append(EFFECTS[e["name"]].from_settings(e["settings"]))
         model = BASES[base](**d["settings"], effects=effects, fixed=d["fixed"], axis=d["axis"],
                             out_of_range=d["out_of_range"])
         model._check_common()

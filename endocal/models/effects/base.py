@@ -100,6 +100,12 @@ class Effect(ABC):
         """JSON-able constructor arguments (saved in model files)."""
         return {}
 
+    @classmethod
+    def from_settings(cls, settings: dict) -> Effect:
+        """The effect a model file's entry describes (:meth:`settings`); an effect whose settings grew
+        overrides it to read the files written before."""
+        return cls(**settings)
+
     def param_names(self) -> list[str]:
         """Short parameter names, in a fixed order."""
         return list(self.units)
