@@ -57,6 +57,7 @@ import numpy as np
 from numba import njit
 
 from endocal.errors import ModelError
+from endocal.models._kernels import varplay_forward_jac
 from endocal.models.data import OTHER_CMD, HysteresisData
 from endocal.models.effects.base import OutputFilter
 from endocal.models.effects.requirements import other_knob_moving
@@ -90,38 +91,10 @@ def _eq1(u, z):
 
 
 @njit(cache=True)
-def lagged(x_deg, lag_deg, run_starts):
-    """The other bend's knob position: ``x`` through a play of half-width ``lag_deg`` (module docstring).
-
-    Returns the played position (n,) and its derivative by ``lag_deg`` (n,); each run starts with
-    the play centred on its first sample.
-    """
-    n = x_deg.shape[0]
-    out = np.empty(n)
-    d_lag = np.zeros(n)
-    n_runs = run_starts.shape[0]
-    for r in range(n_runs):
-        a = run_starts[r]
-        b = run_starts[r + 1] if r + 1 < n_runs else n
-        s = x_deg[a] if b > a else 0.0
-        ds = 0.0
-        for k in range(a, b):
-            lo = x_deg[k] - lag_deg
-            hi = x_deg[k] + lag_deg
-            if s < lo:
-                s, ds = lo, -1.0
-            elif s > hi:
-                s, ds = hi, 1.0
-            out[k] = s
-            d_lag[k] = ds
-    return out, d_lag
-
-
-@njit(cache=True)
 def coupling_forward(y_deg, x_deg, a, b, g, c_pos, c_neg, dx_lag):
     """Measured angle (deg) from the base output ``y`` and the other axis's lagged ``x`` (deg).
 
-    ``dx_lag``: the derivative of ``x`` by the lag (:func:`lagged`). Returns ``theta`` (n,),
+    ``dx_lag``: the derivative of ``x`` by the lag (:meth:`Coupling._x`). Returns ``theta`` (n,),
     ``d theta / d y`` (n,) and the derivatives (n, 6) by ``(a, b, g, c_pos, c_neg, lag)``
     (module docstring).
     """
@@ -302,7 +275,11 @@ class Coupling(OutputFilter):
         x = self._column(data)
         if not self.other_lag:
             return x, np.zeros_like(x)
-        return lagged(x, float(p["lag_deg"]), np.ascontiguousarray(data.run_starts, dtype=np.int64))
+        # the play of the rate and load effects, its width constant: d width / d lag = 1, no upstream parameters
+        width = np.full(x.size, float(p["lag_deg"]))
+        played, d_lag = varplay_forward_jac(x, width, np.ones((x.size, 1)), np.zeros((x.size, 0)),
+                                            np.ascontiguousarray(data.run_starts, dtype=np.int64))
+        return played, np.ascontiguousarray(d_lag[:, 0])
 
     @staticmethod
     def _args(p: dict) -> tuple[float, ...]:
