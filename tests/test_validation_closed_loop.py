@@ -26,12 +26,13 @@ One recipe for every case; nothing is picked per case:
 - foreign plants (issue 31 part 4, ``FOREIGN``): the same recipe on plants whose law is not the
   catalogue's (friction thresholds growing linearly with knob speed, a creep with two time
   constants, a dead band off neutral); the loop must name the effect's family. Measured
-  2026-11-28 (`pytest -m slow -k foreign tests/test_validation_closed_loop.py`, seed 0): `rate`
-  named on the linear-law plant, `creep` on the two-time-constant plant (each loop 40-45 min of
-  a shared core); on the off-centre band (+12 deg) the loop refits `envelope`, `deadzone`,
-  `coupling`, `load:sheath_wrap_deg` (recorded at 180 and 120 deg, the same motion), `drift`, two
-  recordings added, 1.50 -> 0.529 deg, the end structure without `deadzone` 0.590, clean at the end
-  (`drift` is not in the plant: a false discovery to look at). The foreign rate plant validated once from a B-spline without the rig's lag
+  2026-11-28 (the whole file, 58 min of a shared core, seed 0, the coupling term with the other
+  bend's lag): `rate` named on the linear-law plant (2.07 -> 0.474 deg, clean at the end), `creep`
+  on the two-time-constant plant (1.94 -> 0.74 deg); on the off-centre band (+12 deg) the loop
+  refits `envelope`, `deadzone`, `coupling`, `load:sheath_wrap_deg` (recorded at 180 and 120 deg,
+  the same motion), `tension`, `drift`, two recordings added, 1.29 -> 0.504 deg, the end structure
+  without `deadzone` 0.521 (`tension` and `drift` are not in the plant: false discoveries; the run
+  before the lag added `drift` alone). The foreign rate plant validated once from a B-spline without the rig's lag
   (`test_a_foreign_rate_plant_is_named_rate_not_delay`): `rate` -17.8 %, `delay` -16.4 %,
   `creep` -14.6 % (held-out RMSE 0.415 deg, noise 0.33); the look-alikes settled: the records
   prefer `rate` over `delay` (0.341 vs 0.347 deg, p = 0.00015), and `delay` after `rate` adds
@@ -73,8 +74,8 @@ knob segment the start model misses by 1 deg, leaves it under the 10 % bar); its
 -38 %: the catalog term, fitted beside the carried `delay`, takes up part of the simulator's speed-
 dependent capstan friction (-20 % of the ladder's error on its own).
 
-Expensive (a loop records and validates up to seven times: 110-250 s of one core each, 22 min for
-the file): marked ``slow``, outside the 10-minute suite; run it with ``make test-slow`` (or
+Expensive (a loop records and validates up to seven times; 50-58 min of one core for the file on
+2026-11-28): marked ``slow``, outside the 10-minute suite; run it with ``make test-slow`` (or
 ``pytest -m slow tests/test_validation_closed_loop.py``).
 """
 
