@@ -65,6 +65,9 @@ KEYS: dict[str, str] = {
     "demoted": "A candidate lowers the error more than the first suggestion but ranks after it, for a caution (a "
                "parameter at a bound, no hold where creep would show): it may stand in for something it does not "
                "model.",
+    "borrowed": "An additive term (`drift`) lowered the validation error only through the parameters refitted beside "
+                "it: the same fit with its own term taken out scores about as well. It is not suggested; the "
+                "structure misses something on some record (the full text names the share).",
     "minor-loops": "The error concentrates after small reversals inside the loop: the base's memory rule (return-point "
                    "memory: a small reversal returns to the branch it left) misses the plant's minor loops. Try a base "
                    "without it (`--model bouc-wen` or `--model dahl`); validate scores them as candidates.",

@@ -23,6 +23,7 @@ gain; each carries the :class:`~endocal.validation.refit.Refit` that adds it.
 
 from __future__ import annotations
 
+import copy
 import math
 import re
 from collections.abc import Sequence
@@ -94,7 +95,18 @@ def _split_candidate(model: HysteresisModel, effects: Sequence[str], train: Hyst
     cautions += [c for e in new if (c := e.implausible(m.effect_params(e), train))]
     # an effect fitted on records that lack what shows it (creep without a hold) may stand for something else
     cautions += [c for e in new for c in unheld_cautions(e, train, val)]
-    return predict_errors(m, val), cautions, dict(m.params_)
+    err = predict_errors(m, val)
+    return err, cautions, dict(m.params_), _without_own_share(m, new, val)
+
+
+def _without_own_share(m: HysteresisModel, new: list, val: HysteresisData) -> np.ndarray | None:
+    """Validation errors of the fitted candidate ``m`` with its new effects set to their :attr:`~Effect.null`
+    (everything else as fitted), or None unless every new effect is an additive term that declares one."""
+    if not new or any(not (e.null and e.kind == "output") for e in new):
+        return None
+    off = copy.copy(m)
+    off.params_ = {**m.params_, **{f"{e.prefix}_{k}": v for e in new for k, v in e.null.items()}}
+    return predict_errors(off, val)
 
 
 def split_errors(model: HysteresisModel, effects: Sequence[str], train: HysteresisData, val: HysteresisData,
@@ -185,7 +197,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     if isinstance(results[0], ModelError):
         raise ModelError(f"the model as it stands cannot be refitted on the estimation data: {results[0]}") from None
     err_base = results[0][0]
-    fitted, cautions, fitted_params = [], {}, {}
+    fitted, cautions, fitted_params, without_term = [], {}, {}, {}
     for c, res in zip(tested_cands, results[1:]):
         if isinstance(res, ModelError):
             untestable[c] = f"could not be fitted on the estimation data ({res})"
@@ -193,6 +205,8 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
             fitted.append((c, res[0]))
             cautions[c] = "; ".join(res[1])
             fitted_params[c] = res[2]
+            if res[3] is not None:
+                without_term[c] = res[3]
     rmse_base = float(np.sqrt(np.mean(err_base**2)))
     # units sized by the error of the model as it stands: the same for every candidate (a p-value
     # does not depend on which others were tested) and for the report's ladder, which has only the pair
@@ -201,17 +215,29 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     thin = units.n < need
     raw = [unit_test(err_base, e, units) for _, e in fitted]
     adj = holm(raw) if raw else np.array([])
-    tested, errs = [], {}
+    tested, errs, borrowed = [], {}, {}
     for (c, err), p, pa in zip(fitted, raw, adj):
         name, _, col = c.partition(":")
         cls = EFFECTS[name]
         rmse = float(np.sqrt(np.mean(err**2)))
         gain = 100.0 * (1.0 - rmse / rmse_base) if rmse_base > 0 else 0.0
         significant = bool(pa < alpha and gain >= min_gain_pct)
+        if c in without_term and gain >= min_gain_pct:
+            # an effect on the output earns its gain itself: a drift fitted on long records can move the base's
+            # zero there and lower a short record's error with its own term near zero (a false discovery)
+            rmse_alone = float(np.sqrt(np.mean(without_term[c] ** 2)))
+            own_pct = 100.0 * (1.0 - rmse / rmse_alone) if rmse_alone > 0 else 0.0
+            if own_pct < min_gain_pct:
+                significant = False
+                borrowed[c] = Message(
+                    f"{c}: its {gain:.0f} % gain comes from the parameters refitted beside it: the same fit without "
+                    f"its own term scores {rmse_alone:.3g} deg against {rmse:.3g} (the term's own share {own_pct:.0f} "
+                    f"%, under the {min_gain_pct:g} % bar); not suggested", "borrowed")
         # how much more data would settle it, at the gain seen (the power of this very test)
         power = estimate_power(err_base, err, units.bounds, alpha, len(fitted))
         more = evidence_phrase(power, units.kind, gain, min_gain_pct)
-        evidence = (f"not enough evidence ({units.n} units, {need} needed; {more})" if thin else
+        evidence = ("its own term's share is under the bar (the gain is the other parameters')" if c in borrowed else
+                    f"not enough evidence ({units.n} units, {need} needed; {more})" if thin else
                     "significant" if significant else
                     f"under the {min_gain_pct:g} % bar (p = {pa:.2g} over {units.n} {units.kind}s)" if pa < alpha else
                     f"not significant (p = {pa:.2g} over {units.n} {units.kind}s; {more})")
@@ -227,7 +253,8 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     # RMSE by the gain bar is listed as a suggestion with its evidence: it was fitted on other data
     # and measured here, so the refit it names lowers this error by that much; the test only says
     # the gain is not consistent enough across units to rule out chance.
-    suspects = [s for s in tested if s.significant] or [s for s in tested if s.gain_pct >= min_gain_pct]
+    suspects = [s for s in tested if s.significant] or [s for s in tested
+                                                        if s.gain_pct >= min_gain_pct and s.effect not in borrowed]
     # a candidate with a caution (a delay at its -0.5 s bound, a drift too fast to be one) ranks after the others
     suspects.sort(key=lambda s: bool(s.caution))
     # the first suggestion against the look-alikes it declares, on records that separate them
@@ -245,6 +272,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
         [Message(n, "alike") for n in ambiguities(suspects, errs, alpha)] if any(s.significant for s in suspects)
         else [])
     notes += [Message(x.words(), "alike") for x in settled]
+    notes += list(borrowed.values())
     notes += [Message(f"{k}: {v}", "untestable") for k, v in untestable.items()]
     if thin and fitted:
         notes.append(Message(f"the validation data holds {units.n} {units.kind}s; with {len(fitted)} candidates at "

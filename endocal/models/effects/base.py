@@ -75,6 +75,12 @@ class Effect(ABC):
     #: ``--next`` plans segments in ascending ``segment_order`` (those that reuse the others'
     #: motions, e.g. the full amplitude or a condition for the whole run, come last)
     segment_order: ClassVar[int] = 50
+    #: the values of its own parameters (short names) at which an additive term adds nothing (``drift``: no
+    #: rate). ``validate`` then checks that a candidate earns its gain through its own term, not through the
+    #: parameters refitted beside it. Empty: not checked. Only an additive term can be taken out so: an input
+    #: effect or an output filter reshapes what the base's parameters were fitted to (``creep``'s share of a
+    #: slow relaxation scales the output, and the base's gain is fitted with it).
+    null: ClassVar[dict[str, float]] = {}
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)

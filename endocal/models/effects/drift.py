@@ -42,6 +42,7 @@ class Drift(OutputEffect):
     residual = ("time",)
     lookalikes = {"creep": 'creep relaxes after each motion and stops, drift keeps going at a constant rate: run `staircase` (creep restarts at every step) and `hold` (drift keeps going with the knob still)'}
     sim_section = "drift"
+    null = {"rate_dps": 0.0}
 
     def segment(self, design, n_half_cycles: int):
         """A long hold: the knob still, a drift keeps going where creep stops."""
