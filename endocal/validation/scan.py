@@ -223,8 +223,8 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
         gain = 100.0 * (1.0 - rmse / rmse_base) if rmse_base > 0 else 0.0
         significant = bool(pa < alpha and gain >= min_gain_pct)
         if c in without_term and gain >= min_gain_pct:
-            # an effect on the output earns its gain itself: a drift fitted on long records can move the base's
-            # zero there and lower a short record's error with its own term near zero (a false discovery)
+            # an additive term earns its gain itself: a drift fitted on long records can move the base's zero
+            # there and lower a short record's error with its own term near zero (a false discovery)
             rmse_alone = float(np.sqrt(np.mean(without_term[c] ** 2)))
             own_pct = 100.0 * (1.0 - rmse / rmse_alone) if rmse_alone > 0 else 0.0
             if own_pct < min_gain_pct:
@@ -258,7 +258,9 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     # a candidate with a caution (a delay at its -0.5 s bound, a drift too fast to be one) ranks after the others
     suspects.sort(key=lambda s: bool(s.caution))
     # the first suggestion against the look-alikes it declares, on records that separate them
-    suspects, settled = settle_lookalikes(suspects, tested, errs, dt, val, units, alpha, min_gain_pct,
+    # (a look-alike whose gain is borrowed is compared, never promoted)
+    suspects, settled = settle_lookalikes(suspects, [s for s in tested if s.effect not in borrowed], errs, dt, val,
+                                          units, alpha, min_gain_pct,
                                           lambda effects: _split_candidate(model, effects, dt, val, ftol)[0], have)
     if stride > 1 and suspects:
         ranges = expected_ranges(model, [s.effect for s in suspects], train, val, stride,

@@ -30,9 +30,10 @@ first-order share of its hysteresis)::
 
     x_k = min(max(x_{k-1}, X_k - λ), X_k + λ),   x_0 = X_0   (per run; X: the column)
 
-On a Lissajous run of the simulator (both knobs at 60 deg) the lag takes the error from
-0.80 to 0.52 deg (Bouc-Wen friction; 0.65 to 0.47 with capstan friction; noise 0.33):
-without it the two bends' loops are fitted with one bend's.
+On the Lissajous records of the closed loops (the simulator, both knobs at 60 deg) the lag
+took the validation error from 0.80 to 0.51 deg with Bouc-Wen friction and from 0.65 to
+0.44 deg with capstan friction, the noise being 0.33 deg (2026-11-28): without it the two
+bends' loops are fitted with one bend's.
 
 Parameters ``coupling_linear`` (``a``), ``coupling_abs`` (``b``), ``coupling_gain``
 (``g``), ``coupling_tilt_pos`` / ``coupling_tilt_neg`` (``c+`` / ``c-``), ``coupling_lag_deg``
