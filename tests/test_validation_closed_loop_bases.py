@@ -140,7 +140,7 @@ NOISE_GAPS = {
     "load": "ends at 0.785 deg, 2.3x its record's noise (0.339)",
     "deadzone": "ends at 0.758 deg, 2.2x its record's noise (0.337): no base change, deadzone never named (below)",
     "envelope": "ends at 0.444 deg, 1.27x its record's noise (0.350)",
-    "coupling": "ends at 0.641 deg, 1.77x its record's noise (0.362), after drift (below)",
+    "coupling": "ends at 0.728 deg, 2.0x its record's noise (0.362)",
 }
 #: Cases that miss the hidden effect, the base change, or add an effect the plant lacks (2026-11-28, seed 0).
 RATE_GAP = ("after the base change (0.69 deg on the first records) nothing is suggested; on the Lissajous record "
@@ -149,14 +149,13 @@ RATE_GAP = ("after the base change (0.69 deg on the first records) nothing is su
             "lag named it after drift; the one before that added creep: the case turns on gains 1-4 points apart)")
 DEADZONE_GAP = ("no base is ever suggested (the slack's flat band is what the B-spline's branches draw) and deadzone "
                 "never ranks first: bspline+delay+load+envelope+coupling at 0.76 deg")
-COUPLING_GAP = ("on the speed ladder (the other knob at rest) drift (-11 %) takes up what the coupling term leaves: "
-                "0.73 -> 0.64 deg")
 BASE_GAPS = {"deadzone": DEADZONE_GAP, "rate": RATE_GAP}
 NAME_GAPS = {"deadzone": DEADZONE_GAP, "rate": RATE_GAP}
-EXTRA_GAPS = {"rate": RATE_GAP, "coupling": COUPLING_GAP}
+EXTRA_GAPS = {"rate": RATE_GAP}
 #: The issue's bars over every case: the hidden effect named in 6 of 8 (the bar is 7), a base change in 7 of 9,
-#: nothing added the plant lacks in 7 of 9.
-BARS_GAP = f"deadzone: {DEADZONE_GAP}; rate: {RATE_GAP}; coupling: {COUPLING_GAP}"
+#: nothing added the plant lacks in 8 of 9 (the coupling case's drift, -11 % on the speed ladder before the scan
+#: asked an additive term to earn its gain itself, is no longer suggested).
+BARS_GAP = f"deadzone: {DEADZONE_GAP}; rate: {RATE_GAP}"
 
 
 def _gaps(gaps: dict, cases) -> list:
