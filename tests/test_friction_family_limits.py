@@ -17,6 +17,8 @@ gaps are worth a new run.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -44,6 +46,7 @@ def _in_sample_ratio(records, noise_deg: float, base: str, effects: list[str]) -
     return float(np.sqrt(np.mean(err**2))) / noise_deg
 
 
+@functools.lru_cache(maxsize=None)
 def _sweeps(hidden):
     cfg = _plant(hidden)
     (ds, noise), (chirp, _) = simulate(cfg, "damped-sine", {}, seed=0), simulate(cfg, "chirp", {"amplitude_deg": 50.0}, seed=0)
@@ -63,8 +66,13 @@ def test_the_slack_before_a_friction_element_is_outside_the_catalogue(base):
     assert _in_sample_ratio(records, noise, base, ["delay", "deadzone", "envelope"]) > 2.5
 
 
+@functools.lru_cache(maxsize=None)
+def _ladder(hidden):
+    return simulate(_plant(hidden), "sine-varying", LADDER, seed=0)
+
+
 def test_without_speed_dependence_a_friction_base_fits_the_ladder_to_the_noise():
-    rec, noise = simulate(_plant(None), "sine-varying", LADDER, seed=0)
+    rec, noise = _ladder(None)
     # 1.21x (2026-11-28)
     assert _in_sample_ratio([rec], noise, "dahl", ["delay", "envelope"]) < 1.25
 
@@ -73,6 +81,6 @@ def test_without_speed_dependence_a_friction_base_fits_the_ladder_to_the_noise()
                                            ("bouc-wen", ["delay", "envelope", "rate"]),
                                            ("bspline", ["delay", "rate"])])
 def test_friction_whose_holding_force_grows_with_speed_is_outside_the_catalogue(base, effects):
-    rec, noise = simulate(_plant("rate"), "sine-varying", LADDER, seed=0)
+    rec, noise = _ladder("rate")
     # 3.19-3.90x (2026-11-28)
     assert _in_sample_ratio([rec], noise, base, effects) > 3.0
