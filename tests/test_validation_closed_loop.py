@@ -48,8 +48,9 @@ comparison also credits what the loop found besides the hidden effect (the cross
 bends through eq. 1 that `coupling` takes up, which the control finds too); the hidden effect's own
 share (the final model without it, refitted on the same data) is recorded beside it (``LoopResult``).
 
-Measured (2026-11-28, seed 0, the coupling term with the other bend's lag; RMSE in deg on the loop's last
-records, start structure -> end; "own share": the end structure without the hidden effect -> with it):
+Measured (2026-11-28, seed 0, the coupling term with the other bend's lag, the scan's borrowed-gain check; RMSE
+in deg on the loop's last records, start structure -> end; "own share": the end structure without the hidden
+effect -> with it):
 
 =========  ==============  =======================================  =====  ==================  ==================
 hidden     start           refitted in the loop, in order           added  start -> end        own share

@@ -12,10 +12,9 @@ base (the printed refit: `--model BASE` with the model's effects) instead of add
 
 The bars (issue 32, "How good"): the loop names the base change (to a base without return-point
 memory); it ends within 1.2x the noise (the final structure refitted on its final estimation data
-and scored on its final validation record, against the noise floor of the first validation record:
-the noise floor of that record: the same plan recorded again without tracker noise, since a record of
-faster, larger motions reads the tip's noise into a larger angle noise); it names the hidden effect; and it
-adds nothing the plant lacks. What the plant
+and scored on its final validation record, against the noise floor of that record: the same plan
+recorded again without tracker noise, since a record of faster, larger motions reads the tip's noise
+into a larger angle noise); it names the hidden effect; and it adds nothing the plant lacks. What the plant
 has besides the hidden effect, in every case: `delay` (the rig lag), `coupling` and `load` (as in
 the capstan loop: eq. 1 reads the axis from a tip both bends put there, and the wrap --next asks for
 changes the friction), and `envelope` (the angle the tracker reads through eq. 1 is not linear in
