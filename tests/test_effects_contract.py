@@ -94,6 +94,18 @@ def test_parameters_without_bounds_and_a_broken_inverse_are_named():
     assert missing_declarations(NaN) == ["its predict returns NaN or inf on a sample record"]
 
 
+def test_a_null_that_is_not_an_additive_terms_own_parameters_is_named():
+    class Declared(_Incomplete):
+        cause, signature, protocol = "stick-slip at every reversal", "a jump after each reversal", "slow triangles"
+        requires, residual, open_bounds = (TIME_STAMPS,), ("speed",), ("free",)
+        lookalikes: ClassVar[dict] = {}
+        null: ClassVar[dict] = {"jump_deg": 0.0}  # an input effect: validate could not take it out
+
+    assert missing_declarations(Declared, run=False) == [
+        "'null' ({'jump_deg': 0.0}) must map short parameter names of 'units' to finite numbers, on an additive "
+        "term (OutputEffect) only: the values at which the term adds nothing"]
+
+
 def test_a_requirement_of_ones_own_says_why_in_words():
     def reversals(d):
         return bool(np.any(np.diff(np.sign(np.diff(d.cmd_deg))) != 0))

@@ -26,11 +26,10 @@ from endocal.models import make_model
 from endocal.sim import SimConfig
 from endocal.validation.data import axis_data
 from endocal.validation.predict import predict_errors
+from tests.test_validation_closed_loop_bases import BOUC_WEN_PLANT
 from tests.test_validation_hidden import NO_SLACK, simulate
 from tests.test_validation_user_style import HIDDEN
 
-#: The plant of tests/test_validation_closed_loop_bases.py (repeated: that module is slow-only).
-BOUC_WEN_PLANT = {"tendon": {"friction": "bouc-wen"}, "bending": {"friction_nmm": 0.0}}
 #: The speed ladder `--next` designs for `rate` on this probe: one cycle per frequency up to 288 deg/s.
 LADDER = {"axes": ["ap"], "amplitude_deg": 60.0, "cycles": 1,
           "frequencies_hz": [0.06, 0.12, 0.24, 0.45, 0.66, 0.76, 0.66, 0.45, 0.24, 0.12, 0.06]}

@@ -112,6 +112,12 @@ def missing_declarations(cls: type, *, run: bool = True) -> list[str]:
     if not isinstance(cls.lookalikes, dict) or not all(
             isinstance(k, str) and isinstance(v, str) and v.strip() for k, v in cls.lookalikes.items()):
         out.append("'lookalikes' must map effect names to the records that separate them, in words")
+    null = cls.null
+    if null and not (issubclass(cls, OutputEffect) and isinstance(null, dict) and isinstance(cls.units, dict)
+                     and all(k in cls.units and isinstance(v, (int, float)) and math.isfinite(v)
+                             for k, v in null.items())):
+        out.append(f"'null' ({null!r}) must map short parameter names of 'units' to finite numbers, on an additive "
+                   "term (OutputEffect) only: the values at which the term adds nothing")
     if inspect.isabstract(cls):
         out.append("equation methods not defined: " + ", ".join(sorted(cls.__abstractmethods__)))
     if cls.streamable and issubclass(cls, InputEffect) and cls.invert_step is InputEffect.invert_step:

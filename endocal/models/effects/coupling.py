@@ -156,8 +156,8 @@ def coupling_inverse(theta_deg, x_deg, a, b, g, c_pos, c_neg):
 
 #: Fade in and out of the both-knob figure of ``--next`` (s).
 FADE_S = 5.0
-#: Start of the other bend's lag (deg of its knob), inside a tendon drive's play (on the simulator's
-#: Lissajous runs the lag fitted best at 3 deg with capstan friction, 8 deg with Bouc-Wen).
+#: Start of the other bend's lag (deg of its knob), inside a tendon drive's play (on the closed loops'
+#: Lissajous records of the simulator it was fitted at 4.3 deg with capstan friction, 9.6 with Bouc-Wen).
 LAG_START_DEG = 2.0
 
 
