@@ -106,6 +106,36 @@ def test_a_null_that_is_not_an_additive_terms_own_parameters_is_named():
         "term (OutputEffect) only: the values at which the term adds nothing"]
 
 
+def test_a_variant_is_checked_as_the_effect_itself_is():
+    class Declared(_Incomplete):
+        cause, signature, protocol = "stick-slip at every reversal", "a jump after each reversal", "slow triangles"
+        requires, residual, open_bounds = (TIME_STAMPS,), ("speed",), ("free",)
+        lookalikes: ClassVar[dict] = {}
+        variants = ("slip:double",)  # not this effect's name
+
+    assert missing_declarations(Declared, run=False) == [
+        "'variants' (('slip:double',)) must be a tuple of forms written 'stickslip:ARG', which from_argument(ARG) makes"]
+
+    class Doubled(Declared):
+        variants = ("stickslip:double",)
+        times = 1
+
+        @classmethod
+        def from_argument(cls, arg):
+            inst = cls()
+            inst.times = 2
+            return inst
+
+        def apply(self, p, u, data):
+            return u + self.times * p["jump_deg"]
+
+        def invert(self, p, v, data):
+            return v - p["jump_deg"]  # right for the effect, one jump short for its variant
+
+    assert missing_declarations(Doubled) == ["variant 'stickslip:double': its inverse does not invert: apply(invert(y)) "
+                                             "misses y by up to 0.1 deg on a sweep"]
+
+
 def test_a_requirement_of_ones_own_says_why_in_words():
     def reversals(d):
         return bool(np.any(np.diff(np.sign(np.diff(d.cmd_deg))) != 0))

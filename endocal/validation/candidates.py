@@ -1,7 +1,8 @@
 """The candidate effects a scan tests: every catalog effect the model lacks that the data can show.
 
 ``load`` takes a column (``load:sheath_wrap_deg``) and is tried on every extra column that
-varies; an effect the data cannot reveal or fit (what it declares in ``Effect.requires``,
+varies; an effect's other forms (``Effect.variants``: ``deadzone:tip``) are tried beside it; an
+effect the data cannot reveal or fit (what it declares in ``Effect.requires``,
 :mod:`endocal.validation.identifiability`) is not tested, and why is said.
 """
 
@@ -78,7 +79,7 @@ def candidate_effects(model: HysteresisModel, data: HysteresisData, candidates: 
                                         "sheath_wrap_deg, at two or more values)")
                 cands += [f"{name}:{c}" for c in cols]
             elif name not in have_names:
-                cands.append(name)
+                cands += [name, *EFFECTS[name].variants]
     else:
         cands = [c for c in candidates if c not in have]
     tested = []

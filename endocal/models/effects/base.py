@@ -81,6 +81,10 @@ class Effect(ABC):
     #: effect or an output filter reshapes what the base's parameters were fitted to (``creep``'s share of a
     #: slow relaxation scales the output, and the base's gain is fitted with it).
     null: ClassVar[dict[str, float]] = {}
+    #: other forms of the effect that ``validate`` tries as candidates of their own, as ``--effects`` writes
+    #: them (``deadzone:tip``: the slack on the other side of the friction); each must parse to an effect
+    #: of this name
+    variants: ClassVar[tuple[str, ...]] = ()
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)

@@ -118,6 +118,10 @@ def missing_declarations(cls: type, *, run: bool = True) -> list[str]:
                              for k, v in null.items())):
         out.append(f"'null' ({null!r}) must map short parameter names of 'units' to finite numbers, on an additive "
                    "term (OutputEffect) only: the values at which the term adds nothing")
+    variants = cls.variants
+    if not (isinstance(variants, tuple) and all(isinstance(v, str) and v.startswith(f"{name}:") for v in variants)
+            and (not variants or hasattr(cls, "from_argument"))):
+        out.append(f"'variants' ({variants!r}) must be a tuple of forms written '{name}:ARG', which from_argument(ARG) makes")
     if inspect.isabstract(cls):
         out.append("equation methods not defined: " + ", ".join(sorted(cls.__abstractmethods__)))
     if cls.streamable and issubclass(cls, InputEffect) and cls.invert_step is InputEffect.invert_step:
@@ -131,12 +135,29 @@ def missing_declarations(cls: type, *, run: bool = True) -> list[str]:
 
 
 def _run_checks(cls: type) -> list[str]:
-    """Instantiate ``cls`` and run its equation on :func:`sample_data`."""
+    """Instantiate ``cls`` and each of its variants, and run their equations on :func:`sample_data`."""
     data = sample_data()
     try:
         eff = sample_instance(cls)
     except Exception as exc:
         return [f"cannot be made with no argument or from_argument('{SAMPLE_COLUMN}'): {exc}"]
+    out = _check_instance(eff, data)
+    for spec in cls.variants:
+        try:
+            var = cls.from_argument(spec.partition(":")[2])
+        except Exception as exc:
+            out.append(f"variant '{spec}' cannot be made: {type(exc).__name__}: {exc}")
+            continue
+        if not isinstance(var, Effect) or var.name != cls.name:
+            out.append(f"variant '{spec}' makes {var!r}, not an effect named '{cls.name}'")
+            continue
+        out += [f"variant '{spec}': {msg}" for msg in _check_instance(var, data)]
+    return out
+
+
+def _check_instance(eff: Effect, data) -> list[str]:
+    """Run one effect's start, equation and inverse on ``data``."""
+    cls = type(eff)
     u = data.cmd_deg
     try:
         params = eff.initial(data, u)

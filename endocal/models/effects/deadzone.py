@@ -20,6 +20,16 @@ zero crossings; with a band covering the whole motion it is a play of width ``2h
 every reversal (pure input backlash). Outside the band ``v = u -+ h``: a dead band of
 ``2h`` compressed out of the command. The inverse is exact and causal (the slack is
 wound in with one jump of the command).
+
+Where the slack sits in the drive matters when the drive's friction has no return-point memory.
+``deadzone`` puts it between the knob and the friction (the friction sees the slack's output: the
+base's input). ``deadzone:tip`` (:class:`TipDeadzone`) puts it between the friction and the bending
+section: the friction sees the whole knob motion, and the slack acts on the base's output, with
+``h``, ``c`` and ``m`` in degrees of bend. A friction element at the knob, its tendons slack near
+neutral, is the second (the simulator's ``[tendon] friction = "bouc-wen"`` with ``[deadzone]``: on
+its sweeps a smooth friction base fits with ``deadzone:tip`` to the noise and with ``deadzone`` at
+2.7 times it, tests/test_friction_family_limits.py). The operator is homogeneous and moves with a
+shift (``m + S_{h,c}(x - m)``), so on the output it keeps its form, scaled by the drive's gain.
 """
 
 from __future__ import annotations
@@ -27,8 +37,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from endocal.errors import ModelError
 from endocal.models.data import HysteresisData
-from endocal.models.effects.base import InputEffect
+from endocal.models.effects.base import InputEffect, OutputFilter
 from endocal.models.params import Parameter
 
 
@@ -198,16 +209,15 @@ def _inverse_step(s, x, target, h, c):
     return cand
 
 
-class Deadzone(InputEffect):
-    """Tendon slack wound in near the neutral bend (module docstring).
+class _Slack:
+    """What both places of the slack share: the physics, the start, the operator and its inverse.
 
-    Parameters (prefix ``deadzone_``): ``slack_deg`` (half play ``h`` of the slack, deg of
-    knob), ``band_deg`` (half width ``c`` of the band where the section does not spring
-    back, deg), ``center_deg`` (its centre ``m``, deg of knob).
+    Parameters (short names): ``slack_deg`` (half play ``h``), ``band_deg`` (half width ``c`` of the band
+    where the section does not spring back) and ``center_deg`` (its centre ``m``), in degrees of the signal
+    the slack acts on (:meth:`_scale`).
     """
 
     name = "deadzone"
-    order = 30
     streamable = True
     stateful = True
     cause = ("tendon slack: each tendon has free length that must be wound in before it pulls, "
@@ -220,40 +230,63 @@ class Deadzone(InputEffect):
     residual = ()
     lookalikes = {"envelope": 'a dead zone appears after every reversal, wherever it happens, while the envelope depends on the knob position only: run `sine` with an offset (reversals away from neutral)'}
     sim_section = "deadzone"
+    #: the other place of the slack, tried by ``validate`` as a candidate of its own
+    variants = ("deadzone:tip",)
 
-    @staticmethod
-    def _center_start(data: HysteresisData, u: np.ndarray) -> float:
-        # the command where the angle passes its mid level, averaged over both directions
+    @classmethod
+    def from_argument(cls, arg: str):
+        """``deadzone:tip``: the slack between the friction and the bending section (``deadzone:knob``: the default)."""
+        side = arg.strip()
+        if side not in SIDES:
+            raise ModelError(f"effect 'deadzone:{side}': write deadzone (the slack between the knob and the friction) "
+                             "or deadzone:tip (between the friction and the bending section)")
+        return SIDES[side]()
+
+    @classmethod
+    def from_settings(cls, settings: dict):
+        """A model file's entry: ``{"side": "tip"}`` for the tip's side; files without it are the knob's."""
+        settings = dict(settings)
+        side = settings.pop("side", "knob")
+        if side not in SIDES:
+            raise ModelError(f"deadzone: unknown side '{side}' (knob or tip)")
+        return SIDES[side](**settings)
+
+    def _scale(self, data: HysteresisData, u: np.ndarray) -> np.ndarray:
+        """The signal whose range the start and bounds are taken from."""
+        return u
+
+    def _center_start(self, data: HysteresisData, u: np.ndarray) -> float:
+        # where the angle passes its mid level, averaged over both directions, on the signal the slack acts on
+        x = self._scale(data, u)
         y = data.meas_deg
         if y is None:
-            return float(np.median(u))
+            return float(np.median(x))
         near = np.abs(y - 0.5 * (y.max() + y.min())) < 0.05 * np.ptp(y)
-        return float(np.median(u[near])) if near.any() else float(np.median(u))
+        return float(np.median(x[near])) if near.any() else float(np.median(x))
 
     def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
-        span = float(np.ptp(u)) or 1.0
+        x = self._scale(data, u)
+        span = float(np.ptp(x)) or 1.0
         return [
             Parameter(f"{self.prefix}_slack_deg", 0.02 * span, 0.0, 0.5 * span),
             Parameter(f"{self.prefix}_band_deg", 0.05 * span, 0.0, span),
-            Parameter(f"{self.prefix}_center_deg", self._center_start(data, u), float(u.min()), float(u.max())),
+            Parameter(f"{self.prefix}_center_deg", self._center_start(data, u), float(x.min()), float(x.max())),
         ]
 
     def start_candidates(self, data: HysteresisData, u: np.ndarray) -> list[dict]:
         """Start values tried before the fit (the base is re-started on each; the best is kept)."""
-        span = float(np.ptp(u)) or 1.0
+        span = float(np.ptp(self._scale(data, u))) or 1.0
         mid = self._center_start(data, u)
         # no slack at all is a candidate too: on data without it the fit must not start lost
         return [{"slack_deg": fh * span, "band_deg": fc * span, "center_deg": mid}
                 for fh in (0.0, 0.015, 0.05) for fc in (0.0, 0.08, 1.0) if fh > 0 or fc == 0.08]
 
-    def apply(self, p: dict, u: np.ndarray, data: HysteresisData) -> np.ndarray:
-        v, _, _ = slack_forward_jac(np.ascontiguousarray(u, dtype=float), float(p["slack_deg"]), float(p["band_deg"]),
-                                    float(p["center_deg"]), data.run_starts, np.zeros((u.size, 0)))
-        return v
-
-    def apply_jac(self, p: dict, u: np.ndarray, data: HysteresisData, M: np.ndarray):
-        return slack_forward_jac(np.ascontiguousarray(u, dtype=float), float(p["slack_deg"]), float(p["band_deg"]),
+    def _forward(self, p: dict, x: np.ndarray, data: HysteresisData, M: np.ndarray):
+        return slack_forward_jac(np.ascontiguousarray(x, dtype=float), float(p["slack_deg"]), float(p["band_deg"]),
                                  float(p["center_deg"]), data.run_starts, np.ascontiguousarray(M, dtype=float))
+
+    def apply(self, p: dict, x: np.ndarray, data: HysteresisData) -> np.ndarray:
+        return self._forward(p, x, data, np.zeros((len(x), 0)))[0]
 
     def invert(self, p: dict, v: np.ndarray, data: HysteresisData) -> np.ndarray:
         return slack_inverse(np.ascontiguousarray(v, dtype=float), float(p["slack_deg"]), float(p["band_deg"]),
@@ -276,11 +309,66 @@ class Deadzone(InputEffect):
         state[2] = x_new
         return x_new + m
 
+    def is_zero(self, p: dict) -> bool:
+        return p["slack_deg"] == 0.0
+
+
+class Deadzone(_Slack, InputEffect):
+    """Tendon slack between the knob and the friction, wound in near the neutral bend (module docstring).
+
+    Parameters (prefix ``deadzone_``): ``slack_deg`` (half play ``h`` of the slack, deg of
+    knob), ``band_deg`` (half width ``c`` of the band where the section does not spring
+    back, deg), ``center_deg`` (its centre ``m``, deg of knob).
+    """
+
+    order = 30
+    usage = "deadzone[:tip]"
+
+    def apply_jac(self, p: dict, u: np.ndarray, data: HysteresisData, M: np.ndarray):
+        return self._forward(p, u, data, M)
+
     def wrap(self, inner: str) -> str:
         return f"slack({inner})"
 
     def describe(self, p: dict, se: dict) -> str:
         return "slack = deadzone" + self._bracket(p, se)
 
-    def is_zero(self, p: dict) -> bool:
-        return p["slack_deg"] == 0.0
+
+class TipDeadzone(_Slack, OutputFilter):
+    """``deadzone:tip``: the slack between the friction and the bending section, on the base's output.
+
+    Parameters (prefix ``deadzone_tip_``): ``slack_deg``, ``band_deg``, ``center_deg``, in degrees of
+    bend (the knob's slack times the drive's gain).
+    """
+
+    usage = "deadzone:tip"
+    order = 5  # in the tendons: before the bend relaxes (creep) and the tracker reads it (coupling)
+
+    @property
+    def prefix(self) -> str:
+        return "deadzone_tip"
+
+    @property
+    def label(self) -> str:
+        return "deadzone:tip"
+
+    def settings(self) -> dict:
+        return {"side": "tip"}
+
+    def _scale(self, data: HysteresisData, u: np.ndarray) -> np.ndarray:
+        return data.meas_deg if data.meas_deg is not None else u
+
+    def apply_jac(self, p: dict, y: np.ndarray, data: HysteresisData, J: np.ndarray):
+        """Output, the upstream Jacobian carried through the slack (n, m), and the own columns (n, 3)."""
+        v, own, carried = self._forward(p, y, data, J)
+        return v, carried, own
+
+    def wrap(self, inner: str) -> str:
+        return f"tipslack({inner})"
+
+    def describe(self, p: dict, se: dict) -> str:
+        return "tipslack = deadzone:tip" + self._bracket(p, se)
+
+
+#: ``deadzone:SIDE`` -> the class of the slack on that side of the friction
+SIDES = {"knob": Deadzone, "tip": TipDeadzone}
