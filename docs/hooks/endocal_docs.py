@@ -275,6 +275,8 @@ def effects_markdown() -> str:
             f"| streaming compensation | {'yes' if info.streamable else 'no'} |",
             f"| the records must hold | {'; '.join(info.requires) or 'nothing beyond a reversal'} |",
             f"| looks like | {'; '.join(f'`{k}`: {v}' for k, v in info.lookalikes.items()) or 'none declared'} |",
+            *([f"| other forms `validate` tries | {', '.join(f'`{v}` ({k} term)' for v, k in info.variants.items())} |"]
+              if info.variants else []),
             "",
             "**Physics** (from `" + cls.__module__ + "`):",
             "",

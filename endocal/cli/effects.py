@@ -37,6 +37,8 @@ def effects(
         out.print(f"  excited by: {e.protocol}", markup=False)
         if e.needs:
             out.print(f"  needs:      {', '.join(e.needs)}", markup=False)
+        for form, kind in e.variants.items():
+            out.print(f"  also:       {form} ({kind} term; validate tries it too)", markup=False)
         out.print()
 
 

@@ -58,6 +58,9 @@ class EffectInfo:
         (``Effect.requires``).
     lookalikes : dict
         Effect name -> the records that separate the two, in words (``Effect.lookalikes``).
+    variants : dict
+        Other forms ``validate`` tries as candidates of their own, as ``--effects`` writes them, -> their
+        kind (``{"deadzone:tip": "filter"}``; ``Effect.variants``).
     """
 
     name: str
@@ -71,6 +74,7 @@ class EffectInfo:
     streamable: bool
     requires: list[str] = field(default_factory=list)
     lookalikes: dict[str, str] = field(default_factory=dict)
+    variants: dict[str, str] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -88,6 +92,7 @@ def catalog() -> list[EffectInfo]:
             protocol=cls.protocol, parameters=list(cls.units), needs=list(cls.needs),
             streamable=bool(cls.streamable),
             requires=[f"{r.words} ({_PURPOSE[r.to]})" for r in cls.requires], lookalikes=dict(cls.lookalikes),
+            variants={v: make_effect(v).kind for v in cls.variants},
         ))
     return out
 
