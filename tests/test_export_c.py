@@ -35,6 +35,7 @@ needs_cc = pytest.mark.skipif(find_c_compiler() is None, reason="no C compiler (
 ALL_STREAMABLE = {
     **PAPER_TABLE1,
     "deadzone_slack_deg": 4.0, "deadzone_band_deg": 6.0, "deadzone_center_deg": 3.7,
+    "deadzone_tip_slack_deg": 3.0, "deadzone_tip_band_deg": 4.0, "deadzone_tip_center_deg": 2.0,
     "tension_friction": 0.06,
     "rate_gain_s": 0.03, "rate_amp_s_per_deg": 0.0003, "rate_capstan_s_per_deg": 0.005,
     "creep_fraction": 0.25, "creep_tau_s": 2.0,
@@ -76,6 +77,7 @@ def _python(model, desired_deg, dt_s=None) -> np.ndarray:
 
 
 EFFECT_PARAMS = {"deadzone": ("deadzone_slack_deg", "deadzone_band_deg", "deadzone_center_deg"),
+                 "deadzone:tip": ("deadzone_tip_slack_deg", "deadzone_tip_band_deg", "deadzone_tip_center_deg"),
                  "tension": ("tension_friction",),
                  "rate": ("rate_gain_s", "rate_amp_s_per_deg", "rate_capstan_s_per_deg"),
                  "creep": ("creep_fraction", "creep_tau_s")}
@@ -101,7 +103,7 @@ def _desired_of_goals(model) -> np.ndarray:
 @pytest.mark.parametrize("effects,real", [
     (["deadzone", "tension", "rate", "creep"], "double"),
     (["deadzone"], "float"), (["tension"], "float"), (["rate"], "float"), (["creep"], "float"),
-    (["deadzone", "creep"], "float"),
+    (["deadzone", "creep"], "float"), (["deadzone:tip", "tension", "creep"], "double"), (["deadzone:tip"], "float"),
 ])
 def test_every_streamable_effect_agrees_with_python(tmp_path, effects, real):
     m = _effect_model(effects)

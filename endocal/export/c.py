@@ -19,7 +19,7 @@ What each part implements:
 - ``linear``/``bspline`` bases: the generalised play's numerical inverse (bisection on the
   monotone step map; the thesis's direction-dependent model), as :func:`gplay_inverse_step`;
 - effects, each through its own exact causal inverse: ``creep`` (standard linear solid),
-  ``envelope`` (eq. 10), ``deadzone`` (slack), ``tension`` and ``rate`` (friction plays).
+  ``envelope`` (eq. 10), ``deadzone`` and ``deadzone:tip`` (slack), ``tension`` and ``rate`` (friction plays).
 
 Effects that cannot be undone one sample at a time (``delay`` needs future samples; ``load``,
 ``coupling``, ``drift`` logged columns or time) are refused by the compensator itself, with one
@@ -475,7 +475,10 @@ static real_t {f}_invert_step(real_t v)
 
 
 def _deadzone(e, p: dict, state, real: str) -> _Part:
+    from endocal.models.effects.base import InputEffect
+
     P, f = e.prefix.upper(), e.prefix
+    x = "v" if isinstance(e, InputEffect) else "y"  # the command on the knob's side, the bend on the tip's
     tol = "1e-12" if real == "double" else _FLOAT_TOL
     code = (_const(f"{P}_H", p["slack_deg"], real, "deadzone_slack_deg: half play of the slack")
             + _const(f"{P}_C", p["band_deg"], real, "deadzone_band_deg: half width of the band")
@@ -535,7 +538,7 @@ static real_t {f}_invert_step(STATE *s, real_t v)
     return _Part(fields=[f"int {f}_started;", f"real_t {f}_s;  /* the drive's position from the slack centre */",
                          f"real_t {f}_x;  /* the knob's */"],
                  init=[f"s->{f}_started = 0;", f"s->{f}_s = 0;", f"s->{f}_x = 0;"], code=code,
-                 call=f"v = {f}_invert_step(s, v);", needs={"rmin", "rmax"})
+                 call=f"{x} = {f}_invert_step(s, {x});", needs={"rmin", "rmax"})
 
 
 def _play_reference_code() -> str:
@@ -709,8 +712,11 @@ static real_t {f}_invert_step(STATE *s, real_t v)
 def _emitters() -> dict:
     """Effect class -> its C emitter (a streamable effect missing here is refused by name)."""
     from endocal.models.effects import Creep, Deadzone, Envelope, Rate, Tension
+    from endocal.models.effects.deadzone import TipDeadzone
 
-    return {Creep: _creep, Envelope: _envelope, Deadzone: _deadzone, Tension: _tension, Rate: _rate}
+    # the slack's step and inverse are one operator on either side of the friction (on the output: a filter)
+    return {Creep: _creep, Envelope: _envelope, Deadzone: _deadzone, TipDeadzone: _deadzone, Tension: _tension,
+            Rate: _rate}
 
 
 _HELPERS = {
@@ -832,8 +838,10 @@ def _float_warnings(model, real: str) -> list[tuple[str, str]]:
     if real != "float":
         return []
     from endocal.models.effects.base import InputEffect
+    from endocal.models.effects.deadzone import TipDeadzone
 
-    jumps = [e.label for e in model.effects_ if isinstance(e, InputEffect) and getattr(e, "stateful", False)]
+    jumps = [e.label for e in model.effects_
+             if isinstance(e, (InputEffect, TipDeadzone)) and getattr(e, "stateful", False)]
     if getattr(model, "base_name", "") in ("linear", "bspline"):
         jumps.append(f"the {model.base_name} base's backlash")
     if not jumps:
