@@ -29,7 +29,14 @@ import numpy as np
 from scipy.optimize import lsq_linear
 
 from endocal.errors import CompensationRefusedError, ModelError
-from endocal.models._smooth_friction import first_input, friction_inverse, friction_states, inverse_step
+from endocal.models._smooth_friction import (
+    first_input,
+    friction_inverse,
+    friction_states,
+    inverse_step,
+    scaled_friction_states,
+    speed_factors,
+)
 from endocal.models.base import HysteresisModel
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import Effect
@@ -84,6 +91,8 @@ class SmoothFrictionModel(HysteresisModel):
     inverse_kind: ClassVar[str] = "numerical (bisection per sample; checked on a sweep)"
     #: a small reversal inside the loop does not return to the branch it left
     return_point_memory: ClassVar[bool] = False
+    #: one friction state whose bound an effect may scale (``rate:friction``)
+    friction_state: ClassVar[bool] = True
     #: kernel family code (:mod:`endocal.models._smooth_friction`)
     _family: ClassVar[int] = 0
 
@@ -145,10 +154,15 @@ class SmoothFrictionModel(HysteresisModel):
         return [Parameter(k, start[k], *bounds[k]) for k in self._base_names(structure)]
 
     # ------------------------------------------------------------------ forward / inverse
-    def _base_forward(self, structure: dict, p: dict, v: np.ndarray, run_starts: np.ndarray) -> np.ndarray:
+    def _base_forward(self, structure: dict, p: dict, v: np.ndarray, run_starts: np.ndarray,
+                      speed: tuple | None = None) -> np.ndarray:
+        """``speed``: ``(gain, t_s)`` when the friction's bound grows with the input's speed (``rate:friction``)."""
         family, k_lin, k_hys, rho, sigma, expo, offset = self._law(structure, p)
         v = np.ascontiguousarray(v, dtype=float)
-        return k_lin * v + k_hys * friction_states(family, v, rho, sigma, expo, run_starts) + offset
+        if speed is None:
+            return k_lin * v + k_hys * friction_states(family, v, rho, sigma, expo, run_starts) + offset
+        f = speed_factors(v, np.ascontiguousarray(speed[1], dtype=float), float(speed[0]), run_starts)
+        return k_lin * v + k_hys * f * scaled_friction_states(family, v, rho, sigma, expo, run_starts, f) + offset
 
     def _unreachable(self, miss: float) -> str:
         return (f"the {self.base_name} base cannot be inverted: a desired angle lies {miss:.3g} deg beyond what any "

@@ -104,6 +104,32 @@ def state_step(family, w, dv, rho, sigma, expo):
 @njit(cache=True)
 def friction_states(family, v, rho, sigma, expo, run_starts):
     """The internal state ``w`` (n,) driven by ``v`` (n,), restarting at 0 on each run."""
+    return scaled_friction_states(family, v, rho, sigma, expo, run_starts, np.ones(v.shape[0]))
+
+
+@njit(cache=True)
+def _rescaled(w, f_old, f_new):
+    """The state when the friction's bound changes from ``f_old`` to ``f_new`` times its own: the lag
+    ``f w`` is kept, and clipped to the new bound when that falls below it (the element slips)."""
+    if f_new == f_old:
+        return w
+    w = w * f_old / f_new
+    if w > 1.0:
+        return 1.0
+    if w < -1.0:
+        return -1.0
+    return w
+
+
+@njit(cache=True)
+def scaled_friction_states(family, v, rho, sigma, expo, run_starts, f):
+    """The state ``w`` (n,) of a friction whose bound is ``f`` (n,, > 0) times its own at each sample.
+
+    The friction's term is then ``k_hys f w``: a holding force ``f`` times the base's (friction growing
+    with speed, ``rate:friction``). Its lag ``f w`` is kept when the bound changes (clipped: the element
+    slips), and the state saturates within ``f / rho`` of the input (``rho / f``: the element's stiffness
+    after a reversal, ``k_hys rho``, does not change). ``f = 1`` is :func:`friction_states`.
+    """
     n = v.shape[0]
     w = np.empty(n)
     n_runs = run_starts.shape[0]
@@ -115,9 +141,32 @@ def friction_states(family, v, rho, sigma, expo, run_starts):
         wk = 0.0
         w[a] = 0.0
         for k in range(a + 1, b):
-            wk = state_step(family, wk, v[k] - v[k - 1], rho, sigma, expo)
+            wk = state_step(family, _rescaled(wk, f[k - 1], f[k]), v[k] - v[k - 1], rho / f[k], sigma, expo)
             w[k] = wk
     return w
+
+
+@njit(cache=True)
+def speed_factor(v_prev, v_prev2, dt_prev, gain):
+    """The friction's bound at a sample, ``1 + gain |dv/dt|``, from the two samples before it (the speed one
+    sample back keeps the inverse explicit: the factor is known before the sample's input is solved)."""
+    if gain == 0.0 or not dt_prev > 0.0:
+        return 1.0
+    return 1.0 + gain * abs(v_prev - v_prev2) / dt_prev
+
+
+@njit(cache=True)
+def speed_factors(v, t, gain, run_starts):
+    """:func:`speed_factor` at every sample (n,); 1 on a run's first two samples."""
+    n = v.shape[0]
+    f = np.ones(n)
+    n_runs = run_starts.shape[0]
+    for q in range(n_runs):
+        a = run_starts[q]
+        b = run_starts[q + 1] if q + 1 < n_runs else n
+        for k in range(a + 2, b):
+            f[k] = speed_factor(v[k - 1], v[k - 2], t[k - 1] - t[k - 2], gain)
+    return f
 
 
 @njit(cache=True)

@@ -37,7 +37,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
-from endocal.errors import ModelError, OutOfRangeWarning
+from endocal.errors import CompensationRefusedError, ModelError, OutOfRangeWarning
 from endocal.messages import KEYS, Message, key_of
 from endocal.models.compensator import StreamingCompensator
 from endocal.models.data import HysteresisData, as_data
@@ -193,7 +193,28 @@ class HysteresisModel(ABC):
             raise ModelError(f"out_of_range must be one of {OUT_OF_RANGE_CHOICES}, got {self.out_of_range!r}")
 
     def _effects(self) -> list[Effect]:
-        return resolve_effects(self.effects)
+        effects = resolve_effects(self.effects)
+        for e in effects:
+            if why := self.refuses(e):
+                raise ModelError(why)
+        return effects
+
+    def refuses(self, effect: Effect) -> str:
+        """Why this base cannot carry ``effect`` (``""``: it can): an effect that scales the holding force of one
+        friction state (``rate:friction``) needs a base that has one (``dahl``, ``bouc-wen``)."""
+        if hasattr(effect, "friction_speed_gain") and not self.friction_state:
+            return (f"effect '{effect.label}' scales the holding force of a friction base's one friction state; the "
+                    f"{self.base_name} base has none: fit --model dahl or bouc-wen, or use '{effect.name}' (a play in "
+                    "front of any base)")
+        return ""
+
+    def _friction_speed(self, eff_p: dict[int, dict], data: HysteresisData, effects: list[Effect]) -> dict:
+        """``{"speed": (gain, t_s)}`` for the base when an effect scales its friction with the input's speed
+        (``rate:friction``), else ``{}``."""
+        for e in effects:
+            if hasattr(e, "friction_speed_gain"):
+                return {"speed": (float(e.friction_speed_gain(eff_p[id(e)])), data.require_time(f"effect '{e.label}'"))}
+        return {}
 
     # ------------------------------------------------------------------ base hooks
     @abstractmethod
@@ -245,6 +266,8 @@ class HysteresisModel(ABC):
     #: A small reversal inside the loop returns to the branch it left (a bank of plays, a backlash between
     #: two branches); the smooth friction bases (``bouc-wen``, ``dahl``) have no such memory.
     return_point_memory: ClassVar[bool] = True
+    #: whether the base holds one friction state whose bound an effect may scale (``rate:friction``)
+    friction_state: ClassVar[bool] = False
 
     # ------------------------------------------------------------------ helpers
     def _require_fitted(self) -> None:
@@ -282,7 +305,7 @@ class HysteresisModel(ABC):
         for e in effects:
             if isinstance(e, InputEffect):
                 u = e.apply(eff_p[id(e)], u, data)
-        y = self._base_forward(structure, base_p, u, data.run_starts)
+        y = self._base_forward(structure, base_p, u, data.run_starts, **self._friction_speed(eff_p, data, effects))
         for e in effects:
             if isinstance(e, OutputFilter):
                 y = e.apply(eff_p[id(e)], y, data)
@@ -306,7 +329,8 @@ class HysteresisModel(ABC):
         inputs = [e for e in effects if isinstance(e, InputEffect)]
         filters = [e for e in effects if isinstance(e, OutputFilter)]
         outputs = [e for e in effects if isinstance(e, OutputEffect)]
-        if any(not hasattr(e, "apply_jac") for e in inputs + filters) or any(not hasattr(e, "term_jac") for e in outputs):
+        if (any(not hasattr(e, "apply_jac") for e in inputs + filters) or any(not hasattr(e, "term_jac") for e in outputs)
+                or any(hasattr(e, "friction_speed_gain") for e in effects)):
             return None
         u = data.cmd_deg
         M = np.zeros((u.size, 0))
@@ -926,6 +950,18 @@ class HysteresisModel(ABC):
                 v = e.apply(eff_p[id(e)], v, probe)
         return (float(v.min()), float(v.max()))
 
+    def check_effects_invert(self) -> None:
+        """Refuse compensation in one line when an effect has no inverse (``Effect.has_inverse``), naming why.
+
+        Raises
+        ------
+        CompensationRefusedError
+        """
+        for e in self.effects_:
+            if not e.has_inverse:
+                raise CompensationRefusedError(f"effect '{e.label}' has no inverse: {e.no_inverse}; compensation refused "
+                                               "(refit without it to compensate)")
+
     def inverse(self, desired_deg, *, t_s=None, extras=None, max_iter: int = 50, tol_deg: float = 1e-10):
         """Knob commands (deg) that make the model output follow ``desired_deg`` (feedforward compensation).
 
@@ -960,6 +996,7 @@ class HysteresisModel(ABC):
         """
         self._require_fitted()
         self._check_common()
+        self.check_effects_invert()
         d, was_list = as_data(desired_deg, t_s=t_s, extras=extras)
         for e in self.effects_:
             e.check(d)

@@ -41,6 +41,7 @@ class StreamingCompensator:
 
     def __init__(self, model, dt_s: float | None = None):
         model._require_fitted()
+        model.check_effects_invert()
         for e in model.effects_:
             if not e.streamable:
                 raise ModelError(f"effect '{e.label}' cannot be compensated one sample at a time "

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from endocal.errors import ModelError
 from endocal.models import EFFECTS, HysteresisData
 from endocal.models.base import HysteresisModel
+from endocal.models.effects import make_effect
 from endocal.validation.data import load_candidates
 from endocal.validation.identifiability import untestable_reason
 from endocal.validation.structure import effect_labels
@@ -79,7 +80,8 @@ def candidate_effects(model: HysteresisModel, data: HysteresisData, candidates: 
                                         "sheath_wrap_deg, at two or more values)")
                 cands += [f"{name}:{c}" for c in cols]
             elif name not in have_names:
-                cands += [name, *EFFECTS[name].variants]
+                # a variant the base cannot carry is not a candidate (rate:friction needs a friction state)
+                cands += [name, *(v for v in EFFECTS[name].variants if not model.refuses(make_effect(v)))]
     else:
         cands = [c for c in candidates if c not in have]
     tested = []

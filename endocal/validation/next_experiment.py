@@ -651,7 +651,10 @@ def design_next(model: HysteresisModel, result, train: HysteresisData, val: Hyst
     # each effect's own segment (Effect.segment), in its segment_order: the shared speed ladder after the
     # dedicated motions, then more of the validation record's motion for candidates short of units, then
     # the segments that reuse the others' (the full amplitude, a condition of the whole run)
-    order = sorted(targets, key=lambda e: EFFECTS[e].segment_order if e in EFFECTS else 50)
+    def entry(effect: str):  # the catalogue's class of a target (a variant, deadzone:tip, is its effect's)
+        return EFFECTS.get(effect.partition(":")[0])
+
+    order = sorted(targets, key=lambda e: entry(e).segment_order if entry(e) is not None else 50)
     own: set[str] = set()
     phase = {"speeds": False, "short": False}
 
@@ -677,7 +680,7 @@ def design_next(model: HysteresisModel, result, train: HysteresisData, val: Hyst
             plan.tests.append(PlannedTest(effect, status, why, k, 2 * 2 * len(periods) * cycles,
                                           f"the loop at two amplitudes and three speeds ({sized})"))
             continue
-        cls = EFFECTS[effect]
+        cls = entry(effect)
         flush(cls.segment_order)
         try:
             inst = make_effect(effect)

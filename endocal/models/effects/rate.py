@@ -34,6 +34,28 @@ the sample: a desired drive faster than that cannot be reached, and the inverse 
 knob to where the drive gets furthest. (Reading the speed one sample late instead makes
 the inverse feed its own jumps at reversals back into the width, which diverges once the
 capstan term is on.)
+
+``rate:friction`` (:class:`FrictionRate`) is the same physics where the base is one friction element
+(``dahl``, ``bouc-wen``): the friction's holding force grows with the knob's speed, so the element's
+bound is ``1 + γ|v̇|`` times its own (the simulator's ``[rate]`` acting on its ``bouc-wen`` element). A
+play in front of such a base adds a second friction, whose lag opens as a dead band after each reversal;
+a stronger friction instead holds more of the same exponential. Written on the base's input ``v``::
+
+    f_k = 1 + γ |v_{k-1} - v_{k-2}| / Δt_{k-1}              (the speed one sample back)
+    y_k = k_lin v_k - k_hys f_k w_k,  w from the base's law at rho / f_k
+
+with the lag ``f w`` kept when the bound changes, clipped when it falls below (the element slips):
+:func:`endocal.models._smooth_friction.scaled_friction_states`. On the speed ladder `--next` designs,
+the Bouc-Wen plant with friction growing with speed is fitted by ``bouc-wen`` with ``delay``,
+``envelope`` and ``rate:friction`` at 1.2 times the noise, and with ``rate`` at 3.2
+(tests/test_friction_family_limits.py).
+
+It has no inverse, and this is the physics, not the code: while the element slides the tip follows
+``y = k_lin v - k_hys (1 + γ|v̇|)``, so the drive's transfer function ``k_lin - k_hys γ s`` has a zero in
+the right half-plane at ``k_lin / (k_hys γ)`` (4.5 /s for the fit above). The command that tracks a
+desired angle exactly then solves an unstable equation: it grows without bound from any error (in a
+sampled inverse, rounding: tests/test_friction_family_limits.py). A model with ``rate:friction`` predicts
+and validates; compensation refuses it in one line (``rate``, the play, has an exact causal inverse).
 """
 
 from __future__ import annotations
@@ -43,7 +65,7 @@ import math
 import numpy as np
 from numba import njit
 
-from endocal.errors import ModelError
+from endocal.errors import CompensationRefusedError, ModelError
 from endocal.models._kernels import HOLD_TOL, play_reference, play_reference_jit, varplay_forward_jac
 from endocal.models.data import HysteresisData
 from endocal.models.effects.base import InputEffect
@@ -225,6 +247,26 @@ class Rate(InputEffect):
         """The same sine at several frequencies up to the probe's limits (shared with ``delay``)."""
         return design.speeds(self.name, n_half_cycles)
 
+    #: the form for a friction base: its holding force grows with speed (``rate:friction``)
+    variants = ("rate:friction",)
+
+    @classmethod
+    def from_argument(cls, arg: str):
+        """``rate:friction``: the friction base's holding force grows with knob speed."""
+        if arg.strip() != "friction":
+            raise ModelError(f"effect 'rate:{arg.strip()}': write rate (a play in front of the base that widens with "
+                             "knob speed) or rate:friction (a friction base's holding force grows with it)")
+        return FrictionRate()
+
+    @classmethod
+    def from_settings(cls, settings: dict):
+        """A model file's entry: ``{"form": "friction"}`` for :class:`FrictionRate`; files without it are the play's."""
+        settings = dict(settings)
+        form = settings.pop("form", "play")
+        if form not in ("play", "friction"):
+            raise ModelError(f"rate: unknown form '{form}' (play or friction)")
+        return cls(**settings) if form == "play" else FrictionRate(**settings)
+
     def __init__(self, speed_filter_s: float = 0.1):
         if not (isinstance(speed_filter_s, (int, float)) and math.isfinite(speed_filter_s) and speed_filter_s > 0):
             raise ModelError(f"rate: speed_filter_s must be a positive number of seconds, got {speed_filter_s!r}")
@@ -331,3 +373,73 @@ class Rate(InputEffect):
     def is_zero(self, p: dict) -> bool:
         g, h, _ = self._gains(p)
         return g == 0.0 and h == 0.0
+
+
+class FrictionRate(Rate):
+    """``rate:friction``: a friction base's holding force grows with the knob's speed (module docstring).
+
+    Fitted parameter (prefix ``rate_friction_``): ``gain_s_per_deg`` (``γ``, s/deg), the relative growth of the
+    holding force per deg/s of the base's input. The command passes unchanged: the base scales its friction
+    (``HysteresisModel._friction_speed``); a base without a friction state refuses it.
+    """
+
+    units = {"gain_s_per_deg": "s/deg"}
+    usage = "rate:friction"
+    streamable = False
+    has_inverse = False
+    no_inverse = ("friction growing with speed puts a zero in the right half-plane of the drive (the tip follows "
+                  "k_lin v - k_hys (1 + gamma |dv/dt|) while it slides): no causal command tracks it; 'rate' (a play) "
+                  "has an inverse")
+
+    def __init__(self):
+        self.speed_filter_s = 0.0
+
+    @property
+    def prefix(self) -> str:
+        return "rate_friction"
+
+    @property
+    def label(self) -> str:
+        return "rate:friction"
+
+    def settings(self) -> dict:
+        return {"form": "friction"}
+
+    def friction_speed_gain(self, p: dict) -> float:
+        """``γ``: the base's friction bound is ``1 + γ |v̇|`` times its own."""
+        return float(p["gain_s_per_deg"])
+
+    def _upper(self, u: np.ndarray, data: HysteresisData) -> float:
+        # the holding force at most ten times its own at the fastest speed of the data
+        t = data.require_time("effect 'rate:friction'")
+        speed = np.abs(np.diff(np.asarray(u, dtype=float))) / np.maximum(np.diff(t), 1e-12)
+        inside = np.ones(speed.size, dtype=bool)
+        inside[np.asarray(data.run_starts[1:], dtype=int) - 1] = False  # no speed across two runs
+        fastest = float(np.max(speed[inside])) if inside.any() else 0.0
+        return 9.0 / max(fastest, 1e-9)
+
+    def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
+        hi = self._upper(u, data)
+        return [Parameter(f"{self.prefix}_gain_s_per_deg", 0.02 * hi, 0.0, hi)]
+
+    def start_candidates(self, data: HysteresisData, u: np.ndarray) -> list[dict]:
+        """Start values tried before the fit (the best is kept): the force at the fastest speed 1.1 to 4 times its own."""
+        hi = self._upper(u, data)
+        return [{"gain_s_per_deg": f * hi} for f in (0.01, 0.1, 0.33)]
+
+    def apply(self, p: dict, u: np.ndarray, data: HysteresisData) -> np.ndarray:
+        return np.asarray(u, dtype=float)
+
+    apply_jac = None  # the base's friction carries the term: the fit differentiates numerically
+
+    def invert(self, p: dict, v: np.ndarray, data: HysteresisData) -> np.ndarray:
+        raise CompensationRefusedError(f"effect 'rate:friction' has no inverse: {self.no_inverse}; compensation refused")
+
+    def wrap(self, inner: str) -> str:
+        return inner
+
+    def describe(self, p: dict, se: dict) -> str:
+        return "friction x (1 + gamma |dv/dt|): rate:friction" + self._bracket(p, se)
+
+    def is_zero(self, p: dict) -> bool:
+        return p["gain_s_per_deg"] == 0.0
