@@ -959,7 +959,8 @@ class HysteresisModel(ABC):
         """
         for e in self.effects_:
             if not e.has_inverse:
-                raise CompensationRefusedError(f"effect '{e.label}' has no inverse: {e.no_inverse}; compensation refused "
+                why = e.no_inverse or "nothing undoes its equation"
+                raise CompensationRefusedError(f"effect '{e.label}' has no inverse: {why}; compensation refused "
                                                "(refit without it to compensate)")
 
     def inverse(self, desired_deg, *, t_s=None, extras=None, max_iter: int = 50, tol_deg: float = 1e-10):

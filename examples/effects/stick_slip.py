@@ -87,6 +87,7 @@ class StickSlip(InputEffect):
     protocol = "reversals of every size, slow enough that each stick lasts several samples (small sines about the middle)"
     units = {"deg": "deg"}
     has_inverse = False
+    no_inverse = "the angles inside each held range are reached by no command"
     requires = (Requirement("reversals", f"{MIN_REVERSALS} reversals of the knob in a record", _reversing, to="fit",
                             remedy="validate --next designs small sines"),)
     residual = ("abs speed",)

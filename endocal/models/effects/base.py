@@ -50,7 +50,7 @@ class Effect(ABC):
     needs: ClassVar[tuple[str, ...]] = ()
     #: whether :meth:`invert` undoes it (feedforward compensation); False: the inverse refuses it
     has_inverse: ClassVar[bool] = True
-    #: with ``has_inverse = False``: why, in words (``model.inverse`` refuses in one line with it)
+    #: with ``has_inverse = False``: why, in words (``model.inverse`` and the compensator refuse in one line with it)
     no_inverse: ClassVar[str] = ""
     #: what the records must hold to fit it (``to="fit"``) and to test it (``to="test"``):
     #: :class:`~endocal.models.effects.requirements.Requirement` (ready-made ones in that module)

@@ -118,9 +118,6 @@ def missing_declarations(cls: type, *, run: bool = True) -> list[str]:
                              for k, v in null.items())):
         out.append(f"'null' ({null!r}) must map short parameter names of 'units' to finite numbers, on an additive "
                    "term (OutputEffect) only: the values at which the term adds nothing")
-    if not cls.has_inverse and not (isinstance(cls.no_inverse, str) and cls.no_inverse.strip()):
-        out.append("has_inverse = False but no 'no_inverse' (why it cannot be undone, in words: compensation refuses "
-                   "with it)")
     variants = cls.variants
     if not (isinstance(variants, tuple) and all(isinstance(v, str) and v.startswith(f"{name}:") for v in variants)
             and (not variants or hasattr(cls, "from_argument"))):
