@@ -147,25 +147,21 @@ def scaled_friction_states(family, v, rho, sigma, expo, run_starts, f):
 
 
 @njit(cache=True)
-def speed_factor(v_prev, v_prev2, dt_prev, gain):
-    """The friction's bound at a sample, ``1 + gain |dv/dt|``, from the two samples before it (the speed one
-    sample back keeps the inverse explicit: the factor is known before the sample's input is solved)."""
-    if gain == 0.0 or not dt_prev > 0.0:
-        return 1.0
-    return 1.0 + gain * abs(v_prev - v_prev2) / dt_prev
-
-
-@njit(cache=True)
 def speed_factors(v, t, gain, run_starts):
-    """:func:`speed_factor` at every sample (n,); 1 on a run's first two samples."""
+    """The friction's bound at each sample (n,), ``1 + gain |dv/dt|``, the speed over the step that ends there
+    (1 on a run's first sample)."""
     n = v.shape[0]
     f = np.ones(n)
+    if gain == 0.0:
+        return f
     n_runs = run_starts.shape[0]
     for q in range(n_runs):
         a = run_starts[q]
         b = run_starts[q + 1] if q + 1 < n_runs else n
-        for k in range(a + 2, b):
-            f[k] = speed_factor(v[k - 1], v[k - 2], t[k - 1] - t[k - 2], gain)
+        for k in range(a + 1, b):
+            dt = t[k] - t[k - 1]
+            if dt > 0.0:
+                f[k] = 1.0 + gain * abs(v[k] - v[k - 1]) / dt
     return f
 
 

@@ -41,21 +41,21 @@ bound is ``1 + γ|v̇|`` times its own (the simulator's ``[rate]`` acting on its
 play in front of such a base adds a second friction, whose lag opens as a dead band after each reversal;
 a stronger friction instead holds more of the same exponential. Written on the base's input ``v``::
 
-    f_k = 1 + γ |v_{k-1} - v_{k-2}| / Δt_{k-1}              (the speed one sample back)
+    f_k = 1 + γ |v_k - v_{k-1}| / Δt_k                      (the speed over the step to sample k)
     y_k = k_lin v_k - k_hys f_k w_k,  w from the base's law at rho / f_k
 
 with the lag ``f w`` kept when the bound changes, clipped when it falls below (the element slips):
 :func:`endocal.models._smooth_friction.scaled_friction_states`. On the speed ladder `--next` designs,
 the Bouc-Wen plant with friction growing with speed is fitted by ``bouc-wen`` with ``delay``,
-``envelope`` and ``rate:friction`` at 1.2 times the noise, and with ``rate`` at 3.2
+``envelope`` and ``rate:friction`` at 1.16 times the noise, and with ``rate`` at 3.2
 (tests/test_friction_family_limits.py).
 
-It has no inverse, and this is the physics, not the code: while the element slides the tip follows
-``y = k_lin v - k_hys (1 + γ|v̇|)``, so the drive's transfer function ``k_lin - k_hys γ s`` has a zero in
-the right half-plane at ``k_lin / (k_hys γ)`` (4.5 /s for the fit above). The command that tracks a
-desired angle exactly then solves an unstable equation: it grows without bound from any error (in a
-sampled inverse, rounding: tests/test_friction_family_limits.py). A model with ``rate:friction`` predicts
-and validates; compensation refuses it in one line (``rate``, the play, has an exact causal inverse).
+It has no inverse. Within one sample, a knob that slows lowers the bound below the friction held, and
+the element slips: the tip jumps ahead. So once the element slides fast (above about 90 deg/s on the
+Bouc-Wen plant's ladder), the angle a sample reaches is not monotone in its command: one angle is
+reached by several commands, and no sample-by-sample inverse is unique
+(tests/test_friction_family_limits.py). A model with ``rate:friction`` predicts and validates;
+compensation refuses it in one line (``rate``, the play, has an exact causal inverse).
 """
 
 from __future__ import annotations
@@ -387,9 +387,8 @@ class FrictionRate(Rate):
     usage = "rate:friction"
     streamable = False
     has_inverse = False
-    no_inverse = ("friction growing with speed puts a zero in the right half-plane of the drive (the tip follows "
-                  "k_lin v - k_hys (1 + gamma |dv/dt|) while it slides): no causal command tracks it; 'rate' (a play) "
-                  "has an inverse")
+    no_inverse = ("its friction follows the knob's speed, so a knob that slows lets the element slip ahead and one "
+                  "angle is reached by several commands; 'rate' (a play) has an inverse")
 
     def __init__(self):
         self.speed_filter_s = 0.0
