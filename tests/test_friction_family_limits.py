@@ -78,10 +78,14 @@ def _ladder(hidden):
     return simulate(_plant(hidden), "sine-varying", LADDER, seed=0)
 
 
-def test_without_speed_dependence_a_friction_base_fits_the_ladder_to_the_noise():
+def test_without_speed_dependence_a_friction_base_fits_the_ladder_near_the_noise():
+    """The floor of the issue's 1.2x bar on the loop's last record: in-sample, `bouc-wen` + `delay` + `envelope`
+    reaches 1.15x and `dahl` 1.21x (2026-11-29). The loop changes base to the first base 10 % better than its own,
+    `dahl` on this plant (1-4 points ahead of `bouc-wen` on the first records), and no later base is 10 % better:
+    its end on this record then sits at the bar unless another term takes up what the Dahl law misses."""
     rec, noise = _ladder(None)
-    # 1.21x (2026-11-28)
-    assert _in_sample_ratio([rec], noise, "dahl", ["delay", "envelope"]) < 1.25
+    assert _in_sample_ratio([rec], noise, "bouc-wen", ["delay", "envelope"]) < 1.2
+    assert 1.18 < _in_sample_ratio([rec], noise, "dahl", ["delay", "envelope"]) < 1.25
 
 
 @pytest.mark.parametrize("base, effects", [("dahl", ["delay", "envelope", "rate"]),

@@ -42,6 +42,29 @@ def demoted(suspects: list[Suspect]) -> list[str]:
             if s.caution and s.rmse_heldout_deg < top.rmse_heldout_deg]
 
 
+def _alike(a: Suspect, b: Suspect, errs: dict, alpha: float, close_pct: float) -> tuple[bool, float, float]:
+    """Whether ``a`` and ``b`` explain the residual alike (within ``close_pct`` of each other, or apart by chance:
+    the paired test of their errors at ``alpha``), with the test's p and the RMSEs' relative gap (percent)."""
+    p, _ = paired_test(errs[b.effect], errs[a.effect])
+    lo, hi = sorted((a.rmse_heldout_deg, b.rmse_heldout_deg))
+    rel = 100.0 * (hi - lo) / max(lo, 1e-300)
+    return not (p < alpha and rel >= close_pct), p, rel
+
+
+def plain_first(suspects: list[Suspect], errs: dict, alpha: float, close_pct: float = 5.0) -> list[Suspect]:
+    """An effect's other form (``Effect.variants``: ``deadzone:tip``) ranks after the plain form when the two explain
+    the residual alike: the variant is suggested only where the records prefer it."""
+    out = list(suspects)
+    for i, s in enumerate(out):
+        name = s.effect.partition(":")[0]
+        if name not in EFFECTS or s.effect not in EFFECTS[name].variants:
+            continue
+        j = next((k for k in range(i + 1, len(out)) if out[k].effect == name), None)
+        if j is not None and s.effect in errs and name in errs and _alike(s, out[j], errs, alpha, close_pct)[0]:
+            out.insert(i, out.pop(j))
+    return out
+
+
 def ambiguities(suspects: list[Suspect], errs: dict, alpha: float, close_pct: float = 5.0) -> list[str]:
     """Notes on suspects that explain the residual about as well as the top one."""
     if len(suspects) < 2:
@@ -51,10 +74,8 @@ def ambiguities(suspects: list[Suspect], errs: dict, alpha: float, close_pct: fl
     for other in suspects[1:]:
         if other.caution and not top.caution:
             continue  # ranked apart on purpose (demoted says why)
-        p, _ = paired_test(errs[other.effect], errs[top.effect])
-        lo, hi = sorted((top.rmse_heldout_deg, other.rmse_heldout_deg))
-        rel = 100.0 * (hi - lo) / max(lo, 1e-300)
-        if p < alpha and rel >= close_pct:
+        alike, p, rel = _alike(top, other, errs, alpha, close_pct)
+        if not alike:
             continue
         a, b = top.effect.partition(":")[0], other.effect.partition(":")[0]
         how = tell_apart(a, b)

@@ -35,7 +35,7 @@ from endocal.errors import ModelError
 from endocal.messages import Message
 from endocal.models import EFFECTS, HysteresisData
 from endocal.models.base import HysteresisModel
-from endocal.validation.ambiguity import ambiguities, demoted, settle_lookalikes
+from endocal.validation.ambiguity import ambiguities, demoted, plain_first, settle_lookalikes
 from endocal.validation.bases import base_errors, other_bases, scan_bases_rolling, scan_bases_split
 from endocal.validation.candidates import candidate_effects
 from endocal.validation.folds import check_cv_data, fold_bounds, fold_errors, fold_split, still_blocks
@@ -61,6 +61,12 @@ MAX_SCAN_SAMPLES = 5000
 #: samples a cycle, and an effect of speed fitted on them finds none (rate on a ladder to 290 deg/s:
 #: -20 % of the ladder's error fitted on every sample, 0 % on one in 30).
 MIN_SAMPLES_PER_CYCLE = 25
+
+
+def _column(candidate: str) -> str | None:
+    """The column a candidate names (``load:sheath_wrap_deg``); None for a plain effect or another form of one."""
+    name, _, arg = candidate.partition(":")
+    return arg if arg and candidate not in EFFECTS[name].variants else None
 
 
 def scan_stride(data: HysteresisData, max_samples: int = MAX_SCAN_SAMPLES) -> int:
@@ -217,8 +223,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     adj = holm(raw) if raw else np.array([])
     tested, errs, borrowed = [], {}, {}
     for (c, err), p, pa in zip(fitted, raw, adj):
-        name, _, col = c.partition(":")
-        cls = EFFECTS[name]
+        cls = EFFECTS[c.partition(":")[0]]
         rmse = float(np.sqrt(np.mean(err**2)))
         gain = 100.0 * (1.0 - rmse / rmse_base) if rmse_base > 0 else 0.0
         significant = bool(pa < alpha and gain >= min_gain_pct)
@@ -243,7 +248,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
                     f"not significant (p = {pa:.2g} over {units.n} {units.kind}s; {more})")
         refit = suggest_refit(model, c, data_paths, model_path=model_path, planes_path=planes_path,
                               suffix=refit_suffix)
-        tested.append(Suspect(effect=c, column=col or None, gain_pct=gain, p_value=float(pa), p_raw=float(p),
+        tested.append(Suspect(effect=c, column=_column(c), gain_pct=gain, p_value=float(pa), p_raw=float(p),
                               rmse_heldout_deg=rmse, base_rmse_heldout_deg=rmse_base, significant=significant,
                               refit=refit, cause=cls.cause, signature=cls.signature, protocol=cls.protocol,
                               n_blocks=units.n, evidence=evidence, caution=cautions[c], power=power))
@@ -255,8 +260,9 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     # the gain is not consistent enough across units to rule out chance.
     suspects = [s for s in tested if s.significant] or [s for s in tested
                                                         if s.gain_pct >= min_gain_pct and s.effect not in borrowed]
-    # a candidate with a caution (a delay at its -0.5 s bound, a drift too fast to be one) ranks after the others
-    suspects.sort(key=lambda s: bool(s.caution))
+    # a candidate with a caution (a delay at its -0.5 s bound, a drift too fast to be one) ranks after the others;
+    # an effect's other form after its plain form where the two explain the residual alike
+    suspects = plain_first(sorted(suspects, key=lambda s: bool(s.caution)), errs, alpha)
     # the first suggestion against the look-alikes it declares, on records that separate them
     # (a look-alike whose gain is borrowed is compared, never promoted)
     suspects, settled = settle_lookalikes(suspects, [s for s in tested if s.effect not in borrowed], errs, dt, val,
@@ -450,12 +456,11 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
     tested = []
     errs = {}
     for (c, err, rmse, p, nb), pa in zip(results, adj):
-        name, _, col = c.partition(":")
-        cls = EFFECTS[name]
+        cls = EFFECTS[c.partition(":")[0]]
         gain = 100.0 * (1.0 - rmse / rmse_base) if rmse_base > 0 else 0.0
         refit = suggest_refit(model, c, data_paths, model_path=model_path, planes_path=planes_path)
         significant = bool(pa < alpha and gain >= min_gain_pct)
-        tested.append(Suspect(effect=c, column=col or None, gain_pct=gain, p_value=float(pa), p_raw=p,
+        tested.append(Suspect(effect=c, column=_column(c), gain_pct=gain, p_value=float(pa), p_raw=p,
                               rmse_heldout_deg=rmse, base_rmse_heldout_deg=rmse_base,
                               significant=significant, refit=refit,
                               cause=cls.cause, signature=cls.signature, protocol=cls.protocol, n_blocks=nb,
@@ -463,7 +468,7 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
         if err is not None:
             errs[c] = err
     tested.sort(key=lambda s: -s.gain_pct)
-    suspects = [s for s in tested if s.significant]
+    suspects = plain_first([s for s in tested if s.significant], errs, alpha)
     notes = [Message(n, "alike") for n in ambiguities(suspects, errs, alpha)]
     notes += [Message(f"{k}: {v}", "untestable") for k, v in untestable.items()]
     if stride > 1:
