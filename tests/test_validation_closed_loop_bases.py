@@ -126,35 +126,23 @@ def _names(loop: BaseLoop) -> set[str]:
     return {e.partition(":")[0] for e in loop.named}
 
 
-#: Cases measured above the 1.2x bar (2026-11-28, seed 0, the coupling with the other bend's lag), with the numbers:
-#: the end (deg) on the second record `--next` asks for (a speed ladder to the probe's limits), against that record's
-#: own noise floor. On the first records the base change and `envelope` bring the control, drift, delay, creep and
-#: envelope to 0.35-0.36 deg (1.07-1.10x); the Lissajous record --next asks for first ends at 0.51-0.64 there.
+#: Cases measured above the 1.2x bar (2026-11-29, seed 0, with `deadzone:tip` and `rate:friction`), with the numbers:
+#: the end (deg) on the last record `--next` asked for (a speed ladder to the probe's limits; in `rate`, where
+#: `--next` had nothing left to ask after it, the Lissajous record), against that record's own noise floor. On the
+#: first records the base change and `envelope` bring every case but `load` to 0.33-0.36 deg (1.02-1.10x the noise).
+#: The floor of the bar on the ladder itself: tests/test_friction_family_limits.py (the `dahl` base the loop changes
+#: to reaches 1.21x there in-sample).
 NOISE_GAPS = {
     None: "ends at 0.444 deg, 1.27x its record's noise (0.350)",
     "drift": "ends at 0.495 deg, 1.41x its record's noise (0.350)",
     "delay": "ends at 0.496 deg, 1.41x its record's noise (0.351)",
-    "rate": "ends at 1.19 deg, 3.5x its record's noise (0.343): rate is never named (below)",
+    "rate": "ends at 0.639 deg on the Lissajous record, 1.68x its noise (0.381): --next asked for nothing more",
     "creep": "ends at 0.432 deg, 1.25x its record's noise (0.346)",
     "load": "ends at 0.785 deg, 2.3x its record's noise (0.339)",
-    "deadzone": "ends at 0.758 deg, 2.2x its record's noise (0.337): no base change, deadzone never named (below)",
+    "deadzone": "ends at 0.455 deg, 1.33x its record's noise (0.343)",
     "envelope": "ends at 0.444 deg, 1.27x its record's noise (0.350)",
     "coupling": "ends at 0.728 deg, 2.0x its record's noise (0.362)",
 }
-#: Cases that miss the hidden effect, the base change, or add an effect the plant lacks (2026-11-28, seed 0).
-RATE_GAP = ("after the base change (0.69 deg on the first records) nothing is suggested; on the Lissajous record "
-            "coupling and load, then the bspline base back (-13 %, envelope -11 %) and creep (-12 %), which the plant "
-            "lacks; nothing on the speed ladder, where rate would show: rate never named (the run before the coupling's "
-            "lag named it after drift; the one before that added creep: the case turns on gains 1-4 points apart)")
-DEADZONE_GAP = ("no base is ever suggested (the slack's flat band is what the B-spline's branches draw) and deadzone "
-                "never ranks first: bspline+delay+load+envelope+coupling at 0.76 deg")
-BASE_GAPS = {"deadzone": DEADZONE_GAP, "rate": RATE_GAP}
-NAME_GAPS = {"deadzone": DEADZONE_GAP, "rate": RATE_GAP}
-EXTRA_GAPS = {"rate": RATE_GAP}
-#: The issue's bars over every case: the hidden effect named in 6 of 8 (the bar is 7), a base change in 7 of 9,
-#: nothing added the plant lacks in 8 of 9 (the coupling case's drift, -11 % on the speed ladder before the scan
-#: asked an additive term to earn its gain itself, is no longer suggested).
-BARS_GAP = f"deadzone: {DEADZONE_GAP}; rate: {RATE_GAP}"
 
 
 def _gaps(gaps: dict, cases) -> list:
@@ -165,7 +153,7 @@ def _gaps(gaps: dict, cases) -> list:
 CASES = [None, *HIDDEN]
 
 
-@pytest.mark.parametrize("hidden", _gaps(BASE_GAPS, CASES), ids=lambda h: h or "control")
+@pytest.mark.parametrize("hidden", CASES, ids=lambda h: h or "control")
 def test_the_loop_names_the_base_change(hidden):
     loop = run_loop(hidden)
     assert loop.bases and not BASES[loop.bases[-1]].return_point_memory, _summary(loop)
@@ -177,19 +165,18 @@ def test_the_loop_ends_within_the_bar_of_the_noise(hidden):
     assert loop.end_deg <= NOISE_BAR * loop.end_noise_deg, _summary(loop)
 
 
-@pytest.mark.parametrize("hidden", _gaps(EXTRA_GAPS, CASES), ids=lambda h: h or "control")
+@pytest.mark.parametrize("hidden", CASES, ids=lambda h: h or "control")
 def test_the_loop_adds_nothing_the_plant_lacks(hidden):
     loop = run_loop(hidden)
     assert _names(loop) <= PLANT_HAS | ({hidden} if hidden else set()), _summary(loop)
 
 
-@pytest.mark.parametrize("hidden", _gaps(NAME_GAPS, HIDDEN))
+@pytest.mark.parametrize("hidden", HIDDEN)
 def test_the_loop_names_the_hidden_effect(hidden):
     loop = run_loop(hidden)
     assert hidden in _names(loop) | {e for _, effects, _ in loop.steps for e in effects}, _summary(loop)
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=BARS_GAP)
 def test_the_bars_of_the_issue():
     """Every case names the base change and adds nothing the plant lacks; the hidden effect named in at least
     7 of 8 (the 1.2x noise bar per case: test_the_loop_ends_within_the_bar_of_the_noise)."""
