@@ -78,7 +78,8 @@ def ambiguities(suspects: list[Suspect], errs: dict, alpha: float, close_pct: fl
         if not alike:
             continue
         a, b = top.effect.partition(":")[0], other.effect.partition(":")[0]
-        how = tell_apart(a, b)
+        how = tell_apart(a, b) if a != b else (
+            f"they are two forms of {a}, and more of what shows it separates them ({EFFECTS[a].protocol})")
         if how is None:
             how = (f"{top.effect} is revealed by {EFFECTS[a].protocol}; "
                    f"{other.effect} by {EFFECTS[b].protocol}")
