@@ -61,3 +61,4 @@ def test_a_drift_of_every_record_is_suggested():
     res = scan_split(make_model("pi", ["envelope"]).fit(train), train, val, candidates=["drift"], jobs=1)
     assert [s.effect for s in res.suspects] == ["drift"] and res.suspects[0].significant
     assert not [n for n in res.notes if n.key == "borrowed"]
+
