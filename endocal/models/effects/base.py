@@ -87,6 +87,9 @@ class Effect(ABC):
     #: them (``deadzone:tip``: the slack on the other side of the friction); each must parse to an effect
     #: of this name
     variants: ClassVar[tuple[str, ...]] = ()
+    #: which of its effect's forms this class is (``tip`` for ``deadzone:tip``); "" for the plain one. A form's
+    #: parameters are prefixed ``<name>_<form>`` and its model-file settings say ``{"form": ...}``
+    form: ClassVar[str] = ""
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
@@ -101,16 +104,16 @@ class Effect(ABC):
     @property
     def prefix(self) -> str:
         """Parameter-name prefix; unique per effect instance in a model."""
-        return self.name
+        return f"{self.name}_{self.form}" if self.form else self.name
 
     @property
     def label(self) -> str:
         """The name as users write it in ``--effects`` (``load:sheath_wrap_deg`` for load terms)."""
-        return self.name
+        return f"{self.name}:{self.form}" if self.form else self.name
 
     def settings(self) -> dict:
         """JSON-able constructor arguments (saved in model files)."""
-        return {}
+        return {"form": self.form} if self.form else {}
 
     @classmethod
     def from_settings(cls, settings: dict) -> Effect:

@@ -244,11 +244,11 @@ class _Slack:
 
     @classmethod
     def from_settings(cls, settings: dict):
-        """A model file's entry: ``{"side": "tip"}`` for the tip's side; files without it are the knob's."""
+        """A model file's entry: ``{"form": "tip"}`` for the tip's side; files without it are the knob's."""
         settings = dict(settings)
-        side = settings.pop("side", "knob")
+        side = settings.pop("form", "knob")
         if side not in SIDES:
-            raise ModelError(f"deadzone: unknown side '{side}' (knob or tip)")
+            raise ModelError(f"deadzone: unknown form '{side}' (tip, or none for the knob's side)")
         return SIDES[side](**settings)
 
     def _scale(self, data: HysteresisData, u: np.ndarray) -> np.ndarray:
@@ -341,19 +341,9 @@ class TipDeadzone(_Slack, OutputFilter):
     bend (the knob's slack times the drive's gain).
     """
 
+    form = "tip"
     usage = "deadzone:tip"
     order = 5  # in the tendons: before the bend relaxes (creep) and the tracker reads it (coupling)
-
-    @property
-    def prefix(self) -> str:
-        return "deadzone_tip"
-
-    @property
-    def label(self) -> str:
-        return "deadzone:tip"
-
-    def settings(self) -> dict:
-        return {"side": "tip"}
 
     def _scale(self, data: HysteresisData, u: np.ndarray) -> np.ndarray:
         return data.meas_deg if data.meas_deg is not None else u

@@ -384,6 +384,7 @@ class FrictionRate(Rate):
     """
 
     units = {"gain_s_per_deg": "s/deg"}
+    form = "friction"
     usage = "rate:friction"
     streamable = False
     has_inverse = False
@@ -393,16 +394,8 @@ class FrictionRate(Rate):
     def __init__(self):
         self.speed_filter_s = 0.0
 
-    @property
-    def prefix(self) -> str:
-        return "rate_friction"
-
-    @property
-    def label(self) -> str:
-        return "rate:friction"
-
     def settings(self) -> dict:
-        return {"form": "friction"}
+        return {"form": self.form}
 
     def friction_speed_gain(self, p: dict) -> float:
         """``γ``: the base's friction bound is ``1 + γ |v̇|`` times its own."""
