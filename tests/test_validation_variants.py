@@ -46,3 +46,16 @@ def test_every_variant_is_a_candidate_where_the_base_can_carry_it():
                                                                                             .from_argument(v.partition(":")[2]))}
         assert wanted <= set(tested), (base, tested)
         assert ("rate:friction" in tested) is (base == "dahl")
+
+
+def test_a_form_no_effect_has_is_refused_naming_the_forms_it_has():
+    import pytest
+
+    from endocal.errors import ModelError
+    from endocal.models.effects import make_effect
+
+    assert make_effect("deadzone:tip").label == "deadzone:tip" and make_effect("rate:friction").prefix == "rate_friction"
+    with pytest.raises(ModelError, match=r"^effect 'deadzone:foo': write deadzone \(.*\) or deadzone:tip \("):
+        make_effect("deadzone:foo")
+    with pytest.raises(ModelError, match=r"^effect 'rate:fast': write rate \(.*\) or rate:friction \("):
+        make_effect("rate:fast")
