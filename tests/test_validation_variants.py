@@ -5,19 +5,20 @@ prefer them."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from endocal.errors import ModelError
 from endocal.models import make_model
-from endocal.models.effects import EFFECTS
+from endocal.models.effects import EFFECTS, make_effect
+from endocal.validation.ambiguity import plain_first
 from endocal.validation.candidates import candidate_effects
+from endocal.validation.suspects import Suspect
 from tests.test_models_boucwen import _speed_record
 
 
 def test_an_effects_other_form_ranks_after_its_plain_form_unless_the_records_prefer_it():
     """`deadzone:tip` before `deadzone` by a gain the paired test cannot tell from chance: the plain form goes
     first. Where the records prefer the variant (every block's error lower), it stays first."""
-    from endocal.validation.ambiguity import plain_first
-    from endocal.validation.suspects import Suspect
-
     rng = np.random.default_rng(0)
     base = rng.standard_normal(4000)
 
@@ -42,18 +43,12 @@ def test_every_variant_is_a_candidate_where_the_base_can_carry_it():
     for base in ("pi", "dahl"):
         model = make_model(base, axis="ap").fit(d)
         tested, _ = candidate_effects(model, d, None, None, [], train=d, rolling=False)
-        wanted = {v for cls in EFFECTS.values() for v in cls.variants if not model.refuses(EFFECTS[v.partition(":")[0]]
-                                                                                            .from_argument(v.partition(":")[2]))}
+        wanted = {v for cls in EFFECTS.values() for v in cls.variants if not model.refuses(make_effect(v))}
         assert wanted <= set(tested), (base, tested)
         assert ("rate:friction" in tested) is (base == "dahl")
 
 
 def test_a_form_no_effect_has_is_refused_naming_the_forms_it_has():
-    import pytest
-
-    from endocal.errors import ModelError
-    from endocal.models.effects import make_effect
-
     assert make_effect("deadzone:tip").label == "deadzone:tip" and make_effect("rate:friction").prefix == "rate_friction"
     with pytest.raises(ModelError, match=r"^effect 'deadzone:foo': write deadzone \(.*\) or deadzone:tip \("):
         make_effect("deadzone:foo")
