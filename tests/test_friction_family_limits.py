@@ -110,8 +110,8 @@ def test_a_friction_growing_with_speed_has_no_unique_command_for_an_angle_at_spe
     """Why `rate:friction` has no inverse. Its element's bound follows the knob's speed over each step, so within one
     sample a knob that slows lets the bound fall below the friction held, and the element slips: the tip jumps
     ahead. On the fitted model, the angle a sample reaches as a function of its command (the state before it given)
-    rises monotonically while the knob moves slowly (20 deg/s), and does not once it slides fast (above about
-    90 deg/s on this plant): there one angle is reached by several commands, and no sample-by-sample inverse is
+    rises monotonically while the knob moves slowly (20 deg/s), and does not once it slides fast (by 90 deg/s on
+    this plant, 2026-11-29; the test checks 168 deg/s): there one angle is reached by several commands, and no sample-by-sample inverse is
     unique. (Without the speed dependence the map is monotone wherever the base's sweep check passes.)"""
     from endocal.models._smooth_friction import _rescaled, scaled_friction_states, speed_factors, state_step
 

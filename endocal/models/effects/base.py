@@ -100,6 +100,10 @@ class Effect(ABC):
     #: the measured angle (deg, (n,)) of ``data.meas_deg`` with this effect added, for a simulator
     #: that hides a user's effect in a record (defined by subclasses that can; absent otherwise)
     simulate = None
+    #: optional (absent otherwise): ``friction_speed_gain(self, p) -> float``, ``gamma`` of an effect that scales the
+    #: base's friction bound by ``1 + gamma |dv/dt|`` instead of transforming the command (``rate:friction``). Only a
+    #: base with one friction state carries it (``HysteresisModel.friction_state``; the others refuse it in one line),
+    #: and the fit then differentiates numerically.
 
     @property
     def prefix(self) -> str:

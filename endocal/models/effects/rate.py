@@ -47,11 +47,11 @@ a stronger friction instead holds more of the same exponential. Written on the b
 with the lag ``f w`` kept when the bound changes, clipped when it falls below (the element slips):
 :func:`endocal.models._smooth_friction.scaled_friction_states`. On the speed ladder `--next` designs,
 the Bouc-Wen plant with friction growing with speed is fitted by ``bouc-wen`` with ``delay``,
-``envelope`` and ``rate:friction`` at 1.16 times the noise, and with ``rate`` at 3.2
+``envelope`` and ``rate:friction`` at 1.16 times the noise, and with ``rate`` above 3
 (tests/test_friction_family_limits.py).
 
 It has no inverse. Within one sample, a knob that slows lowers the bound below the friction held, and
-the element slips: the tip jumps ahead. So once the element slides fast (above about 90 deg/s on the
+the element slips: the tip jumps ahead. So once the element slides fast (by 90 deg/s on the
 Bouc-Wen plant's ladder), the angle a sample reaches is not monotone in its command: one angle is
 reached by several commands, and no sample-by-sample inverse is unique
 (tests/test_friction_family_limits.py). A model with ``rate:friction`` predicts and validates;
