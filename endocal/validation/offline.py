@@ -27,7 +27,7 @@ from endocal.validation.folds import check_cv_data, fold_bounds, heldout_errors
 from endocal.validation.parallel import one_blas_thread
 from endocal.validation.predict import predict_errors, predict_extrapolated, predict_scored
 from endocal.validation.scan import MAX_SCAN_SAMPLES, scan_effects, scan_split, scan_stride, split_errors
-from endocal.validation.structure import SCAN_FTOL, effect_labels, fitted_on
+from endocal.validation.structure import QUICK_FIT, effect_labels, fitted_on
 from endocal.validation.suspects import ScanResult
 from endocal.validation.shift import (RecordShift, covariate_changes, covariates_held, moving_speed_dps,
                                      record_shift)
@@ -514,27 +514,31 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
         check_columns(est, own, what="the estimation data")
 
     pred, beyond, starts = predict_scored(model, data)
-    metrics = error_metrics(data.meas_deg, pred, n_boot=n_boot, seed=seed)
-    regimes = error_by_regime(data, pred, seed=seed)
-    load_cols = list(dict.fromkeys([*(load_columns or []), *load_candidates(data, axes_all)[0]]))
-    resid = residual_tests(data, data.meas_deg - pred, alpha=alpha, load_columns=load_cols)
-    loops = minor_loops(model, data, data.meas_deg - pred)
-    notes = [slow_clock(sum(d["n_samples"] for d in info), sum(d.get("duration_s") or 0.0 for d in info)),
-             val_glitches, cut_start(data, data.meas_deg - pred, starts=starts),
-             Message(loops.note, "minor-loops") if loops and loops.note else ""]
+    own: dict = {}
+
+    def score_own() -> None:
+        """The model's own scores, worked out in this process while the scan's candidates fit on the other cores."""
+        load_cols = list(dict.fromkeys([*(load_columns or []), *load_candidates(data, axes_all)[0]]))
+        own.update(metrics=error_metrics(data.meas_deg, pred, n_boot=n_boot, seed=seed),
+                   regimes=error_by_regime(data, pred, seed=seed),
+                   resid=residual_tests(data, data.meas_deg - pred, alpha=alpha, load_columns=load_cols),
+                   loops=minor_loops(model, data, data.meas_deg - pred))
+
+    in_sample = []
     if est is not None:
         same = {d["sha256"] for d in est_info if d["sha256"]} & {d["sha256"] for d in info if d["sha256"]}
         if same:
-            notes.append(Message("the estimation data includes the record validated here: the scores are in-sample "
-                                 "and flatter the model; validate on a record the model was not fitted on",
-                                 "in-sample"))
+            in_sample.append(Message("the estimation data includes the record validated here: the scores are "
+                                     "in-sample and flatter the model; validate on a record the model was not fitted "
+                                     "on", "in-sample"))
             # the refit is fitted on the validated record too: not under the name a refit on
             # estimation data alone would take (that model, if made, is the one to keep)
             refit_suffix = refit_suffix or "-insample"
         scan = scan_split(model, est, data, alpha=alpha, min_gain_pct=min_gain_pct, load_columns=load_columns,
                           bending_axes=axes_all, max_samples=max_scan_samples, data_paths=list(train_paths),
                           model_path=model_path, planes_path=planes_path,
-                          scheme_reason=scheme_reason or "estimation data given", refit_suffix=refit_suffix)
+                          scheme_reason=scheme_reason or "estimation data given", refit_suffix=refit_suffix,
+                          meanwhile=score_own)
     else:
         reason = scheme_reason or "no separate estimation data"
         try:
@@ -548,7 +552,13 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
             scan = scan_effects(model, data, folds=folds, alpha=alpha, min_gain_pct=min_gain_pct,
                                 load_columns=load_columns, bending_axes=axes_all, max_samples=max_scan_samples,
                                 data_paths=paths, model_path=model_path, planes_path=planes_path,
-                                scheme_reason=reason)
+                                scheme_reason=reason, meanwhile=score_own)
+    if not own:  # no scan ran (or none ran it)
+        score_own()
+    metrics, regimes, resid, loops = own["metrics"], own["regimes"], own["resid"], own["loops"]
+    notes = [slow_clock(sum(d["n_samples"] for d in info), sum(d.get("duration_s") or 0.0 for d in info)),
+             val_glitches, cut_start(data, data.meas_deg - pred, starts=starts),
+             Message(loops.note, "minor-loops") if loops and loops.note else "", *in_sample]
     if beyond:
         lo, hi = model.cmd_range_deg_
         notes.append(Message(f"{beyond} of {data.n_samples} samples command beyond the model's fitted range "
@@ -580,7 +590,7 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
             else:
                 d = data.decimate(stride) if stride > 1 else data
                 old_err, _ = heldout_errors(compare, effect_labels(compare), d, fold_bounds(d.n_samples, folds),
-                                            SCAN_FTOL)  # as the scan's folds, its baseline
+                                            QUICK_FIT)  # as the scan's folds, its baseline
         comp = Comparison(
             old_label=model_label(compare), new_label=model_label(model),
             old_rmse_deg=float(np.sqrt(np.mean((old_pred - data.meas_deg) ** 2))), new_rmse_deg=metrics.rmse_deg,

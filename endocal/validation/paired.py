@@ -44,9 +44,16 @@ def paired_test(err_base: np.ndarray, err_cand: np.ndarray) -> tuple[float, int]
     means = d[: nb * L].reshape(nb, L).mean(axis=1)
     if nb < 2 or not np.any(means):
         return 1.0, nb
-    from scipy.stats import wilcoxon  # here: validate's scan never calls it, and scipy.stats takes 0.2 s to import
+    return float(import_paired_test()(means, alternative="greater").pvalue), nb
 
-    return float(wilcoxon(means, alternative="greater").pvalue), nb
+
+def import_paired_test():
+    """:func:`scipy.stats.wilcoxon`, imported on first use: scipy.stats takes 0.27 s to import, which the
+    split scan spends while its candidates fit (:func:`~endocal.validation.scan.scan_split`) and most
+    commands never."""
+    from scipy.stats import wilcoxon
+
+    return wilcoxon
 
 
 def holm(p: Sequence[float]) -> np.ndarray:

@@ -49,7 +49,8 @@ def _run(i: int) -> Any:
     return _call(fn, items[i])
 
 
-def map_jobs(fn: Callable[[Any], Any], items: Sequence[Any], jobs: int | None = None) -> list[Any]:
+def map_jobs(fn: Callable[[Any], Any], items: Sequence[Any], jobs: int | None = None,
+             meanwhile: Callable[[], Any] | None = None) -> list[Any]:
     """``[fn(x) for x in items]`` over forked worker processes, in order.
 
     An :class:`~endocal.errors.EndocalError` raised by a job is returned in its place (the
@@ -63,6 +64,9 @@ def map_jobs(fn: Callable[[Any], Any], items: Sequence[Any], jobs: int | None = 
         One item per job.
     jobs : int, optional
         Processes (default: :func:`n_jobs`).
+    meanwhile : callable, optional
+        Work of this process's own, run while the workers fit (after they are forked, so they do not
+        see it), instead of this process waiting idle; run before the jobs where they run here.
 
     Returns
     -------
@@ -72,11 +76,16 @@ def map_jobs(fn: Callable[[Any], Any], items: Sequence[Any], jobs: int | None = 
     global _TASK
     n = n_jobs(len(items), jobs)
     if n <= 1 or "fork" not in multiprocessing.get_all_start_methods():
+        if meanwhile is not None:
+            meanwhile()
         return [_call(fn, x) for x in items]
     _TASK = (fn, items)
     try:
         with multiprocessing.get_context("fork").Pool(n) as pool:
-            return pool.map(_run, range(len(items)), chunksize=1)
+            pending = pool.map_async(_run, range(len(items)), chunksize=1)
+            if meanwhile is not None:
+                meanwhile()
+            return pending.get()
     finally:
         _TASK = None
 

@@ -9,25 +9,35 @@ model's own values, :func:`fitted_on` says when no refit is needed at all.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from types import MappingProxyType
 
 from endocal.models import HysteresisData, make_model
 from endocal.models.base import HysteresisModel
 
 #: The stopping rule of the fits validation makes on a subsample of the estimation data (candidates,
-#: bases, expected ranges: :func:`scan_ftol`) and on rolling-origin folds: stop when a step lowers the
+#: bases, expected ranges: :func:`scan_fit`) and on rolling-origin folds: stop when a step lowers the
 #: cost by less than 1e-5 of itself. The scan decides at 10 % of the RMSE; the model's own fit keeps
 #: models.base.FTOL (1e-7). On the demo's records (scripts/demo.sh, pi + envelope, 6 candidates) the
 #: candidates ended within 0.13 % of their cost at FTOL (0.06 % of the RMSE) with 1.5-15 times fewer
 #: evaluations: several crawl along a shallow valley (eq. 8's beta) for hundreds of steps that each
 #: lower the cost by under 1e-5 (bench/bench_loop.py).
 SCAN_FTOL = 1e-5
+#: Samples those fits screen a new effect's start candidates on (``HysteresisModel.fit``'s ``screen_samples``;
+#: a fit's own is models.base.SUBSAMPLE_SAMPLES, 4000). The scan's estimation data are already a subsample
+#: of at most 5000 (scan.MAX_SCAN_SAMPLES); screening on half of it picks among starts that differ by a
+#: delay of 0.1 s or a play of a few degrees, which 2000 samples still resolve. On the demo's records
+#: (bench/bench_loop.py, 2026-11-29) every candidate's validation gain moved by at most 0.3 points and
+#: the candidates' fits took a fifth less time.
+SCAN_SCREEN_SAMPLES = 2000
+#: The keywords of those quick fits (:meth:`HysteresisModel.fit`).
+QUICK_FIT = MappingProxyType({"ftol": SCAN_FTOL, "screen_samples": SCAN_SCREEN_SAMPLES})
 
 
-def scan_ftol(stride: int) -> float | None:
-    """The stopping rule of a scan's fits on 1 estimation sample in ``stride``: :data:`SCAN_FTOL` where it
-    subsamples (the printed refit, on every sample, then comes with the range to expect), else None, the
+def scan_fit(stride: int) -> dict:
+    """The fit keywords of a scan's fits on 1 estimation sample in ``stride``: :data:`QUICK_FIT` where it
+    subsamples (the printed refit, on every sample, then comes with the range to expect), else none, the
     fit's own: on every sample the printed refit is the very fit the scan scored (to 1e-6)."""
-    return SCAN_FTOL if stride > 1 else None
+    return dict(QUICK_FIT) if stride > 1 else {}
 
 
 def resolved_settings(model: HysteresisModel) -> dict:
@@ -85,12 +95,12 @@ def fitted_on(model: HysteresisModel, data: HysteresisData) -> bool:
 
 
 def split_fit(model: HysteresisModel, effects: Sequence[str], train: HysteresisData, stride: int = 1,
-              ftol: float | None = None) -> HysteresisModel:
+              fit_kw: dict | None = None) -> HysteresisModel:
     """``base + effects`` (with ``model``'s settings) fitted on ``train``, every ``stride``-th sample.
 
     The effects ``model`` already has start from its fitted values (it was fitted on this
-    estimation data), so only a new effect searches its start candidates. ``ftol``: the fit's stopping
-    rule (:func:`scan_ftol`; None: the fit's own).
+    estimation data), so only a new effect searches its start candidates. ``fit_kw``: the fit's stopping
+    rule and start screen (:func:`scan_fit`; none: the fit's own).
     """
     dt = train.decimate(stride) if stride > 1 else train
-    return template(model, effects).fit_from(model, dt, ftol=ftol)
+    return template(model, effects).fit_from(model, dt, **(fit_kw or {}))
