@@ -1,3 +1,3 @@
-from endocal.cli import main
+from endocal.cli import run
 
-main()
+run()
