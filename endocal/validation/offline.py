@@ -553,7 +553,7 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
                                 load_columns=load_columns, bending_axes=axes_all, max_samples=max_scan_samples,
                                 data_paths=paths, model_path=model_path, planes_path=planes_path,
                                 scheme_reason=reason, meanwhile=score_own)
-    if not own:  # no scan ran (or none ran it)
+    if not own:  # no scan ran to work them out meanwhile
         score_own()
     metrics, regimes, resid, loops = own["metrics"], own["regimes"], own["resid"], own["loops"]
     notes = [slow_clock(sum(d["n_samples"] for d in info), sum(d.get("duration_s") or 0.0 for d in info)),
