@@ -69,8 +69,6 @@ SUBSAMPLE_SAMPLES = 4000
 FTOL = 1e-7
 #: the stopping rule of the fit running in this context (:meth:`HysteresisModel.fit`'s ``ftol``)
 _FTOL_NOW: contextvars.ContextVar[float] = contextvars.ContextVar("endocal_fit_ftol", default=FTOL)
-#: the samples the running fit screens start candidates on (:meth:`HysteresisModel.fit`'s ``screen_samples``)
-_SCREEN_NOW: contextvars.ContextVar[int] = contextvars.ContextVar("endocal_fit_screen", default=SUBSAMPLE_SAMPLES)
 
 
 #: What drives each command unit names, for messages.
@@ -368,7 +366,7 @@ class HysteresisModel(ABC):
 
     # ------------------------------------------------------------------ fit
     def fit(self, data, meas_deg=None, *, t_s=None, extras=None, max_nfev: int | None = None,
-            warm_start: dict | None = None, ftol: float | None = None, screen_samples: int | None = None):
+            warm_start: dict | None = None, ftol: float | None = None):
         """Fit the base and all effect terms jointly by least squares.
 
         Parameters
@@ -394,9 +392,6 @@ class HysteresisModel(ABC):
             Relative cost decrease per step under which the fit stops (default :data:`FTOL`).
             ``validate`` fits its candidates on a subsample with a looser one
             (``validation.structure.SCAN_FTOL``): they are compared at 10 % of the RMSE, not at 1e-7.
-        screen_samples : int, optional
-            Samples the start candidates are screened on (default :data:`SUBSAMPLE_SAMPLES`). ``validate``'s
-            candidates, already fitted on a subsample, screen on fewer (``validation.structure.SCAN_SCREEN_SAMPLES``).
 
         Returns
         -------
@@ -413,21 +408,15 @@ class HysteresisModel(ABC):
         # only contend with each other there (10-20x slower on a loaded machine), so one.
         if ftol is not None and not (isinstance(ftol, (float, int)) and 0.0 < ftol < 1.0):
             raise ModelError(f"ftol must be a number between 0 and 1 (a relative cost change per step), got {ftol!r}")
-        if screen_samples is not None and not (isinstance(screen_samples, int) and screen_samples >= 100):
-            raise ModelError(f"screen_samples must be a whole number of at least 100, got {screen_samples!r}")
         token = _FTOL_NOW.set(float(ftol)) if ftol is not None else None
-        screen = _SCREEN_NOW.set(screen_samples) if screen_samples is not None else None
         try:
             with threadpool_limits(limits=1, user_api="blas"):
                 return self._fit(data, meas_deg, t_s=t_s, extras=extras, max_nfev=max_nfev, warm_start=warm_start)
         finally:
             if token is not None:
                 _FTOL_NOW.reset(token)
-            if screen is not None:
-                _SCREEN_NOW.reset(screen)
 
-    def fit_from(self, start: HysteresisModel, data, *, max_nfev: int | None = None, ftol: float | None = None,
-                 screen_samples: int | None = None):
+    def fit_from(self, start: HysteresisModel, data, *, max_nfev: int | None = None, ftol: float | None = None):
         """Fit starting from ``start``, a fitted model with some of these effects (``--start-from``).
 
         The effects ``start`` has begin at its values (:meth:`fit`'s ``warm_start``). When this model
@@ -444,11 +433,11 @@ class HysteresisModel(ABC):
             A fitted model of the same base (validate's model, when it scans candidates).
         data : HysteresisData or list of them
             What to fit, as :meth:`fit` takes it.
-        max_nfev, ftol, screen_samples : optional
+        max_nfev, ftol : optional
             As :meth:`fit` takes them.
         """
         start.check_drive_unit(as_data(data)[0], "the data to fit")
-        self.fit(data, max_nfev=max_nfev, warm_start=dict(start.params_), ftol=ftol, screen_samples=screen_samples)
+        self.fit(data, max_nfev=max_nfev, warm_start=dict(start.params_), ftol=ftol)
         if not {e.label for e in start.effects_} <= {e.label for e in self.effects_}:
             return self  # an effect dropped: this model does not nest start, and may well fit worse
         d, _ = as_data(data)
@@ -462,7 +451,7 @@ class HysteresisModel(ABC):
         if not warm_rmse > start_rmse * (1.0 + NESTED_TOL):
             return self
         warm = dict(self.__dict__)
-        self.fit(data, max_nfev=max_nfev, ftol=ftol, screen_samples=screen_samples)
+        self.fit(data, max_nfev=max_nfev, ftol=ftol)
         if not self.fit_report_.rmse_deg < warm_rmse:
             self.__dict__.update(warm)
             return self
@@ -510,7 +499,7 @@ class HysteresisModel(ABC):
             if known and all(n in warm for n in known):
                 overrides.update({n: float(warm[n]) for n in known})
         start, structure, owners = self._start(dd, effects, fixed, overrides, initials)
-        ds = _subsample(dd, _SCREEN_NOW.get())
+        ds = _subsample(dd)
         for e in effects:
             if not hasattr(e, "start_candidates") or all(n in overrides for n in e.full_names() if n not in fixed):
                 continue
@@ -1128,10 +1117,10 @@ def _columns(block: np.ndarray) -> np.ndarray:
     return block[:, None] if np.ndim(block) == 1 else block
 
 
-def _subsample(d: HysteresisData, samples: int = SUBSAMPLE_SAMPLES) -> HysteresisData:
-    """Every k-th sample of a record over 2 x ``samples`` long, about ``samples`` of them (the knob moves
-    little between samples, so the loops keep their shape); else ``d``."""
-    return d.decimate(d.n_samples // samples) if d.n_samples >= 2 * samples else d
+def _subsample(d: HysteresisData) -> HysteresisData:
+    """Every k-th sample of a record over 2 x SUBSAMPLE_SAMPLES long, about SUBSAMPLE_SAMPLES of them
+    (the knob moves little between samples, so the loops keep their shape); else ``d``."""
+    return d.decimate(d.n_samples // SUBSAMPLE_SAMPLES) if d.n_samples >= 2 * SUBSAMPLE_SAMPLES else d
 
 
 def _no_better_than_a_line(d: HysteresisData, rmse_deg: float, base: str) -> list[str]:
