@@ -17,11 +17,11 @@ from endocal.models.base import HysteresisModel
 #: The stopping rule of the fits validation makes on a subsample of the estimation data (candidates,
 #: bases, expected ranges: :func:`scan_fit`) and on rolling-origin folds: stop when a step lowers the
 #: cost by less than 1e-4 of itself. The scan decides at 10 % of the RMSE; the model's own fit keeps
-#: models.base.FTOL (1e-7). On the demo's records (scripts/demo.sh, pi + envelope, 7 candidates, started
-#: from their screened starts) the candidates ended within 0.34 % of their training RMSE at FTOL and
-#: within 0.63 % of its validation RMSE, in 4 to 39 evaluations where FTOL takes 138 to 598: they crawl
-#: along shallow valleys (eq. 8's beta) for hundreds of steps that each lower the cost by under 1e-4
-#: (tests/test_validation_quick_fit.py holds them within 1 % and 2 %; bench/bench_loop.py).
+#: models.base.FTOL (1e-7). On the demo's records (scripts/demo.sh, pi + envelope, 7 candidates) the
+#: candidates ended within 0.42 % of their training RMSE at FTOL and within 1.5 % of its validation RMSE,
+#: in 7 to 39 evaluations where FTOL takes 78 to 584: they crawl along shallow valleys (eq. 8's beta) for
+#: hundreds of steps that each lower the cost by under 1e-4 (tests/test_validation_quick_fit.py holds
+#: them within 1 % and 2 % on the README's records; bench/bench_loop.py).
 SCAN_FTOL = 1e-4
 #: The keywords of those quick fits (:meth:`HysteresisModel.fit`). Their start candidates are screened
 #: as ``fit`` screens them: screened on 2 000 samples instead of 4 000 (16.7 Hz instead of 33 Hz on the
