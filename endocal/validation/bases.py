@@ -160,8 +160,8 @@ def _warm(model: HysteresisModel) -> dict:
 
 def base_fit(model: HysteresisModel, base: str, train: HysteresisData, fit_kw: dict | None = None) -> HysteresisModel:
     """``base`` with ``model``'s effects fitted on ``train``, its effects starting from ``model``'s values;
-    continued beyond its fitted range as validation scores it. ``fit_kw``: the fit's stopping rule and start
-    screen (:func:`~endocal.validation.structure.scan_fit`; none: the fit's own)."""
+    continued beyond its fitted range as validation scores it. ``fit_kw``: the fit's keywords, its
+    stopping rule (:func:`~endocal.validation.structure.scan_fit`; none: the fit's own)."""
     proxy = _proxy(model, base)
     m = make_model(base, effect_labels(model), axis=model.axis, fixed=proxy.fixed, out_of_range="extrapolate")
     return m.fit(train, warm_start=_warm(model), **(fit_kw or {}))

@@ -135,8 +135,8 @@ def fold_errors(model: HysteresisModel, effects: Sequence[str], data: Hysteresis
     """Held-out errors ``pred - meas`` (deg) of ``base + effects`` on one rolling-origin fold, and its fitted model.
 
     The model is fitted on ``[0, train_end)`` and run over ``[0, test_end)`` from the record's
-    start; the errors are those of ``[train_end, test_end)``. ``fit_kw``: the fit's stopping rule and start
-    screen (the scan's :data:`~endocal.validation.structure.QUICK_FIT`; none, the fit's own, as the report's
+    start; the errors are those of ``[train_end, test_end)``. ``fit_kw``: the fit's keywords, its stopping
+    rule (the scan's :data:`~endocal.validation.structure.QUICK_FIT`; none, the fit's own, as the report's
     ladder and its definition by hand).
     """
     train, evaluate, held = fold_split(data, bound)
@@ -159,7 +159,7 @@ def heldout_errors(model: HysteresisModel, effects: Sequence[str], data: Hystere
     bounds : list of (train_end, test_end)
         From :func:`fold_bounds`.
     fit_kw : dict, optional
-        The fits' stopping rule and start screen (:func:`fold_errors`).
+        The fits' keywords, their stopping rule (:func:`fold_errors`).
 
     Returns
     -------

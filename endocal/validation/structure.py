@@ -24,8 +24,8 @@ from endocal.models.base import HysteresisModel
 #: them within 1 % and 2 % on the README's records; bench/bench_loop.py).
 SCAN_FTOL = 1e-4
 #: The keywords of those quick fits (:meth:`HysteresisModel.fit`). Their start candidates are screened
-#: as ``fit`` screens them: screened on 2 000 samples instead of 4 000 (16.7 Hz instead of 33 Hz on the
-#: README's records), a 0.05 s `delay` fell into another basin, -29 % where it gains -34 %, to save 0.35 s.
+#: as ``fit`` screens them (on 4 000 samples): screened on 2 000 (16.7 Hz instead of 33 Hz on the README's
+#: records), a 0.05 s `delay` fell into another basin, -29 % where it gains -34 %, to save 0.35 s.
 QUICK_FIT = MappingProxyType({"ftol": SCAN_FTOL})
 
 
@@ -95,8 +95,8 @@ def split_fit(model: HysteresisModel, effects: Sequence[str], train: HysteresisD
     """``base + effects`` (with ``model``'s settings) fitted on ``train``, every ``stride``-th sample.
 
     The effects ``model`` already has start from its fitted values (it was fitted on this
-    estimation data), so only a new effect searches its start candidates. ``fit_kw``: the fit's stopping
-    rule and start screen (:func:`scan_fit`; none: the fit's own).
+    estimation data), so only a new effect searches its start candidates. ``fit_kw``: the fit's keywords,
+    its stopping rule (:func:`scan_fit`; none: the fit's own).
     """
     dt = train.decimate(stride) if stride > 1 else train
     return template(model, effects).fit_from(model, dt, **(fit_kw or {}))
