@@ -1,7 +1,7 @@
 """The scan's quick fits end where a fit run to convergence ends, within a tenth of the gain bar.
 
 `validate` fits every candidate effect on a subsample of the estimation data with a looser stopping
-rule than ``fit`` uses (``validation.structure.QUICK_FIT``: stop when a step lowers the cost by less
+rule than ``fit`` uses (``validation.structure.SCAN_FTOL``: stop when a step lowers the cost by less
 than 1e-4 of itself, not 1e-7). The scan decides at a 10 % gain of the validation RMSE, so a quick fit
 may end off the converged one by a small part of that: here at most 1 % of the training RMSE and 2 %
 of the validation RMSE, a fifth of the bar, on the README's records (a damped sine to fit, a random
@@ -24,7 +24,7 @@ from endocal.runs.aligned import load_aligned
 from endocal.validation.data import axis_data
 from endocal.validation.predict import predict_errors
 from endocal.validation.scan import scan_stride
-from endocal.validation.structure import QUICK_FIT, effect_labels, split_fit
+from endocal.validation.structure import SCAN_FTOL, effect_labels, split_fit
 
 TEE = PRESETS["tee"]
 
@@ -56,8 +56,8 @@ def test_a_quick_candidate_fit_ends_near_the_converged_one(readme_records, start
     models, dt, val = readme_records
     model = models[start]
     effects = effect_labels(model) + [effect]
-    quick = split_fit(model, effects, dt, fit_kw=QUICK_FIT)
-    full = split_fit(model, effects, dt, fit_kw={"ftol": FTOL})
+    quick = split_fit(model, effects, dt, ftol=SCAN_FTOL)
+    full = split_fit(model, effects, dt, ftol=FTOL)
     q, f = quick.fit_report_, full.fit_report_
     assert q.nfev < f.nfev
     assert q.rmse_deg == pytest.approx(f.rmse_deg, rel=0.01)

@@ -41,7 +41,7 @@ from endocal.validation.parallel import map_jobs
 from endocal.validation.predict import predict_errors
 from endocal.validation.refit import Refit, refit_path
 from endocal.validation.regimes import turning_points
-from endocal.validation.structure import QUICK_FIT, effect_labels
+from endocal.validation.structure import SCAN_FTOL, effect_labels
 from endocal.validation.units import Units
 
 #: A half-cycle shorter than this share of its record's span is a small reversal inside the loop.
@@ -158,19 +158,19 @@ def _warm(model: HysteresisModel) -> dict:
     return {k: v for k, v in model.params_.items() if not k.startswith(own)}
 
 
-def base_fit(model: HysteresisModel, base: str, train: HysteresisData, fit_kw: dict | None = None) -> HysteresisModel:
+def base_fit(model: HysteresisModel, base: str, train: HysteresisData, ftol: float | None = None) -> HysteresisModel:
     """``base`` with ``model``'s effects fitted on ``train``, its effects starting from ``model``'s values;
-    continued beyond its fitted range as validation scores it. ``fit_kw``: the fit's keywords, its
-    stopping rule (:func:`~endocal.validation.structure.scan_fit`; none: the fit's own)."""
+    continued beyond its fitted range as validation scores it. ``ftol``: the fit's stopping rule
+    (:func:`~endocal.validation.structure.scan_ftol`; None: the fit's own)."""
     proxy = _proxy(model, base)
     m = make_model(base, effect_labels(model), axis=model.axis, fixed=proxy.fixed, out_of_range="extrapolate")
-    return m.fit(train, warm_start=_warm(model), **(fit_kw or {}))
+    return m.fit(train, warm_start=_warm(model), ftol=ftol)
 
 
 def base_errors(model: HysteresisModel, base: str, train: HysteresisData, val: HysteresisData,
-                fit_kw: dict | None = None) -> np.ndarray:
+                ftol: float | None = None) -> np.ndarray:
     """Validation errors ``pred - meas`` (deg) on ``val`` of ``base`` with ``model``'s effects fitted on ``train``."""
-    return predict_errors(base_fit(model, base, train, fit_kw), val)
+    return predict_errors(base_fit(model, base, train, ftol), val)
 
 
 def _refit(model: HysteresisModel, base: str, data_paths: Sequence[str], model_path: str | None,
@@ -238,7 +238,7 @@ def scan_bases_rolling(model: HysteresisModel, data: HysteresisData, bounds: Seq
 
     def one(b: str):
         proxy = _proxy(model, b)
-        first = fold_errors(proxy, have, data, bounds[0], QUICK_FIT)
+        first = fold_errors(proxy, have, data, bounds[0], SCAN_FTOL)
         gain = 100.0 * (1.0 - first[1].fit_report_.rmse_deg / base_train_rmse) if base_train_rmse > 0 else 0.0
         if gain < screen_pct * min_gain_pct:
             e0 = first[0]
@@ -246,7 +246,7 @@ def scan_bases_rolling(model: HysteresisModel, data: HysteresisData, bounds: Seq
             rmse0 = float(np.sqrt(np.mean(e0**2)))
             rmse_base = float(np.sqrt(np.mean(err_base**2)))
             return b, (rmse0 * rmse_base / base0 if base0 > 0 else rmse0), 1.0, True
-        err = np.concatenate([first[0]] + [fold_errors(proxy, have, data, bd, QUICK_FIT)[0] for bd in bounds[1:]])
+        err = np.concatenate([first[0]] + [fold_errors(proxy, have, data, bd, SCAN_FTOL)[0] for bd in bounds[1:]])
         return b, float(np.sqrt(np.mean(err**2))), paired_test(err_base, err)[0], False
 
     bases = other_bases(model)

@@ -131,22 +131,22 @@ def still_blocks(data: HysteresisData, bounds: Sequence[tuple[int, int]]) -> int
 
 
 def fold_errors(model: HysteresisModel, effects: Sequence[str], data: HysteresisData,
-                bound: tuple[int, int], fit_kw: dict | None = None) -> tuple[np.ndarray, HysteresisModel]:
+                bound: tuple[int, int], ftol: float | None = None) -> tuple[np.ndarray, HysteresisModel]:
     """Held-out errors ``pred - meas`` (deg) of ``base + effects`` on one rolling-origin fold, and its fitted model.
 
     The model is fitted on ``[0, train_end)`` and run over ``[0, test_end)`` from the record's
-    start; the errors are those of ``[train_end, test_end)``. ``fit_kw``: the fit's keywords, its stopping
-    rule (the scan's :data:`~endocal.validation.structure.QUICK_FIT`; none, the fit's own, as the report's
-    ladder and its definition by hand).
+    start; the errors are those of ``[train_end, test_end)``. ``ftol``: the fit's stopping rule (the
+    scan's :data:`~endocal.validation.structure.SCAN_FTOL`; None, the fit's own, as the report's ladder
+    and its definition by hand).
     """
     train, evaluate, held = fold_split(data, bound)
-    m = template(model, effects).fit(train, **(fit_kw or {}))
+    m = template(model, effects).fit(train, ftol=ftol)
     pred = m.predict(evaluate)  # a template extrapolates beyond its fitted range
     return pred[held] - evaluate.meas_deg[held], m
 
 
 def heldout_errors(model: HysteresisModel, effects: Sequence[str], data: HysteresisData,
-                   bounds: Sequence[tuple[int, int]], fit_kw: dict | None = None) -> tuple[np.ndarray, list]:
+                   bounds: Sequence[tuple[int, int]], ftol: float | None = None) -> tuple[np.ndarray, list]:
     """Held-out errors ``pred - meas`` of ``base + effects`` on the rolling-origin folds.
 
     Parameters
@@ -158,8 +158,8 @@ def heldout_errors(model: HysteresisModel, effects: Sequence[str], data: Hystere
     data : HysteresisData
     bounds : list of (train_end, test_end)
         From :func:`fold_bounds`.
-    fit_kw : dict, optional
-        The fits' keywords, their stopping rule (:func:`fold_errors`).
+    ftol : float, optional
+        The fits' stopping rule (:func:`fold_errors`).
 
     Returns
     -------
@@ -168,5 +168,5 @@ def heldout_errors(model: HysteresisModel, effects: Sequence[str], data: Hystere
     fitted : list of HysteresisModel
         The model of each fold.
     """
-    out = [fold_errors(model, effects, data, bd, fit_kw) for bd in bounds]
+    out = [fold_errors(model, effects, data, bd, ftol) for bd in bounds]
     return np.concatenate([e for e, _ in out]), [m for _, m in out]

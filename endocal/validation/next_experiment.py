@@ -58,7 +58,7 @@ from endocal.validation.power import POWER, evidence_phrase, units_for_power
 from endocal.validation.regimes import turning_points
 from endocal.validation.predict import predict_errors
 from endocal.validation.scan import MAX_SCAN_SAMPLES, scan_stride
-from endocal.validation.structure import effect_labels, scan_fit, split_fit
+from endocal.validation.structure import effect_labels, scan_ftol, split_fit
 from endocal.validation.units import make_units
 
 #: Smallest amplitude (deg) a designed motion sweeps about its centre: a loop narrower than 10 deg
@@ -744,7 +744,7 @@ def _speed_segment(plan: Design, model, train, val, at_stake: dict, scan, notes,
     tops = {}
     for effect, (status, why, n, sized) in at_stake.items():
         try:
-            alt = split_fit(model, have + [effect], train, stride, scan_fit(stride))
+            alt = split_fit(model, have + [effect], train, stride, ftol=scan_ftol(stride))
         except ModelError as exc:
             tops[effect] = (v_cap, sized + f"; {effect} could not be fitted on the estimation data ({exc}), so the "
                             f"segment reaches {v_cap:.3g} deg/s, the most the probe's limits allow")

@@ -27,7 +27,7 @@ from endocal.validation.folds import check_cv_data, fold_bounds, heldout_errors
 from endocal.validation.parallel import one_blas_thread
 from endocal.validation.predict import predict_errors, predict_extrapolated, predict_scored
 from endocal.validation.scan import MAX_SCAN_SAMPLES, scan_effects, scan_split, scan_stride, split_errors
-from endocal.validation.structure import QUICK_FIT, effect_labels, fitted_on
+from endocal.validation.structure import SCAN_FTOL, effect_labels, fitted_on
 from endocal.validation.suspects import ScanResult
 from endocal.validation.shift import (RecordShift, covariate_changes, covariates_held, moving_speed_dps,
                                      record_shift)
@@ -590,7 +590,7 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
             else:
                 d = data.decimate(stride) if stride > 1 else data
                 old_err, _ = heldout_errors(compare, effect_labels(compare), d, fold_bounds(d.n_samples, folds),
-                                            QUICK_FIT)  # as the scan's folds, its baseline
+                                            SCAN_FTOL)  # as the scan's folds, its baseline
         comp = Comparison(
             old_label=model_label(compare), new_label=model_label(model),
             old_rmse_deg=float(np.sqrt(np.mean((old_pred - data.meas_deg) ** 2))), new_rmse_deg=metrics.rmse_deg,

@@ -46,7 +46,7 @@ from endocal.validation.power import estimate_power, evidence_phrase
 from endocal.validation.predict import predict_errors
 from endocal.validation.refit import suggest_refit
 from endocal.validation.regimes import turning_points
-from endocal.validation.structure import QUICK_FIT, effect_labels, fitted_on, scan_fit, split_fit, template
+from endocal.validation.structure import SCAN_FTOL, effect_labels, fitted_on, scan_ftol, split_fit, template
 from endocal.validation.suspects import ScanResult, Suspect
 from endocal.validation.units import make_units
 
@@ -89,10 +89,10 @@ _AT_BOUND = re.compile(r"sits at its (?:lower|upper) bound (\S+):")
 
 
 def _split_candidate(model: HysteresisModel, effects: Sequence[str], train: HysteresisData,
-                     val: HysteresisData, fit_kw: dict | None = None) -> tuple[np.ndarray, list[str]]:
-    """Validation errors of ``base + effects`` fitted on ``train`` (the fit's keywords ``fit_kw``: :func:`scan_fit`),
+                     val: HysteresisData, ftol: float | None = None) -> tuple[np.ndarray, list[str]]:
+    """Validation errors of ``base + effects`` fitted on ``train`` (stopping at ``ftol``: :func:`scan_ftol`),
     and the cautions about the effects ``model`` lacks (:attr:`Suspect.caution`)."""
-    m = split_fit(model, effects, train, fit_kw=fit_kw)
+    m = split_fit(model, effects, train, ftol=ftol)
     have = set(effect_labels(model))
     new = [e for e in m.effects_ if e.label not in have]
     prefixes = tuple(e.prefix + "_" for e in new)
@@ -118,7 +118,7 @@ def _without_own_share(m: HysteresisModel, new: list, val: HysteresisData) -> np
 def split_errors(model: HysteresisModel, effects: Sequence[str], train: HysteresisData, val: HysteresisData,
                  stride: int = 1) -> np.ndarray:
     """Validation errors ``pred - meas`` (deg) of ``base + effects`` fitted on ``train`` (every ``stride``-th sample)."""
-    return predict_errors(split_fit(model, effects, train, stride, scan_fit(stride)), val)
+    return predict_errors(split_fit(model, effects, train, stride, ftol=scan_ftol(stride)), val)
 
 
 def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisData, *, alpha: float = 0.05,
@@ -197,7 +197,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     # the other bases (scored after the effects) are fitted among the same jobs, so both cores stay busy
     bases_fitted = other_bases(model) if candidates is None else []
     structures = ([] if as_is else [have]) + [have + [c] for c in tested_cands]
-    quick = scan_fit(stride)
+    ftol = scan_ftol(stride)
 
     def own_work():  # while the candidates fit: the caller's, and the import the suspects' comparisons need
         if meanwhile is not None:
@@ -206,8 +206,8 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
             import_paired_test()
 
     with one_blas_thread():
-        results = map_jobs(lambda job: _split_candidate(model, job, dt, val, quick) if isinstance(job, list)
-                           else base_errors(model, job, dt, val, quick), structures + bases_fitted, jobs, own_work)
+        results = map_jobs(lambda job: _split_candidate(model, job, dt, val, ftol) if isinstance(job, list)
+                           else base_errors(model, job, dt, val, ftol), structures + bases_fitted, jobs, own_work)
     results, base_results = results[:len(structures)], results[len(structures):]
     if as_is:
         results = [(predict_errors(model, val), [], dict(model.params_))] + results
@@ -278,7 +278,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     # (a look-alike whose gain is borrowed is compared, never promoted)
     suspects, settled = settle_lookalikes(suspects, [s for s in tested if s.effect not in borrowed], errs, dt, val,
                                           units, alpha, min_gain_pct,
-                                          lambda effects: _split_candidate(model, effects, dt, val, quick)[0], have)
+                                          lambda effects: _split_candidate(model, effects, dt, val, ftol)[0], have)
     if stride > 1 and suspects:
         ranges = expected_ranges(model, [s.effect for s in suspects], train, val, stride,
                                  [s.rmse_heldout_deg for s in suspects], jobs,
@@ -338,9 +338,9 @@ def expected_ranges(model: HysteresisModel, effects: Sequence[str], train: Hyste
 
     def again_errors(k: int) -> np.ndarray:
         if starts[k]:
-            return predict_errors(template(model, have + [effects[k]]).fit(dt2, warm_start=starts[k], **QUICK_FIT),
+            return predict_errors(template(model, have + [effects[k]]).fit(dt2, warm_start=starts[k], ftol=SCAN_FTOL),
                                  val)
-        return _split_candidate(model, have + [effects[k]], dt2, val, QUICK_FIT)[0]
+        return _split_candidate(model, have + [effects[k]], dt2, val, SCAN_FTOL)[0]
 
     with one_blas_thread():
         again = map_jobs(again_errors, list(range(len(effects))), jobs)
@@ -435,7 +435,7 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
                                                  train=first_train, rolling=True)
 
     with one_blas_thread():
-        base_folds = map_jobs(lambda bd: fold_errors(model, have, d, bd, QUICK_FIT), bounds, jobs, meanwhile)
+        base_folds = map_jobs(lambda bd: fold_errors(model, have, d, bd, SCAN_FTOL), bounds, jobs, meanwhile)
         for f in base_folds:
             if isinstance(f, ModelError):
                 raise f
@@ -444,7 +444,7 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
         rmse_base = float(np.sqrt(np.mean(err_base**2)))
 
         def candidate(c: str):
-            first = fold_errors(model, have + [c], d, bounds[0], QUICK_FIT)
+            first = fold_errors(model, have + [c], d, bounds[0], SCAN_FTOL)
             train_gain = 100.0 * (1.0 - first[1].fit_report_.rmse_deg / base_train_rmse) if base_train_rmse > 0 else 0.0
             if train_gain < screen_pct * min_gain_pct:
                 # screened on its training fit alone: no held-out data was looked at to decide
@@ -452,7 +452,7 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
                 rmse0 = float(np.sqrt(np.mean(e0**2)))
                 base0 = float(np.sqrt(np.mean(err_base[:e0.size] ** 2)))
                 return (c, None, rmse0 * rmse_base / base0 if base0 > 0 else rmse0, 1.0, 0)
-            rest = [fold_errors(model, have + [c], d, bd, QUICK_FIT) for bd in bounds[1:]]
+            rest = [fold_errors(model, have + [c], d, bd, SCAN_FTOL) for bd in bounds[1:]]
             err = np.concatenate([first[0]] + [e for e, _ in rest])
             p, nb = paired_test(err_base, err)
             return (c, err, float(np.sqrt(np.mean(err**2))), p, nb)

@@ -9,31 +9,29 @@ model's own values, :func:`fitted_on` says when no refit is needed at all.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from types import MappingProxyType
 
 from endocal.models import HysteresisData, make_model
 from endocal.models.base import HysteresisModel
 
 #: The stopping rule of the fits validation makes on a subsample of the estimation data (candidates,
-#: bases, expected ranges: :func:`scan_fit`) and on rolling-origin folds: stop when a step lowers the
+#: bases, expected ranges: :func:`scan_ftol`) and on rolling-origin folds: stop when a step lowers the
 #: cost by less than 1e-4 of itself. The scan decides at 10 % of the RMSE; the model's own fit keeps
 #: models.base.FTOL (1e-7). On the demo's records (scripts/demo.sh, pi + envelope, 7 candidates) the
 #: candidates ended within 0.42 % of their training RMSE at FTOL and within 1.5 % of its validation RMSE,
 #: in 7 to 39 evaluations where FTOL takes 78 to 584: they crawl along shallow valleys (eq. 8's beta) for
 #: hundreds of steps that each lower the cost by under 1e-4 (tests/test_validation_quick_fit.py holds
 #: them within 1 % and 2 % on the README's records; bench/bench_loop.py).
+#: Their start candidates are screened as ``fit`` screens them (on 4 000 samples): screened on 2 000
+#: (16.7 Hz instead of 33 Hz on the README's records), a 0.05 s `delay` fell into another basin, -29 %
+#: where it gains -34 %, to save 0.35 s.
 SCAN_FTOL = 1e-4
-#: The keywords of those quick fits (:meth:`HysteresisModel.fit`). Their start candidates are screened
-#: as ``fit`` screens them (on 4 000 samples): screened on 2 000 (16.7 Hz instead of 33 Hz on the README's
-#: records), a 0.05 s `delay` fell into another basin, -29 % where it gains -34 %, to save 0.35 s.
-QUICK_FIT = MappingProxyType({"ftol": SCAN_FTOL})
 
 
-def scan_fit(stride: int) -> dict:
-    """The fit keywords of a scan's fits on 1 estimation sample in ``stride``: :data:`QUICK_FIT` where it
-    subsamples (the printed refit, on every sample, then comes with the range to expect), else none, the
+def scan_ftol(stride: int) -> float | None:
+    """The stopping rule of a scan's fits on 1 estimation sample in ``stride``: :data:`SCAN_FTOL` where it
+    subsamples (the printed refit, on every sample, then comes with the range to expect), else None, the
     fit's own: on every sample the printed refit is the very fit the scan scored (to 1e-6)."""
-    return dict(QUICK_FIT) if stride > 1 else {}
+    return SCAN_FTOL if stride > 1 else None
 
 
 def resolved_settings(model: HysteresisModel) -> dict:
@@ -91,12 +89,12 @@ def fitted_on(model: HysteresisModel, data: HysteresisData) -> bool:
 
 
 def split_fit(model: HysteresisModel, effects: Sequence[str], train: HysteresisData, stride: int = 1,
-              fit_kw: dict | None = None) -> HysteresisModel:
+              ftol: float | None = None) -> HysteresisModel:
     """``base + effects`` (with ``model``'s settings) fitted on ``train``, every ``stride``-th sample.
 
     The effects ``model`` already has start from its fitted values (it was fitted on this
-    estimation data), so only a new effect searches its start candidates. ``fit_kw``: the fit's keywords,
-    its stopping rule (:func:`scan_fit`; none: the fit's own).
+    estimation data), so only a new effect searches its start candidates. ``ftol``: the fit's stopping
+    rule (:func:`scan_ftol`; None: the fit's own).
     """
     dt = train.decimate(stride) if stride > 1 else train
-    return template(model, effects).fit_from(model, dt, **(fit_kw or {}))
+    return template(model, effects).fit_from(model, dt, ftol=ftol)
