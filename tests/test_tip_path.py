@@ -84,6 +84,14 @@ def test_a_point_out_of_reach_is_named_with_the_nearest_reachable_one():
         path_trajectory(path, TEE)
 
 
+@pytest.mark.parametrize("overrides", [{"speed_mmps": 5e-6}, {"approach_s": 1e6}, {"sample_rate_hz": 1e12}])
+def test_a_walk_of_more_samples_than_a_day_holds_is_refused_before_any_is_made(overrides):
+    # a mutation run found it (2026-11-29): circle-1 at 5e-6 mm/s asked for 2.6e9 samples and 24 GB, and the
+    # machine killed the process; a protocol had this cap already, a path now shares it (check_samples)
+    with pytest.raises(ProtocolError, match=r"path 'circle-1': .* more than 20,000,000 samples .*check its speed_mmps"):
+        path_trajectory(load_path("circle-1", overrides=overrides), TEE)
+    assert path_trajectory(load_path("circle-1", overrides={"speed_mmps": 0.05}), TEE).n_samples > 250_000
+
 @pytest.mark.parametrize("content, fragment", [
     ("x_mm,y_mm\n0,0\n1,1\n", "missing z_mm"),
     ("a;b\n", "needs columns x_mm, y_mm, z_mm"),

@@ -28,11 +28,7 @@ from endocal.protocols.params import (
     param,
     positive_param,
 )
-from endocal.protocols.trajectory import Segment, Trajectory
-
-
-#: Most samples one protocol may render: a day of recording at about 230 Hz.
-MAX_SAMPLES = 20_000_000
+from endocal.protocols.trajectory import Segment, Trajectory, check_samples
 
 
 class Timeline:
@@ -62,16 +58,12 @@ class Timeline:
         Raises
         ------
         ProtocolError
-            More than :data:`MAX_SAMPLES` samples (a duration or rate changed by a factor by
-            mistake would otherwise fill the memory before anything is checked).
+            More than :data:`~endocal.protocols.trajectory.MAX_SAMPLES` samples
+            (:func:`~endocal.protocols.trajectory.check_samples`).
         """
         fs = sample_rate_hz
-        n_f = self.now_s * fs
-        if not (math.isfinite(n_f) and n_f < MAX_SAMPLES):
-            raise ProtocolError(f"protocol '{protocol}': {self.now_s:.4g} s at {fs:.4g} Hz is more than "
-                                f"{MAX_SAMPLES:,} samples (a day at {MAX_SAMPLES / 86400:.0f} Hz); "
-                                "check its duration, periods, cycles and sample_rate_hz")
-        n = int(math.ceil(n_f - 1e-9)) + 1
+        check_samples(self.now_s, fs, f"protocol '{protocol}'", "its duration, periods, cycles and sample_rate_hz")
+        n = int(math.ceil(self.now_s * fs - 1e-9)) + 1
         t_s = np.arange(n) / fs
         goal = {d: np.zeros(n) for d in dofs}
         for axis, start, stop, fn in self.pieces:

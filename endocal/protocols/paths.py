@@ -49,7 +49,7 @@ from endocal.kinematics.constant_curvature import tip_pose_in_base
 from endocal.kinematics.inverse import MAX_UNIQUE_BEND_RAD, bend_from_lateral_offset_rad, lateral_offset_mm
 from endocal.probe import ROTATION, TRANSLATION, ProbeConfig
 from endocal.protocols.params import DEFAULT_SAMPLE_RATE_HZ, Param, param, positive_param
-from endocal.protocols.trajectory import Segment, Trajectory
+from endocal.protocols.trajectory import Segment, Trajectory, check_samples
 
 _FILE_KEYS = ("description", "path", "params")
 #: Waypoints per full turn of a circle (a 21 mm circle: 0.18 mm chords, 2e-4 mm off the arc).
@@ -282,10 +282,16 @@ def path_trajectory(path: TipPath, probe: ProbeConfig) -> Trajectory:
     UnreachableError
         A waypoint is outside the workspace (named, with the nearest reachable point), before
         anything is computed for the motors.
+    ProtocolError
+        The walk would hold more samples than :data:`~endocal.protocols.trajectory.MAX_SAMPLES`
+        (a speed typed in m/s, say), before any is made.
     """
     p = path.params
     fs = p["sample_rate_hz"]
     pts, dome = path._dense(probe)
+    walk_s = float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum()) / p["speed_mmps"]
+    check_samples(2 * (p["approach_s"] + p["hold_s"]) + walk_s, fs, f"path '{path.name}'",
+                  "its speed_mmps, approach_s, hold_s and sample_rate_hz")
     kin = ProbeKinematics.from_probe(probe)
     try:
         kin.inverse(pts, rotation_deg=0.0)  # every waypoint reachable, named by its index

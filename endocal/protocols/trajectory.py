@@ -2,12 +2,34 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from endocal.errors import LimitError
+from endocal.errors import LimitError, ProtocolError
 from endocal.probe import ProbeConfig
+
+#: Most samples one trajectory may hold: a day of recording at about 230 Hz.
+MAX_SAMPLES = 20_000_000
+
+
+def check_samples(duration_s: float, sample_rate_hz: float, what: str, check: str) -> None:
+    """Refuse a trajectory of more than :data:`MAX_SAMPLES` samples before any of them is made.
+
+    A duration, speed or rate changed by a factor by mistake would otherwise fill the memory before
+    anything else is checked. ``what`` names the trajectory (``protocol 'chirp'``), ``check`` what
+    to look at.
+
+    Raises
+    ------
+    ProtocolError
+        One line: the duration, the rate, the cap, and ``check``.
+    """
+    n_f = duration_s * sample_rate_hz
+    if not (math.isfinite(n_f) and n_f < MAX_SAMPLES):
+        raise ProtocolError(f"{what}: {duration_s:.4g} s at {sample_rate_hz:.4g} Hz is more than {MAX_SAMPLES:,} "
+                            f"samples (a day at {MAX_SAMPLES / 86400:.0f} Hz); check {check}")
 
 
 @dataclass(frozen=True)
