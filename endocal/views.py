@@ -110,7 +110,8 @@ def validation_summary(result) -> list[str]:
         head.append(change[0].line(what))
         first = result.suspects[0].gain_pct if result.suspects else -float("inf")
         if change[0].gain_pct > first:  # the base first; an effect that gains more keeps its refit (--explain: both)
-            then = [f"next: refit with the {change[0].base} base, then validate the new model:",
+            with_ = f" and {', '.join(change[0].added)}" if change[0].added else ""
+            then = [f"next: refit with the {change[0].base} base{with_}, then validate the new model:",
                     "  " + refit_command(change[0].refit)]
     if result.pointers:
         head.append("untested suspects: " + ", ".join(dict.fromkeys(p.effect for p in result.pointers)))

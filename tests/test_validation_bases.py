@@ -10,6 +10,7 @@ from endocal.validation.bases import minor_loop_mask, minor_loops, scan_bases_sp
 from endocal.validation.offline import validate_offline
 from endocal.validation.predict import predict_errors
 from endocal.validation.units import make_units
+from endocal.views import validation_summary
 
 NOISE_DEG = 0.3
 #: A Bouc-Wen plant whose tip holds at a reversal from saturation (k_lin = k_hys * rho * 2 sigma), as in the issue.
@@ -62,3 +63,38 @@ def test_a_plant_with_return_point_memory_gets_no_base_change_and_no_minor_loop_
     assert not any(b.significant for b in bases), [b.line() for b in bases]
     loops = minor_loops(model, val, err)
     assert loops.n_loops >= 3 and loops.ratio < 1.3 and not loops.note
+
+
+def test_a_base_change_that_needs_an_effect_beside_it_is_tried_with_it():
+    """A B-spline's free branches take up the plant's slack (a dead band on the tip's side of a Bouc-Wen
+    element, 4 deg): the bases without return-point memory, with the model's effects alone, score worse than
+    it, and the slack alone gains little. Where the minor-loop statistic points at the base, each of them is
+    tried with the effect candidates that gained most; with the slack it reaches the noise."""
+    plant = make_model("bouc-wen", ["deadzone:tip"]).set_parameters(
+        {**BOUC_WEN, "deadzone_tip_slack_deg": 4.0, "deadzone_tip_band_deg": 0.0, "deadzone_tip_center_deg": 0.0})
+    est, val = _records(plant)
+    model = make_model("bspline", axis="ap").fit(est)
+    res = validate_offline(model, val, train=est, model_path="m.json", n_boot=50)
+    alone = {b.base: b for b in res.scan.bases if not b.added}
+    # 2026-11-29: bouc-wen and dahl alone raise the validation RMSE by 31 and 30 %; the slack alone lowers it by 19 %
+    assert alone["bouc-wen"].gain_pct < 0 and alone["dahl"].gain_pct < 0
+    change = res.scan.base_suggestions[0]
+    assert change.base in ("bouc-wen", "dahl") and change.added == ("deadzone:tip",), [b.line() for b in res.scan.bases]
+    # 1.70 -> 0.295 deg (2026-11-29): the plant's structure, to the noise
+    assert change.gain_pct >= 70.0 and change.p_value < 0.05 and change.rmse_heldout_deg < 1.1 * NOISE_DEG
+    assert change.refit.effects == ("deadzone:tip",) and change.refit.out_path == f"m-{change.base}-deadzone-tip.json"
+    assert change.line().startswith(f"base: {change.base} with deadzone:tip lowers the validation RMSE by ")
+    lines = validation_summary(res)
+    assert f"next: refit with the {change.base} base and deadzone:tip, then validate the new model:" in lines, lines
+
+
+def test_a_base_change_whose_gain_is_its_effects_alone_is_not_suggested():
+    from endocal.validation.bases import _joint_veto
+
+    # the effect with the model's base scores 0.31 deg, with the other base 0.30: the base change earns 3 %
+    why = _joint_veto("dahl", "deadzone:tip", 0.30, base_alone=2.2, effect_alone=0.31, min_gain_pct=10.0)
+    assert why.startswith("deadzone:tip alone scores 0.31 deg against 0.3 together") and "3 %" in why
+    # the other base alone does the work: the effect earns nothing beside it
+    assert _joint_veto("dahl", "envelope", 0.50, base_alone=0.52, effect_alone=2.0, min_gain_pct=10.0).startswith(
+        "the dahl base alone scores 0.52 deg")
+    assert _joint_veto("dahl", "deadzone:tip", 0.30, base_alone=2.2, effect_alone=1.4, min_gain_pct=10.0) == ""

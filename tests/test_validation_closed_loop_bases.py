@@ -92,6 +92,7 @@ def run_loop(hidden: str | None) -> BaseLoop:
         change = res.scan.base_suggestions[0] if res.scan.base_suggestions else None
         if change is not None and (not res.suspects or change.gain_pct > res.suspects[0].gain_pct):
             out.bases.append(change.base)
+            out.named += list(change.added)  # a change that needs an effect beside it brings it (validation.bases)
             base = change.base
             model = make_model(base, list(change.refit.effects), axis="ap").fit(axis_data(est, "ap"))
             continue

@@ -155,7 +155,8 @@ def render(result) -> None:
         out.print(f"[bold]Which effect is missing:[/] nothing: no catalog effect lowers the {what} RMSE by "
                   f"{scan.min_gain_pct:g} % or more, and the residual points at nothing the scan could not test.{rests}")
     if scan.bases:
-        out.print(f"[bold]Which base[/] (the other bases with this model's effects, {what} gain, Holm-corrected p):")
+        out.print(f"[bold]Which base[/] (the other bases with this model's effects, or with an effect beside them "
+                  f"where the minor loops point at the base, {what} gain, Holm-corrected p):")
         for b in scan.bases:
             out.print(f"  {b.line(what)}: {b.evidence}"
                       + ("" if b.return_point_memory else "; no return-point memory"), markup=False)

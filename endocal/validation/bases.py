@@ -16,7 +16,9 @@ The p-values of the base candidates are Holm-corrected among themselves (a famil
 a base change is a different question from a missing term, and adding them to the effects' family
 would make every effect harder to find). A base is *suggested* when its corrected p-value is below
 ``alpha`` and it lowers the held-out RMSE by at least ``min_gain_pct`` -- the effects' bars -- and
-its refit (``--model BASE`` with the model's effects) is printed.
+its refit (``--model BASE`` with the model's effects) is printed. Where the minor-loop statistic
+(below) points at the base and no base alone is suggested, the bases of the other memory rule are
+also tried with the effect candidates that gained most (:func:`joint_changes`), in the same family.
 
 :func:`minor_loops` measures where the error sits: on the samples after a small reversal inside
 the loop (a half-cycle shorter than ``MINOR_FRAC`` of the record's span, and the leg that returns from it),
@@ -44,6 +46,8 @@ from endocal.validation.regimes import turning_points
 from endocal.validation.structure import SCAN_FTOL, effect_labels
 from endocal.validation.units import Units
 
+#: Effect candidates a base change is tried together with (:func:`joint_changes`), the best first.
+JOINT_EFFECTS = 2
 #: A half-cycle shorter than this share of its record's span is a small reversal inside the loop.
 MINOR_FRAC = 0.4
 #: The minor-loop note needs at least this many small reversals ...
@@ -80,6 +84,9 @@ class BaseCandidate:
         ``significant``, or why not (the p-value, the gain bar, or a fit that failed).
     screened : bool
         Rolling origin: not refitted beyond the first fold (its training fit gained too little).
+    added : tuple of str
+        Effects the base change brings with it (:func:`joint_changes`); empty for the base with the
+        model's effects alone.
     """
 
     base: str
@@ -93,14 +100,20 @@ class BaseCandidate:
     refit: Refit
     evidence: str = ""
     screened: bool = False
+    added: tuple[str, ...] = ()
+
+    @property
+    def name(self) -> str:
+        """``bouc-wen``, or ``bouc-wen with deadzone:tip`` for a change that brings an effect."""
+        return self.base + (f" with {', '.join(self.added)}" if self.added else "")
 
     def line(self, what: str = "validation") -> str:
         """``base: bouc-wen lowers the validation RMSE by 55 %, p = 0.001 (1.28 -> 0.58 deg)``."""
         if not np.isfinite(self.gain_pct):
-            return f"base: {self.base}: {self.evidence}"
+            return f"base: {self.name}: {self.evidence}"
         verb = f"lowers the {what} RMSE by {self.gain_pct:.0f} %" if self.gain_pct >= 0 else \
             f"raises the {what} RMSE by {-self.gain_pct:.0f} %"
-        return (f"base: {self.base} {verb}, p = {self.p_value:.2g} ({self.base_rmse_heldout_deg:.3g} -> "
+        return (f"base: {self.name} {verb}, p = {self.p_value:.2g} ({self.base_rmse_heldout_deg:.3g} -> "
                 f"{self.rmse_heldout_deg:.3g} deg)")
 
     def to_dict(self) -> dict:
@@ -158,44 +171,49 @@ def _warm(model: HysteresisModel) -> dict:
     return {k: v for k, v in model.params_.items() if not k.startswith(own)}
 
 
-def base_fit(model: HysteresisModel, base: str, train: HysteresisData, ftol: float | None = None) -> HysteresisModel:
-    """``base`` with ``model``'s effects fitted on ``train``, its effects starting from ``model``'s values;
-    continued beyond its fitted range as validation scores it. ``ftol``: the fit's stopping rule
+def base_fit(model: HysteresisModel, base: str, train: HysteresisData, ftol: float | None = None,
+             added: Sequence[str] = ()) -> HysteresisModel:
+    """``base`` with ``model``'s effects (and ``added``) fitted on ``train``, its effects starting from ``model``'s
+    values; continued beyond its fitted range as validation scores it. ``ftol``: the fit's stopping rule
     (:func:`~endocal.validation.structure.scan_ftol`; None: the fit's own)."""
     proxy = _proxy(model, base)
-    m = make_model(base, effect_labels(model), axis=model.axis, fixed=proxy.fixed, out_of_range="extrapolate")
+    m = make_model(base, [*effect_labels(model), *added], axis=model.axis, fixed=proxy.fixed,
+                   out_of_range="extrapolate")
     return m.fit(train, warm_start=_warm(model), ftol=ftol)
 
 
 def base_errors(model: HysteresisModel, base: str, train: HysteresisData, val: HysteresisData,
-                ftol: float | None = None) -> np.ndarray:
-    """Validation errors ``pred - meas`` (deg) on ``val`` of ``base`` with ``model``'s effects fitted on ``train``."""
-    return predict_errors(base_fit(model, base, train, ftol), val)
+                ftol: float | None = None, added: Sequence[str] = ()) -> np.ndarray:
+    """Validation errors ``pred - meas`` (deg) on ``val`` of ``base`` with ``model``'s effects (and ``added``)
+    fitted on ``train``."""
+    return predict_errors(base_fit(model, base, train, ftol, added), val)
 
 
 def _refit(model: HysteresisModel, base: str, data_paths: Sequence[str], model_path: str | None,
-           planes_path: str | None, suffix: str) -> Refit:
+           planes_path: str | None, suffix: str, added: Sequence[str] = ()) -> Refit:
     return Refit(data_paths=tuple(str(p) for p in data_paths), axis=model.axis, base=base,
-                 effects=tuple(effect_labels(model)), out_path=refit_path(model_path, base, suffix),
+                 effects=(*effect_labels(model), *added),
+                 out_path=refit_path(model_path, "-".join([base, *added]), suffix),
                  planes_path=None if planes_path is None else str(planes_path), start_from=None)
 
 
 def _rank(model, rows, err_base: np.ndarray, alpha: float, min_gain_pct: float, data_paths, model_path,
           planes_path, suffix, failed: dict[str, str]) -> tuple[BaseCandidate, ...]:
-    """Holm-correct ``rows`` of ``(base, rmse, p_raw, screened)`` and make the candidates, best gain first."""
+    """Holm-correct ``rows`` of ``(base, rmse, p_raw, screened, added, veto)`` and make the candidates, best gain
+    first (``added``: effects the change brings; ``veto``: why it is not suggested whatever its p-value, or "")."""
     rmse_base = float(np.sqrt(np.mean(err_base**2)))
     adj = holm([r[2] for r in rows]) if rows else np.array([])
     out = []
-    for (base, rmse, p, screened), pa in zip(rows, adj):
+    for (base, rmse, p, screened, added, veto), pa in zip(rows, adj):
         gain = 100.0 * (1.0 - rmse / rmse_base) if rmse_base > 0 else 0.0
-        significant = bool(pa < alpha and gain >= min_gain_pct)
-        evidence = ("significant" if significant else
+        significant = bool(pa < alpha and gain >= min_gain_pct and not veto)
+        evidence = ("significant" if significant else veto if veto and pa < alpha and gain >= min_gain_pct else
                     f"under the {min_gain_pct:g} % bar" if pa < alpha else f"not significant (p = {pa:.2g})")
         out.append(BaseCandidate(base=base, gain_pct=gain, p_value=float(pa), p_raw=float(p), rmse_heldout_deg=rmse,
                                  base_rmse_heldout_deg=rmse_base, significant=significant,
                                  return_point_memory=bool(BASES[base].return_point_memory),
-                                 refit=_refit(model, base, data_paths, model_path, planes_path, suffix),
-                                 evidence=evidence, screened=screened))
+                                 refit=_refit(model, base, data_paths, model_path, planes_path, suffix, added),
+                                 evidence=evidence, screened=screened, added=tuple(added)))
     for base, why in failed.items():
         out.append(BaseCandidate(base=base, gain_pct=float("nan"), p_value=1.0, p_raw=1.0,
                                  rmse_heldout_deg=float("nan"), base_rmse_heldout_deg=rmse_base, significant=False,
@@ -209,23 +227,75 @@ def _rank(model, rows, err_base: np.ndarray, alpha: float, min_gain_pct: float, 
 def scan_bases_split(model: HysteresisModel, train: HysteresisData, val: HysteresisData, err_base: np.ndarray,
                      units: Units, *, alpha: float, min_gain_pct: float, data_paths: Sequence[str],
                      model_path: str | None = None, planes_path: str | None = None, suffix: str = "",
-                     jobs: int | None = None, errors: Sequence | None = None) -> tuple[BaseCandidate, ...]:
+                     jobs: int | None = None, errors: Sequence | None = None, joint: Sequence = (),
+                     effect_rmse: dict[str, float] | None = None) -> tuple[BaseCandidate, ...]:
     """Every other base with the model's effects, fitted on ``train`` (the scan's decimated estimation
     data), scored on ``val`` unit by unit against ``err_base`` (the model's validation errors).
 
     ``errors``: per base of :func:`other_bases`, its :func:`base_errors` (or the ModelError it raised),
     when the caller fitted them among its own jobs (the effect scan fits them beside its candidates,
-    so both cores stay busy); else they are fitted here.
+    so both cores stay busy); else they are fitted here. ``joint``: ``((base, effect), errors)`` of the
+    pairs of :func:`joint_changes`, ranked in the same family; each is suggested only if the base and the
+    effect each earn their part (``effect_rmse``: the validation RMSE of the model with each effect alone).
     """
+    effect_rmse = effect_rmse or {}
     bases = other_bases(model)
     results = errors if errors is not None else map_jobs(lambda b: base_errors(model, b, train, val), bases, jobs)
-    rows, failed = [], {}
+    rows, failed, alone = [], {}, {}
     for b, err in zip(bases, results):
         if isinstance(err, ModelError):
             failed[b] = str(err)
         else:
-            rows.append((b, float(np.sqrt(np.mean(err**2))), unit_test(err_base, err, units), False))
+            alone[b] = float(np.sqrt(np.mean(err**2)))
+            rows.append((b, alone[b], unit_test(err_base, err, units), False, (), ""))
+    for (b, e), err in joint:
+        if isinstance(err, ModelError):
+            continue  # the base alone says whether it fits; a pair that does not is no candidate
+        rmse = float(np.sqrt(np.mean(err**2)))
+        rows.append((b, rmse, unit_test(err_base, err, units), False, (e,),
+                     _joint_veto(b, e, rmse, alone.get(b), effect_rmse.get(e), min_gain_pct)))
     return _rank(model, rows, err_base, alpha, min_gain_pct, data_paths, model_path, planes_path, suffix, failed)
+
+
+def joint_changes(model: HysteresisModel, val: HysteresisData, err_base: np.ndarray, tested: Sequence,
+                  bases: Sequence[BaseCandidate], alpha: float, borrowed: Sequence[str] = ()) -> list[tuple[str, str]]:
+    """The ``(base, effect)`` pairs to fit where a base change needs an effect beside it.
+
+    A base whose free branch shapes take up a static effect (a B-spline's branches, a dead band) can fit
+    the records better than a base with the plant's memory rule but without that effect. Then neither the
+    effect alone (the base's shapes held most of it) nor the other base alone (the effect missing) clears
+    the bars, and a loop that follows `validate` stays on a base whose memory rule misses the plant. Where
+    the minor-loop statistic says so (:func:`minor_loops`: the error after small reversals inside the
+    loop) and no base alone is suggested, each base of the other memory rule is tried with each of the
+    JOINT_EFFECTS effect candidates that lowered the validation error most (raw p below ``alpha``).
+
+    ``tested``: the effect scan's candidates (:class:`~endocal.validation.suspects.Suspect`); ``borrowed``:
+    those whose gain is the other parameters' (never tried).
+    """
+    if any(b.significant for b in bases):
+        return []
+    loops = minor_loops(model, val, err_base)
+    if loops is None or not loops.note:
+        return []
+    effects = [s.effect for s in sorted(tested, key=lambda s: -s.gain_pct)
+               if s.gain_pct > 0 and s.p_raw < alpha and s.effect not in borrowed][:JOINT_EFFECTS]
+    others = [b for b in other_bases(model) if BASES[b].return_point_memory != model.return_point_memory]
+    return [(b, e) for b in others for e in effects]
+
+
+def _joint_veto(base: str, effect: str, rmse: float, base_alone: float | None, effect_alone: float | None,
+                min_gain_pct: float) -> str:
+    """Why a base change with ``effect`` is not suggested although it may clear the bars: one of the two
+    does the work alone (each must lower the validation RMSE of the other alone by ``min_gain_pct``); "" if
+    both earn their part."""
+    for other, alone in ((f"the {base} base", base_alone), (effect, effect_alone)):
+        if alone is None or not alone > 0:
+            return f"{other} alone could not be scored"
+        own = 100.0 * (1.0 - rmse / alone)
+        if own < min_gain_pct:
+            return (f"{other} alone scores {alone:.3g} deg against {rmse:.3g} together: the other's own share "
+                    f"{own:.0f} % is under the {min_gain_pct:g} % bar")
+    return ""
 
 
 def scan_bases_rolling(model: HysteresisModel, data: HysteresisData, bounds: Sequence[tuple[int, int]],
@@ -245,9 +315,9 @@ def scan_bases_rolling(model: HysteresisModel, data: HysteresisData, bounds: Seq
             base0 = float(np.sqrt(np.mean(err_base[:e0.size] ** 2)))
             rmse0 = float(np.sqrt(np.mean(e0**2)))
             rmse_base = float(np.sqrt(np.mean(err_base**2)))
-            return b, (rmse0 * rmse_base / base0 if base0 > 0 else rmse0), 1.0, True
+            return b, (rmse0 * rmse_base / base0 if base0 > 0 else rmse0), 1.0, True, (), ""
         err = np.concatenate([first[0]] + [fold_errors(proxy, have, data, bd, SCAN_FTOL)[0] for bd in bounds[1:]])
-        return b, float(np.sqrt(np.mean(err**2))), paired_test(err_base, err)[0], False
+        return b, float(np.sqrt(np.mean(err**2))), paired_test(err_base, err)[0], False, (), ""
 
     bases = other_bases(model)
     rows, failed = [], {}

@@ -36,7 +36,7 @@ from endocal.messages import Message
 from endocal.models import EFFECTS, HysteresisData
 from endocal.models.base import HysteresisModel
 from endocal.validation.ambiguity import ambiguities, demoted, plain_first, settle_lookalikes
-from endocal.validation.bases import base_errors, other_bases, scan_bases_rolling, scan_bases_split
+from endocal.validation.bases import base_errors, joint_changes, other_bases, scan_bases_rolling, scan_bases_split
 from endocal.validation.candidates import candidate_effects
 from endocal.validation.folds import check_cv_data, fold_bounds, fold_errors, fold_split, still_blocks
 from endocal.validation.identifiability import unheld_cautions
@@ -310,6 +310,14 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     bases = () if candidates is not None else scan_bases_split(
         model, dt, val, err_base, units, alpha=alpha, min_gain_pct=min_gain_pct, data_paths=data_paths,
         model_path=model_path, planes_path=planes_path, suffix=refit_suffix, jobs=jobs, errors=base_results)
+    pairs = joint_changes(model, val, err_base, tested, bases, alpha, list(borrowed)) if bases else []
+    if pairs:  # a base change that needs an effect beside it, ranked in the bases' family
+        with one_blas_thread():
+            joint = map_jobs(lambda pair: base_errors(model, pair[0], dt, val, ftol, (pair[1],)), pairs, jobs)
+        bases = scan_bases_split(
+            model, dt, val, err_base, units, alpha=alpha, min_gain_pct=min_gain_pct, data_paths=data_paths,
+            model_path=model_path, planes_path=planes_path, suffix=refit_suffix, jobs=jobs, errors=base_results,
+            joint=list(zip(pairs, joint)), effect_rmse={s.effect: s.rmse_heldout_deg for s in tested})
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), 0, stride,
                       dt.n_samples, alpha, min_gain_pct, scheme="estimation/validation", scheme_reason=scheme_reason,
                       units=units.to_dict(), min_units=need, lookalikes=tuple(settled), bases=bases)
