@@ -108,8 +108,7 @@ def validation_summary(result) -> list[str]:
     change = scan.base_suggestions[:1]  # another base, the same paired test (validation.bases)
     if change:
         head.append(change[0].line(what))
-        first = result.suspects[0].gain_pct if result.suspects else -float("inf")
-        if change[0].gain_pct > first:  # the base first; an effect that gains more keeps its refit (--explain: both)
+        if scan.base_first:  # the base change before the first effect (validation.bases.base_before_effect)
             with_ = f" and {', '.join(change[0].added)}" if change[0].added else ""
             then = [f"next: refit with the {change[0].base} base{with_}, then validate the new model:",
                     "  " + refit_command(change[0].refit)]

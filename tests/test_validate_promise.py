@@ -43,9 +43,9 @@ def keep_promises(model: Path, data: list[Path], tmp: Path, first_only: bool = F
     promised %, delivered %, new RMSE, expected range) per suggestion; asserts each is kept."""
     d, stdout = _validate(model, data, tmp / "v.json")
     assert d["suspects"], [(s["effect"], round(s["gain_pct"], 1)) for s in d["scan"]["tested"]]
-    # the command printed is the JSON's: the first suggestion's, or a base change's that gains more
+    # the command printed is the JSON's: the first suggestion's, or the base change's that comes first
     bases = [b for b in d["scan"].get("bases", []) if b["significant"]]
-    first = (bases[0] if bases and bases[0]["gain_pct"] > d["suspects"][0]["gain_pct"] else d["suspects"][0])
+    first = bases[0] if d["scan"]["base_first"] else d["suspects"][0]
     assert "  " + first["command"] in stdout.splitlines(), stdout
     kept = []
     for s in d["suspects"][:1] if first_only else d["suspects"]:

@@ -98,3 +98,27 @@ def test_a_base_change_whose_gain_is_its_effects_alone_is_not_suggested():
     assert _joint_veto("dahl", "envelope", 0.50, base_alone=0.52, effect_alone=2.0, min_gain_pct=10.0).startswith(
         "the dahl base alone scores 0.52 deg")
     assert _joint_veto("dahl", "deadzone:tip", 0.30, base_alone=2.2, effect_alone=1.4, min_gain_pct=10.0) == ""
+
+
+def test_a_base_change_goes_first_only_where_it_beats_the_effect_it_edges_out():
+    """`scan.base_first`: the larger gain is not enough; the two refits are paired-tested against each other."""
+    from types import SimpleNamespace
+
+    from endocal.validation.bases import base_before_effect
+
+    est, val = _records(_plant("bouc-wen"))
+    rng = np.random.default_rng(7)
+    err_effect = 0.5 * rng.standard_normal(val.n_samples)
+    units = make_units(val, [err_effect])
+    change = SimpleNamespace(name="bspline", gain_pct=13.0, rmse_heldout_deg=0.49)
+    first = SimpleNamespace(effect="envelope", gain_pct=11.0, rmse_heldout_deg=0.50)
+    # the base change's errors: the effect's, 2 % smaller and redrawn in part: no unit-by-unit evidence
+    close = 0.98 * err_effect + 0.1 * rng.standard_normal(val.n_samples)
+    ahead, note = base_before_effect(change, first, close, err_effect, units, 0.05)
+    assert not ahead and note.startswith("base bspline (13 %) and envelope (11 %) lower the validation RMSE about "
+                                         "equally") and note.endswith("envelope, the smaller change, first")
+    # half the error, unit by unit: the base change first
+    assert base_before_effect(change, first, 0.5 * err_effect, err_effect, units, 0.05) == (True, "")
+    # a smaller gain never goes first; without an effect suspected, a base change does
+    assert base_before_effect(SimpleNamespace(gain_pct=9.0), first, None, None, None, 0.05) == (False, "")
+    assert base_before_effect(change, None, None, None, None, 0.05) == (True, "")

@@ -7,8 +7,9 @@ section's joint friction is off, so no friction in the plant has return-point me
 section, each hidden effect's strength, the rig lag (servo 2 x 30 ms, tracker 15 ms), the records
 and the loop are those of tests/test_validation_closed_loop.py (issue 27's user-shaped loop), with
 one step added: when `validate` suggests another base (`scan.base_suggestions`, the same paired
-test as the effects) and it gains more than the first effect suspect, the loop refits with that
-base (the printed refit: `--model BASE` with the model's effects) instead of adding an effect.
+test as the effects) and the summary's next refit is that change (``scan.base_first``: it gains more than
+the first effect suspect and beats its refit in a paired test), the loop refits with that base (the printed
+refit: `--model BASE` with the model's effects, and any effect the change brings) instead of adding an effect.
 
 The bars (issue 32, "How good"): the loop names the base change (to a base without return-point
 memory); it ends within 1.2x the noise (the final structure refitted on its final estimation data
@@ -90,7 +91,7 @@ def run_loop(hidden: str | None) -> BaseLoop:
               f"{[(b.base, round(b.gain_pct)) for b in res.scan.base_suggestions]}, effects suggested "
               f"{[(s.effect, round(s.gain_pct)) for s in res.suspects]}", flush=True)
         change = res.scan.base_suggestions[0] if res.scan.base_suggestions else None
-        if change is not None and (not res.suspects or change.gain_pct > res.suspects[0].gain_pct):
+        if res.scan.base_first:  # the summary's next refit is the base change (validation.bases.base_before_effect)
             out.bases.append(change.base)
             out.named += list(change.added)  # a change that needs an effect beside it brings it (validation.bases)
             base = change.base

@@ -283,6 +283,34 @@ def joint_changes(model: HysteresisModel, val: HysteresisData, err_base: np.ndar
     return [(b, e) for b in others for e in effects]
 
 
+def base_before_effect(change: BaseCandidate | None, first, err_change: np.ndarray | None,
+                       err_first: np.ndarray | None, units: Units | None, alpha: float) -> tuple[bool, str]:
+    """Whether the base change ``change`` is the next refit rather than the first effect suspect ``first``,
+    and a note when the two are close.
+
+    A base change replaces the whole base; an effect adds a term to it. Where the base gains more but the
+    paired test of the two refits (``err_change`` against ``err_first`` on ``units``, one comparison: raw
+    p below ``alpha``) cannot tell them apart, the smaller change goes first: a base whose free branch
+    shapes take up a static effect (a B-spline's, the envelope's stiffening) can edge out the base with the
+    plant's memory rule by a point or two, and a loop that follows it turns back to the wrong memory rule.
+    Without errors to compare (rolling origin) the larger gain goes first.
+    """
+    if change is None:
+        return False, ""
+    if first is None:
+        return True, ""
+    if change.gain_pct <= first.gain_pct:
+        return False, ""
+    if err_change is None or err_first is None or units is None:
+        return True, ""
+    p = unit_test(err_first, err_change, units)
+    if p < alpha:
+        return True, ""
+    return False, (f"base {change.name} ({change.gain_pct:.0f} %) and {first.effect} ({first.gain_pct:.0f} %) lower the "
+                   f"validation RMSE about equally ({change.rmse_heldout_deg:.3g} vs {first.rmse_heldout_deg:.3g} deg, "
+                   f"p = {p:.2g} that the base change is better): {first.effect}, the smaller change, first")
+
+
 def _joint_veto(base: str, effect: str, rmse: float, base_alone: float | None, effect_alone: float | None,
                 min_gain_pct: float) -> str:
     """Why a base change with ``effect`` is not suggested although it may clear the bars: one of the two

@@ -36,7 +36,8 @@ from endocal.messages import Message
 from endocal.models import EFFECTS, HysteresisData
 from endocal.models.base import HysteresisModel
 from endocal.validation.ambiguity import ambiguities, demoted, plain_first, settle_lookalikes
-from endocal.validation.bases import base_errors, joint_changes, other_bases, scan_bases_rolling, scan_bases_split
+from endocal.validation.bases import (base_before_effect, base_errors, joint_changes, other_bases, scan_bases_rolling,
+                                     scan_bases_split)
 from endocal.validation.candidates import candidate_effects
 from endocal.validation.folds import check_cv_data, fold_bounds, fold_errors, fold_split, still_blocks
 from endocal.validation.identifiability import unheld_cautions
@@ -318,9 +319,19 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
             model, dt, val, err_base, units, alpha=alpha, min_gain_pct=min_gain_pct, data_paths=data_paths,
             model_path=model_path, planes_path=planes_path, suffix=refit_suffix, jobs=jobs, errors=base_results,
             joint=list(zip(pairs, joint)), effect_rmse={s.effect: s.rmse_heldout_deg for s in tested})
+    change = next((b for b in bases if b.significant), None)
+    base_errs = {**{(b, ()): e for b, e in zip(bases_fitted, base_results)},
+                 **({(b, (e,)): err for (b, e), err in zip(pairs, joint)} if pairs else {})}
+    err_change = None if change is None else base_errs.get((change.base, change.added))
+    first = suspects[0] if suspects else None
+    base_first, close = base_before_effect(change, first, None if isinstance(err_change, ModelError) else err_change,
+                                           None if first is None else errs.get(first.effect), units, alpha)
+    if close:
+        notes.append(Message(close, "alike"))
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), 0, stride,
                       dt.n_samples, alpha, min_gain_pct, scheme="estimation/validation", scheme_reason=scheme_reason,
-                      units=units.to_dict(), min_units=need, lookalikes=tuple(settled), bases=bases)
+                      units=units.to_dict(), min_units=need, lookalikes=tuple(settled), bases=bases,
+                      base_first=base_first)
 
 
 def expected_ranges(model: HysteresisModel, effects: Sequence[str], train: HysteresisData, val: HysteresisData,
@@ -504,4 +515,6 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
         data_paths=data_paths, model_path=model_path, planes_path=planes_path, jobs=jobs)
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), folds, stride,
                       d.n_samples, alpha, min_gain_pct, scheme="rolling-origin", scheme_reason=scheme_reason,
-                      still_blocks=still, bases=bases)
+                      still_blocks=still, bases=bases,
+                      base_first=base_before_effect(next((b for b in bases if b.significant), None),
+                                                    suspects[0] if suspects else None, None, None, None, alpha)[0])

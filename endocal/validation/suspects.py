@@ -127,6 +127,10 @@ class ScanResult:
     bases : tuple of BaseCandidate
         The other bases of the catalogue with the model's effects, tested the same way, by decreasing
         gain (:mod:`endocal.validation.bases`); empty when the scan tested given candidates only.
+    base_first : bool
+        The first base suggestion is the next refit, before the first effect suspect: no effect is
+        suspected, or the base change gains more and (estimation/validation) beats the effect's refit in
+        a paired test of its own (:func:`~endocal.validation.bases.base_before_effect`).
     """
 
     suspects: tuple[Suspect, ...]
@@ -146,6 +150,7 @@ class ScanResult:
     still_blocks: int = 0
     lookalikes: tuple = ()
     bases: tuple = ()
+    base_first: bool = False
 
     @property
     def base_suggestions(self) -> tuple:
@@ -165,6 +170,7 @@ class ScanResult:
             "suspects": [s.to_dict() for s in self.suspects],
             "tested": [s.to_dict() for s in self.tested],
             "bases": [b.to_dict() for b in self.bases],
+            "base_first": self.base_first,
             "baseline_rmse_heldout_deg": self.baseline_rmse_heldout_deg,
             "untestable": dict(self.untestable),
             "notes": list(self.notes),
