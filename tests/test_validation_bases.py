@@ -93,10 +93,11 @@ def test_a_base_change_whose_gain_is_its_effects_alone_is_not_suggested():
 
     # the effect with the model's base scores 0.31 deg, with the other base 0.30: the base change earns 3 %
     why = _joint_veto("dahl", "deadzone:tip", 0.30, base_alone=2.2, effect_alone=0.31, min_gain_pct=10.0)
-    assert why.startswith("deadzone:tip alone scores 0.31 deg against 0.3 together") and "3 %" in why
+    assert why == ("deadzone:tip alone scores 0.31 deg against 0.3 together: the dahl base's own share, 3 %, is "
+                   "under the 10 % bar")
     # the other base alone does the work: the effect earns nothing beside it
-    assert _joint_veto("dahl", "envelope", 0.50, base_alone=0.52, effect_alone=2.0, min_gain_pct=10.0).startswith(
-        "the dahl base alone scores 0.52 deg")
+    assert _joint_veto("dahl", "envelope", 0.50, base_alone=0.52, effect_alone=2.0, min_gain_pct=10.0) == (
+        "the dahl base alone scores 0.52 deg against 0.5 together: envelope's own share, 4 %, is under the 10 % bar")
     assert _joint_veto("dahl", "deadzone:tip", 0.30, base_alone=2.2, effect_alone=1.4, min_gain_pct=10.0) == ""
 
 

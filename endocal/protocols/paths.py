@@ -200,8 +200,7 @@ class TipPath:
 
     def length_mm(self, probe: ProbeConfig) -> float:
         """Length of the walked path, mm."""
-        pts = self.waypoints_mm(probe)
-        return float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
+        return _polyline_length_mm(self.waypoints_mm(probe))
 
     def to_dict(self) -> dict:
         params = {k: (np.asarray(v).tolist() if k == "points_mm" else v) for k, v in self.params.items()}
@@ -244,6 +243,11 @@ def dome_height_mm(xy_mm: np.ndarray, probe: ProbeConfig, where: str = "path") -
 
 
 # --------------------------------------------------------------------------- joints on the motor clock
+
+
+def _polyline_length_mm(pts: np.ndarray) -> float:
+    """Length (mm) of the polyline through the points ``pts`` (m, 3)."""
+    return float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
 
 
 def _resample_constant_speed(pts: np.ndarray, dome: np.ndarray, speed_mmps: float, fs: float) -> tuple[np.ndarray, np.ndarray]:
@@ -289,7 +293,7 @@ def path_trajectory(path: TipPath, probe: ProbeConfig) -> Trajectory:
     p = path.params
     fs = p["sample_rate_hz"]
     pts, dome = path._dense(probe)
-    walk_s = float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum()) / p["speed_mmps"]
+    walk_s = _polyline_length_mm(pts) / p["speed_mmps"]
     check_samples(2 * (p["approach_s"] + p["hold_s"]) + walk_s, fs, f"path '{path.name}'",
                   "its speed_mmps, approach_s, hold_s and sample_rate_hz")
     kin = ProbeKinematics.from_probe(probe)

@@ -316,13 +316,14 @@ def _joint_veto(base: str, effect: str, rmse: float, base_alone: float | None, e
     """Why a base change with ``effect`` is not suggested although it may clear the bars: one of the two
     does the work alone (each must lower the validation RMSE of the other alone by ``min_gain_pct``); "" if
     both earn their part."""
-    for other, alone in ((f"the {base} base", base_alone), (effect, effect_alone)):
+    for alone_name, alone, other in ((f"the {base} base", base_alone, effect),
+                                     (effect, effect_alone, f"the {base} base")):
         if alone is None or not alone > 0:
-            return f"{other} alone could not be scored"
+            return f"{alone_name} alone could not be scored"
         own = 100.0 * (1.0 - rmse / alone)
         if own < min_gain_pct:
-            return (f"{other} alone scores {alone:.3g} deg against {rmse:.3g} together: the other's own share "
-                    f"{own:.0f} % is under the {min_gain_pct:g} % bar")
+            return (f"{alone_name} alone scores {alone:.3g} deg against {rmse:.3g} together: {other}'s own share, "
+                    f"{own:.0f} %, is under the {min_gain_pct:g} % bar")
     return ""
 
 
