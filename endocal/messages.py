@@ -65,6 +65,9 @@ KEYS: dict[str, str] = {
     "demoted": "A candidate lowers the error more than the first suggestion but ranks after it, for a caution (a "
                "parameter at a bound, no hold where creep would show): it may stand in for something it does not "
                "model.",
+    "cautioned-first": "A candidate whose only caution is that no record holds what would confirm it goes first "
+                       "anyway: its refit beats the first suggestion without a caution by the gain bar, in a paired "
+                       "test of the two. Record what the caution names to confirm it.",
     "borrowed": "An additive term (`drift`) lowered the validation error only through the parameters refitted beside "
                 "it: the same fit with its own term taken out scores about as well. It is not suggested; the "
                 "structure misses something on some record (the full text names the share).",

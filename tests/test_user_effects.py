@@ -87,6 +87,9 @@ BAD = {
     "a predict of NaN": (GOOD.replace("return p[\"k\"] * u", "return p[\"k\"] * u * np.nan"), "NaN"),
     "a predict of the wrong length": (GOOD.replace("return p[\"k\"] * u", "return p[\"k\"] * u[1:]"), "shape"),
     "an inverse that does not invert": (GOOD.replace("return v / p[\"k\"]", "return v / p[\"k\"] + 1.0"), "does not invert"),
+    "an implausible() that is not words": (GOOD.replace("    def describe(self, p, se):",
+                                                       "    def implausible(self, p, data):\n        return None\n\n"
+                                                       "    def describe(self, p, se):"), "not a string"),
     "a file that raises": (GOOD + "\nraise RuntimeError('lab path not set')\n", "RuntimeError: lab path not set"),
 }
 

@@ -10,7 +10,7 @@ look-alike (``Effect.lookalikes``) is settled against it on records that separat
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -29,6 +29,37 @@ def tell_apart(a: str, b: str) -> str | None:
         if cls is not None and y in cls.lookalikes:
             return cls.lookalikes[y]
     return None
+
+
+def cautioned_last(suspects: list[Suspect], errs: dict, units, alpha: float, min_gain_pct: float,
+                   unconfirmed: Collection[str] = ()) -> tuple[list[Suspect], str]:
+    """``suspects`` (by decreasing gain) with the cautioned ones after the others, and a note (``""`` if none).
+
+    A caution says the term may stand in for something it does not model, so by default it ranks
+    last. One kind of caution says only that no record holds what would confirm the term (a `creep`
+    fitted where no record holds the knob still: the effects in ``unconfirmed``); a stand-in takes
+    up a share of the residual, and a term that explains much more than the next candidate is more
+    than that. So the best such candidate goes first where its refit beats the first uncautioned
+    one's by ``min_gain_pct`` and in a paired test of their own (``unit_test`` on ``units``, raw p
+    below ``alpha``), and the note says why (a `creep` at -53 % behind a `rate:friction` at -14 % on
+    a Bouc-Wen plant that creeps and has no speed-dependent friction). A caution about the fitted
+    values themselves (a parameter at its bound, a creep that relaxes within each motion) keeps the
+    term last however much it gains.
+    """
+    out = sorted(suspects, key=lambda s: bool(s.caution))
+    plain = [s for s in out if not s.caution]
+    flagged = [s for s in out if s.caution and s.effect in unconfirmed]
+    if not (plain and flagged) or flagged[0].gain_pct <= plain[0].gain_pct:
+        return out, ""
+    c, u = flagged[0], plain[0]
+    ahead = 100.0 * (1.0 - c.rmse_heldout_deg / u.rmse_heldout_deg) if u.rmse_heldout_deg > 0 else 0.0
+    p = unit_test(errs[u.effect], errs[c.effect], units) if ahead >= min_gain_pct else 1.0
+    if p >= alpha:
+        return out, ""
+    return [c] + [s for s in out if s is not c], (
+        f"{c.effect} goes first despite its caution: its refit beats {u.effect}'s, the first suggestion without one, "
+        f"by {ahead:.0f} % ({c.rmse_heldout_deg:.3g} vs {u.rmse_heldout_deg:.3g} deg, paired p = {p:.2g}); "
+        f"{c.caution}")
 
 
 def demoted(suspects: list[Suspect]) -> list[str]:

@@ -35,7 +35,7 @@ from endocal.errors import ModelError
 from endocal.messages import Message
 from endocal.models import EFFECTS, HysteresisData
 from endocal.models.base import HysteresisModel
-from endocal.validation.ambiguity import ambiguities, demoted, plain_first, settle_lookalikes
+from endocal.validation.ambiguity import ambiguities, cautioned_last, demoted, plain_first, settle_lookalikes
 from endocal.validation.bases import (base_before_effect, base_errors, joint_changes, other_bases, scan_bases_rolling,
                                      scan_bases_split)
 from endocal.validation.candidates import candidate_effects
@@ -90,9 +90,11 @@ _AT_BOUND = re.compile(r"sits at its (?:lower|upper) bound (\S+):")
 
 
 def _split_candidate(model: HysteresisModel, effects: Sequence[str], train: HysteresisData,
-                     val: HysteresisData, ftol: float | None = None) -> tuple[np.ndarray, list[str]]:
-    """Validation errors of ``base + effects`` fitted on ``train`` (stopping at ``ftol``: :func:`scan_ftol`),
-    and the cautions about the effects ``model`` lacks (:attr:`Suspect.caution`)."""
+                     val: HysteresisData, ftol: float | None = None) -> tuple:
+    """Validation errors of ``base + effects`` fitted on ``train`` (stopping at ``ftol``: :func:`scan_ftol`), the
+    cautions about the effects ``model`` lacks (:attr:`Suspect.caution`), the fitted values, the errors without
+    the new terms' own share (:func:`_without_own_share`), and whether the only cautions say that no record holds
+    what would confirm the effects (:func:`~endocal.validation.ambiguity.cautioned_last`)."""
     m = split_fit(model, effects, train, ftol=ftol)
     have = set(effect_labels(model))
     new = [e for e in m.effects_ if e.label not in have]
@@ -100,10 +102,12 @@ def _split_candidate(model: HysteresisModel, effects: Sequence[str], train: Hyst
     cautions = [w for w in m.fit_report_.warnings if prefixes and w.startswith(prefixes)
                 and (b := _AT_BOUND.search(w)) and float(b.group(1)) != 0.0]
     cautions += [c for e in new if (c := e.implausible(m.effect_params(e), train))]
-    # an effect fitted on records that lack what shows it (creep without a hold) may stand for something else
-    cautions += [c for e in new for c in unheld_cautions(e, train, val)]
+    # an effect fitted on records that lack what shows it (creep without a hold) may stand for something else;
+    # a caution of that kind alone says nothing against the fitted values (ambiguity.cautioned_last)
+    unconfirmed = [c for e in new for c in unheld_cautions(e, train, val)]
     err = predict_errors(m, val)
-    return err, cautions, dict(m.params_), _without_own_share(m, new, val)
+    return (err, cautions + unconfirmed, dict(m.params_), _without_own_share(m, new, val),
+            bool(unconfirmed) and not cautions)
 
 
 def _without_own_share(m: HysteresisModel, new: list, val: HysteresisData) -> np.ndarray | None:
@@ -215,7 +219,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     if isinstance(results[0], ModelError):
         raise ModelError(f"the model as it stands cannot be refitted on the estimation data: {results[0]}") from None
     err_base = results[0][0]
-    fitted, cautions, fitted_params, without_term = [], {}, {}, {}
+    fitted, cautions, fitted_params, without_term, unconfirmed = [], {}, {}, {}, set()
     for c, res in zip(tested_cands, results[1:]):
         if isinstance(res, ModelError):
             untestable[c] = f"could not be fitted on the estimation data ({res})"
@@ -223,6 +227,8 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
             fitted.append((c, res[0]))
             cautions[c] = "; ".join(res[1])
             fitted_params[c] = res[2]
+            if res[4]:
+                unconfirmed.add(c)
             if res[3] is not None:
                 without_term[c] = res[3]
     rmse_base = float(np.sqrt(np.mean(err_base**2)))
@@ -272,9 +278,11 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     # the gain is not consistent enough across units to rule out chance.
     suspects = [s for s in tested if s.significant] or [s for s in tested
                                                         if s.gain_pct >= min_gain_pct and s.effect not in borrowed]
-    # a candidate with a caution (a delay at its -0.5 s bound, a drift too fast to be one) ranks after the others;
-    # an effect's other form after its plain form where the two explain the residual alike
-    suspects = plain_first(sorted(suspects, key=lambda s: bool(s.caution)), errs, alpha)
+    # a candidate with a caution (a delay at its -0.5 s bound, a drift too fast to be one) ranks after the others,
+    # unless it beats the first of them in a paired test; an effect's other form after its plain form where the
+    # two explain the residual alike
+    suspects, ahead = cautioned_last(suspects, errs, units, alpha, min_gain_pct, unconfirmed)
+    suspects = plain_first(suspects, errs, alpha)
     # the first suggestion against the look-alikes it declares, on records that separate them
     # (a look-alike whose gain is borrowed is compared, never promoted)
     suspects, settled = settle_lookalikes(suspects, [s for s in tested if s.effect not in borrowed], errs, dt, val,
@@ -288,7 +296,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
                     for s, r in zip(suspects, ranges)]
         tested = [next((x for x in suspects if x.effect == s.effect), s) for s in tested]
     # ambiguity.py words these notes, one kind per function: each gets its key as it enters the result
-    notes = [Message(n, "demoted") for n in demoted(suspects)] + (
+    notes = [Message(n, "demoted") for n in demoted(suspects)] + [Message(ahead, "cautioned-first")] * bool(ahead) + (
         [Message(n, "alike") for n in ambiguities(suspects, errs, alpha)] if any(s.significant for s in suspects)
         else [])
     notes += [Message(x.words(), "alike") for x in settled]

@@ -191,6 +191,13 @@ def _check_instance(eff: Effect, data) -> list[str]:
         return [f"its predict returns shape {y.shape}, not ({data.n_samples},)"]
     if not np.all(np.isfinite(y)):
         return ["its predict returns NaN or inf on a sample record"]
+    try:  # validate words a candidate's caution with it (validation.scan): a crash there would end the scan
+        why = eff.implausible(p, data)
+    except Exception as exc:
+        return [f"implausible(p, data) failed on a sample record: {type(exc).__name__}: {exc}"]
+    if not isinstance(why, str):
+        return [f"implausible(p, data) returns {type(why).__name__}, not a string ('' where the values can be its "
+                "physics)"]
     if cls.has_inverse and isinstance(eff, (InputEffect, OutputFilter)):
         try:
             back = np.asarray(eff.invert(p, y, data), dtype=float)

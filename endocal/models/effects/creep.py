@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 
 from endocal.errors import ModelError
-from endocal.models.data import HysteresisData
+from endocal.models.data import HysteresisData, turning_points
 from endocal.models.effects.base import OutputFilter
 from endocal.models.effects.requirements import TIME_STAMPS, holds_after_moves
 from endocal.models.params import Parameter
@@ -88,6 +88,12 @@ def creep_inverse(yo, t, a, tau, run_starts):
             s = s + alpha * (y[k] - s)
     return y
 
+
+#: :meth:`Creep.implausible`: the shortest time constant, as a share of the records' median half-cycle, that
+#: can be creep. A relaxation of a tenth of a half-cycle has ended (to e^-10) long before the reversal: it
+#: smooths and lags each motion, which a lag of the bend behind the knob (`delay`, `rate`) also does, and no
+#: longer moves the tip after the knob stops. The sheath's creep takes seconds (the simulator's 2 s).
+MIN_TAU_SHARE = 0.1
 
 #: Hold after each move of ``--next``'s creep segment (s): 5 s holds 2.5 time constants of the
 #: simulator's 2 s (92 % of the relaxation); a relaxation slower than that shows as its start.
@@ -184,6 +190,28 @@ class Creep(OutputFilter):
         yb = (y - a * (1.0 - alpha) * s) / (1.0 - a + a * alpha)
         state[1] = s + alpha * (yb - s)
         return yb
+
+    def implausible(self, p: dict, data: HysteresisData) -> str:
+        """A creep relaxes after the motion that caused it. One whose time constant is under
+        :data:`MIN_TAU_SHARE` of the records' median half-cycle (the time between the command's
+        reversals, holds included) has relaxed within each motion: it is a lag of the bend behind
+        the knob, here taken up by a filter on the output (a real piezo stack's 1 Hz cycles, fitted on
+        motion alone: 0.037 s against half-cycles of 0.5 s)."""
+        if data.t_s is None:
+            return ""
+        turns = turning_points(data, 0.05)
+        same = np.searchsorted(data.run_starts, turns[1:], side="right") == np.searchsorted(
+            data.run_starts, turns[:-1], side="right")
+        half = np.diff(data.t_s[turns])[same]
+        if half.size < 2:
+            return ""
+        half_s = float(np.median(half))
+        tau = float(p["tau_s"])
+        if not (half_s > 0 and tau < MIN_TAU_SHARE * half_s):
+            return ""
+        return (f"{self.prefix}_tau_s = {tau:.3g} s is {100 * tau / half_s:.0f} % of the records' median half-cycle "
+                f"({half_s:.3g} s): a relaxation that ends within each motion is a lag of the bend behind the knob "
+                "(delay, rate), not the tip moving on after the knob stops")
 
     def describe(self, p: dict, se: dict) -> str:
         return "creep" + self._bracket(p, se)
