@@ -74,6 +74,10 @@ KEYS: dict[str, str] = {
     "minor-loops": "The error concentrates after small reversals inside the loop: the base's memory rule (return-point "
                    "memory: a small reversal returns to the branch it left) misses the plant's minor loops. Try a base "
                    "without it (`--model bouc-wen` or `--model dahl`); validate scores them as candidates.",
+    "memory-rule": "A base of the other memory rule (return-point memory or not) clears both bars but is not "
+                   "suggested: the validation data hold too few small reversals inside the loop, where the two rules "
+                   "differ, so its gain is its branch shapes'. Validate on a record with small reversals (a random "
+                   "run) to judge the change.",
     "still-blocks": "Some held-out blocks of the rolling-origin scan hold no motion of the axis: there the scan says "
                     "little. Validate on a record where the axis moves throughout.",
     # ---- fit planes, fit force

@@ -123,3 +123,36 @@ def test_a_base_change_goes_first_only_where_it_beats_the_effect_it_edges_out():
     # a smaller gain never goes first; without an effect suspected, a base change does
     assert base_before_effect(SimpleNamespace(gain_pct=9.0), first, None, None, None, 0.05) == (False, "")
     assert base_before_effect(change, None, None, None, None, 0.05) == (True, "")
+
+
+def test_a_change_of_memory_rule_is_judged_only_where_the_records_hold_small_reversals():
+    """Return-point memory decides what follows a small reversal inside the loop, and nothing else: on a record
+    without them (a plain sine) a base of the other rule gains only by its branch shapes, and is not suggested;
+    a base of the same rule, or a record with small reversals, is judged as before."""
+    from endocal.validation.bases import MINOR_MIN_LOOPS, memory_veto
+
+    t = np.arange(0.0, 30.0, 0.01)
+    plain = HysteresisData(cmd_deg=40.0 * np.sin(2 * np.pi * 0.2 * t), meas_deg=np.zeros(t.size), t_s=t)
+    wiggly = HysteresisData(cmd_deg=40.0 * np.sin(2 * np.pi * 0.2 * t) + 6.0 * np.sin(2 * np.pi * 1.3 * t),
+                            meas_deg=np.zeros(t.size), t_s=t)
+    assert minor_loop_mask(plain)[1] == 0 and minor_loop_mask(wiggly)[1] >= MINOR_MIN_LOOPS
+    assert memory_veto(make_model("bspline"), "dahl", plain) == (
+        "a change of memory rule (to a base without return-point memory) that the validation data cannot judge: they "
+        "hold 0 small reversal(s) inside the loop, where the rules differ (3 needed), so its gain is its branch "
+        "shapes'; validate on a record with small reversals (a random run)")
+    assert memory_veto(make_model("dahl"), "bspline", plain).startswith(
+        "a change of memory rule (to a base with return-point memory) ")
+    assert memory_veto(make_model("bspline"), "dahl", wiggly) == ""
+    assert memory_veto(make_model("bspline"), "pi", plain) == ""
+    assert memory_veto(make_model("dahl"), "bouc-wen", plain) == ""
+    # the summary lists suggestions only: a base held back by its memory rule gets a note of its own
+    from endocal.validation.bases import BaseCandidate, held_back
+
+    held = BaseCandidate(base="dahl", gain_pct=19.0, p_value=0.004, p_raw=0.001, rmse_heldout_deg=0.81,
+                         base_rmse_heldout_deg=1.0, significant=False, return_point_memory=False, refit=None)
+    assert held_back(make_model("bspline"), [held], plain, 0.05, 10.0) == [
+        "dahl lowers the validation RMSE by 19 % (p = 0.004) but is not suggested: a change of memory rule (to a "
+        "base without return-point memory) that the validation data cannot judge: they hold 0 small reversal(s) "
+        "inside the loop, where the rules differ (3 needed), so its gain is its branch shapes'; validate on a record "
+        "with small reversals (a random run)"]
+    assert held_back(make_model("bspline"), [held], wiggly, 0.05, 10.0) == []

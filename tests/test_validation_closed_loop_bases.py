@@ -203,10 +203,15 @@ def test_the_bars_of_the_issue():
     assert all(_names(lp) <= PLANT_HAS | ({h} if h else set()) for h, lp in loops.items())
 
 
-def test_a_creep_behind_a_sharper_element_goes_first_and_no_speed_friction_is_added():
-    """σ 3, a 12° lag: `creep` (-53 %, the plant's 2 s relaxation) carries the caution that no record holds the knob
-    still; it ranked after `rate:friction` (-14 %), which the loop then added though the plant lacks it. A caution
-    that says only what would confirm the term gives way where the term beats the first other one's refit by 10 %
-    in a paired test (validation.ambiguity.cautioned_last)."""
-    loop = run_loop("creep", "sigma3-lag12")
-    assert "creep" in _names(loop) and _names(loop) <= PLANT_HAS | {"creep"}, _summary(loop)
+@pytest.mark.parametrize("hidden", ["creep", "deadzone"])
+def test_a_sharper_element_keeps_its_base_change_names_the_effect_and_adds_nothing_it_lacks(hidden):
+    """σ 3, a 12° lag (:data:`VARIANTS`). `creep` (-53 %, the plant's 2 s relaxation) carries the caution that no
+    record holds the knob still; it ranked after `rate:friction` (-14 %), which the loop then added though the plant
+    lacks it: a caution that says only what would confirm the term now gives way where the term beats the first other
+    one's refit by 10 % in a paired test (validation.ambiguity.cautioned_last). `deadzone`'s loop changed to
+    `bouc-wen` with `deadzone:tip`, then turned back to `bspline` (-19 %) on the sheath-wrap record, which holds no
+    small reversal: a change of memory rule is now judged only where the records hold them
+    (validation.bases.memory_veto)."""
+    loop = run_loop(hidden, "sigma3-lag12")
+    assert loop.bases and not BASES[loop.bases[-1]].return_point_memory, _summary(loop)
+    assert hidden in _names(loop) and _names(loop) <= PLANT_HAS | {hidden}, _summary(loop)

@@ -36,8 +36,8 @@ from endocal.messages import Message
 from endocal.models import EFFECTS, HysteresisData
 from endocal.models.base import HysteresisModel
 from endocal.validation.ambiguity import ambiguities, cautioned_last, demoted, plain_first, settle_lookalikes
-from endocal.validation.bases import (base_before_effect, base_errors, joint_changes, other_bases, scan_bases_rolling,
-                                     scan_bases_split)
+from endocal.validation.bases import (base_before_effect, base_errors, held_back, joint_changes, other_bases,
+                                     scan_bases_rolling, scan_bases_split)
 from endocal.validation.candidates import candidate_effects
 from endocal.validation.folds import check_cv_data, fold_bounds, fold_errors, fold_split, still_blocks
 from endocal.validation.identifiability import unheld_cautions
@@ -327,6 +327,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
             model, dt, val, err_base, units, alpha=alpha, min_gain_pct=min_gain_pct, data_paths=data_paths,
             model_path=model_path, planes_path=planes_path, suffix=refit_suffix, jobs=jobs, errors=base_results,
             joint=list(zip(pairs, joint)), effect_rmse={s.effect: s.rmse_heldout_deg for s in tested})
+    notes += [Message(n, "memory-rule") for n in held_back(model, bases, val, alpha, min_gain_pct)]
     change = next((b for b in bases if b.significant), None)
     base_errs = {**{(b, ()): e for b, e in zip(bases_fitted, base_results)},
                  **({(b, (e,)): err for (b, e), err in zip(pairs, joint)} if pairs else {})}
@@ -521,6 +522,7 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
     bases = () if candidates is not None else scan_bases_rolling(
         model, d, bounds, err_base, base_train_rmse, alpha=alpha, min_gain_pct=min_gain_pct, screen_pct=screen_pct,
         data_paths=data_paths, model_path=model_path, planes_path=planes_path, jobs=jobs)
+    notes += [Message(n, "memory-rule") for n in held_back(model, bases, d, alpha, min_gain_pct)]
     return ScanResult(tuple(suspects), tuple(tested), rmse_base, untestable, tuple(notes), folds, stride,
                       d.n_samples, alpha, min_gain_pct, scheme="rolling-origin", scheme_reason=scheme_reason,
                       still_blocks=still, bases=bases,
