@@ -350,6 +350,15 @@ def turning_points(data: HysteresisData, tol_frac: float = 0.01) -> np.ndarray:
     return np.asarray(out, dtype=np.int64)
 
 
+def half_cycles(data: HysteresisData, tol_frac: float = 0.01) -> np.ndarray:
+    """(k, 2) indices of the reversals that start and end each half-cycle of the command, within one run
+    (reversals as :func:`turning_points` finds them with ``tol_frac``)."""
+    turns = turning_points(data, tol_frac)
+    same = np.searchsorted(data.run_starts, turns[1:], side="right") == np.searchsorted(
+        data.run_starts, turns[:-1], side="right")
+    return np.column_stack([turns[:-1], turns[1:]])[same]
+
+
 def hold_mask(data: HysteresisData, hold_min_s: float = 0.5) -> np.ndarray:
     """Samples where the command stands still for at least ``hold_min_s`` (or 5 samples without time)."""
     v = np.abs(speed_dps(data))

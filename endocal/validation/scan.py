@@ -35,6 +35,7 @@ from endocal.errors import ModelError
 from endocal.messages import Message
 from endocal.models import EFFECTS, HysteresisData
 from endocal.models.base import HysteresisModel
+from endocal.models.data import half_cycles
 from endocal.validation.ambiguity import ambiguities, cautioned_last, demoted, plain_first, settle_lookalikes
 from endocal.validation.bases import (base_before_effect, base_errors, held_back, joint_changes, other_bases,
                                      scan_bases_rolling, scan_bases_split)
@@ -76,10 +77,7 @@ def scan_stride(data: HysteresisData, max_samples: int = MAX_SCAN_SAMPLES) -> in
     stride = max(1, int(math.ceil(data.n_samples / max_samples)))
     if stride == 1:
         return 1
-    turns = turning_points(data, 0.05)
-    same = np.searchsorted(data.run_starts, turns[1:], side="right") == np.searchsorted(
-        data.run_starts, turns[:-1], side="right")
-    half = np.diff(turns)[same]
+    half = np.diff(half_cycles(data, 0.05), axis=1).ravel()
     if half.size < 2:
         return stride
     fast = float(np.percentile(half, 5))

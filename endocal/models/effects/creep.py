@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 
 from endocal.errors import ModelError
-from endocal.models.data import HysteresisData, turning_points
+from endocal.models.data import HysteresisData, half_cycles
 from endocal.models.effects.base import OutputFilter
 from endocal.models.effects.requirements import TIME_STAMPS, holds_after_moves
 from endocal.models.params import Parameter
@@ -199,10 +199,7 @@ class Creep(OutputFilter):
         motion alone: 0.037 s against half-cycles of 0.5 s)."""
         if data.t_s is None:
             return ""
-        turns = turning_points(data, 0.05)
-        same = np.searchsorted(data.run_starts, turns[1:], side="right") == np.searchsorted(
-            data.run_starts, turns[:-1], side="right")
-        half = np.diff(data.t_s[turns])[same]
+        half = np.diff(data.t_s[half_cycles(data, 0.05)], axis=1).ravel()
         if half.size < 2:
             return ""
         half_s = float(np.median(half))
