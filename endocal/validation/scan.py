@@ -28,6 +28,7 @@ import math
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -87,12 +88,25 @@ def scan_stride(data: HysteresisData, max_samples: int = MAX_SCAN_SAMPLES) -> in
 _AT_BOUND = re.compile(r"sits at its (?:lower|upper) bound (\S+):")
 
 
+class CandidateFit(NamedTuple):
+    """One scan candidate, ``base + effects`` fitted on the estimation data (:func:`_split_candidate`)."""
+
+    #: validation errors ``pred - meas`` (deg)
+    errors: np.ndarray
+    #: the cautions about the effects the model lacks (:attr:`Suspect.caution`)
+    cautions: list
+    #: the fitted values
+    params: dict
+    #: the validation errors without the new terms' own share (:func:`_without_own_share`), or None
+    without_own: np.ndarray | None
+    #: the only cautions say that no record holds what would confirm the effects
+    #: (:func:`~endocal.validation.ambiguity.cautioned_last`)
+    unconfirmed_only: bool
+
+
 def _split_candidate(model: HysteresisModel, effects: Sequence[str], train: HysteresisData,
-                     val: HysteresisData, ftol: float | None = None) -> tuple:
-    """Validation errors of ``base + effects`` fitted on ``train`` (stopping at ``ftol``: :func:`scan_ftol`), the
-    cautions about the effects ``model`` lacks (:attr:`Suspect.caution`), the fitted values, the errors without
-    the new terms' own share (:func:`_without_own_share`), and whether the only cautions say that no record holds
-    what would confirm the effects (:func:`~endocal.validation.ambiguity.cautioned_last`)."""
+                     val: HysteresisData, ftol: float | None = None) -> CandidateFit:
+    """``base + effects`` fitted on ``train`` (stopping at ``ftol``: :func:`scan_ftol`) and scored on ``val``."""
     m = split_fit(model, effects, train, ftol=ftol)
     have = set(effect_labels(model))
     new = [e for e in m.effects_ if e.label not in have]
@@ -104,8 +118,8 @@ def _split_candidate(model: HysteresisModel, effects: Sequence[str], train: Hyst
     # a caution of that kind alone says nothing against the fitted values (ambiguity.cautioned_last)
     unconfirmed = [c for e in new for c in unheld_cautions(e, train, val)]
     err = predict_errors(m, val)
-    return (err, cautions + unconfirmed, dict(m.params_), _without_own_share(m, new, val),
-            bool(unconfirmed) and not cautions)
+    return CandidateFit(err, cautions + unconfirmed, dict(m.params_), _without_own_share(m, new, val),
+                        bool(unconfirmed) and not cautions)
 
 
 def _without_own_share(m: HysteresisModel, new: list, val: HysteresisData) -> np.ndarray | None:
@@ -216,19 +230,19 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
         results = [(predict_errors(model, val), [], dict(model.params_))] + results
     if isinstance(results[0], ModelError):
         raise ModelError(f"the model as it stands cannot be refitted on the estimation data: {results[0]}") from None
-    err_base = results[0][0]
+    err_base = results[0][0]  # the model's own: as it stands, or its structure refitted (a CandidateFit)
     fitted, cautions, fitted_params, without_term, unconfirmed = [], {}, {}, {}, set()
     for c, res in zip(tested_cands, results[1:]):
         if isinstance(res, ModelError):
             untestable[c] = f"could not be fitted on the estimation data ({res})"
         else:
-            fitted.append((c, res[0]))
-            cautions[c] = "; ".join(res[1])
-            fitted_params[c] = res[2]
-            if res[4]:
+            fitted.append((c, res.errors))
+            cautions[c] = "; ".join(res.cautions)
+            fitted_params[c] = res.params
+            if res.unconfirmed_only:
                 unconfirmed.add(c)
-            if res[3] is not None:
-                without_term[c] = res[3]
+            if res.without_own is not None:
+                without_term[c] = res.without_own
     rmse_base = float(np.sqrt(np.mean(err_base**2)))
     # units sized by the error of the model as it stands: the same for every candidate (a p-value
     # does not depend on which others were tested) and for the report's ladder, which has only the pair
@@ -285,7 +299,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     # (a look-alike whose gain is borrowed is compared, never promoted)
     suspects, settled = settle_lookalikes(suspects, [s for s in tested if s.effect not in borrowed], errs, dt, val,
                                           units, alpha, min_gain_pct,
-                                          lambda effects: _split_candidate(model, effects, dt, val, ftol)[0], have)
+                                          lambda effects: _split_candidate(model, effects, dt, val, ftol).errors, have)
     if stride > 1 and suspects:
         ranges = expected_ranges(model, [s.effect for s in suspects], train, val, stride,
                                  [s.rmse_heldout_deg for s in suspects], jobs,
@@ -366,7 +380,7 @@ def expected_ranges(model: HysteresisModel, effects: Sequence[str], train: Hyste
         if starts[k]:
             return predict_errors(template(model, have + [effects[k]]).fit(dt2, warm_start=starts[k], ftol=SCAN_FTOL),
                                  val)
-        return _split_candidate(model, have + [effects[k]], dt2, val, SCAN_FTOL)[0]
+        return _split_candidate(model, have + [effects[k]], dt2, val, SCAN_FTOL).errors
 
     with one_blas_thread():
         again = map_jobs(again_errors, list(range(len(effects))), jobs)
