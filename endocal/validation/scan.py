@@ -43,7 +43,7 @@ from endocal.validation.bases import (base_before_effect, base_errors, held_back
 from endocal.validation.candidates import candidate_effects
 from endocal.validation.folds import check_cv_data, fold_bounds, fold_errors, fold_split, still_blocks
 from endocal.validation.identifiability import unheld_cautions
-from endocal.validation.paired import holm, import_paired_test, min_units_for, paired_test, unit_test
+from endocal.validation.paired import holm, min_units_for, paired_test, unit_test
 from endocal.validation.parallel import map_jobs, one_blas_thread
 from endocal.validation.power import estimate_power, evidence_phrase
 from endocal.validation.predict import predict_errors
@@ -216,15 +216,9 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     structures = ([] if as_is else [have]) + [have + [c] for c in tested_cands]
     ftol = scan_ftol(stride)
 
-    def own_work():  # while the candidates fit: the caller's, and the import the suspects' comparisons need
-        if meanwhile is not None:
-            meanwhile()
-        if len(tested_cands) > 1:
-            import_paired_test()
-
     with one_blas_thread():
         results = map_jobs(lambda job: _split_candidate(model, job, dt, val, ftol) if isinstance(job, list)
-                           else base_errors(model, job, dt, val, ftol), structures + bases_fitted, jobs, own_work)
+                           else base_errors(model, job, dt, val, ftol), structures + bases_fitted, jobs, meanwhile)
     results, base_results = results[:len(structures)], results[len(structures):]
     if as_is:
         results = [(predict_errors(model, val), [], dict(model.params_))] + results
