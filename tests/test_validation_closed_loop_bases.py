@@ -115,9 +115,11 @@ def run_loop(hidden: str | None, variant: str | None = None) -> BaseLoop:
         if step is None:
             break
         model, est, val = step
+    else:
+        raise AssertionError(f"the loop on {hidden or 'the control'} did not end in 14 turns: {out.steps}")
     out.clean = bool(res.clean)
-    final = validate_offline(model, val, train=est, max_scan_samples=SCAN_SAMPLES)
-    out.end_label, out.end_deg = final.model["label"], final.scan.baseline_rmse_heldout_deg
+    # the loop ends on a validate of the model, estimation and validation records it ends with: its scores are the end
+    out.end_label, out.end_deg = res.model["label"], res.scan.baseline_rmse_heldout_deg
     out.end_noise_deg = noise if out.added == 0 else record_noise(cfg, tmp, out.added)
     print(f"loop {hidden or 'control'}: {_summary(out)}")  # the numbers of the evidence page (pytest -s)
     return out
