@@ -246,15 +246,19 @@ def run_loop(case: str | None) -> LoopResult:
     tmp = Path(tempfile.mkdtemp(prefix=f"loop-{case}-"))
     res = None
     for _ in range(12):  # a bound the loop never reaches: at most two recordings and a refit per effect
-        res = validate_offline(model, val, train=est, model_path=str(tmp / "m.json"), max_scan_samples=SCAN_SAMPLES)
+        # each validate also scores the start model on its records (`--compare`): the last one's comparison is the
+        # loop's start -> end (one fit more per validate, where scoring the end again would take a whole scan)
+        res = validate_offline(model, val, train=est, model_path=str(tmp / "m.json"), max_scan_samples=SCAN_SAMPLES,
+                               compare=start)
         out.history_deg.append(res.scan.baseline_rmse_heldout_deg)
         step = follow(res, base, model, cfg, est, val, tmp, out)
         if step is None:
             break
         model, est, val = step
+    else:
+        raise AssertionError(f"the loop on {case or 'the control'} did not end in 12 turns: {out.history_deg}")
     out.clean = bool(res.clean)
-    final = validate_offline(model, val, train=est, max_scan_samples=SCAN_SAMPLES, compare=start)
-    out.start_deg, out.end_deg = final.compare.old_heldout_rmse_deg, final.compare.new_heldout_rmse_deg
+    out.start_deg, out.end_deg = res.compare.old_heldout_rmse_deg, res.compare.new_heldout_rmse_deg
     hidden_label = next((e.label for e in model.effects_ if e.label.partition(":")[0] == hidden), None)
     if hidden_label is not None:
         rest = [e.label for e in model.effects_ if e.label != hidden_label]
