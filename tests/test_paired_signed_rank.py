@@ -11,7 +11,8 @@ from endocal.validation.paired import paired_test, signed_rank_greater
 def _cases():
     rng = np.random.default_rng(7)
     for n in (2, 3, 5, 8, 13, 14, 20, 33, 50, 51, 80, 200):
-        for shift in (-0.5, 0.0, 0.3, 1.0):
+        # at 13 values with ties scipy enumerates 8192 sign patterns in Python (1.5 s a case): one shift there
+        for shift in ((0.3,) if n == 13 else (-0.5, 0.0, 0.3, 1.0)):
             yield f"n{n}-shift{shift}", rng.normal(shift, 1.0, n)  # no ties: exact up to 50, then normal
             tied = np.round(rng.normal(shift, 1.0, n), 1)  # ties, and a zero now and then
             yield f"n{n}-shift{shift}-tied", tied
