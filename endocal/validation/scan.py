@@ -221,10 +221,10 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
                            else base_errors(model, job, dt, val, ftol), structures + bases_fitted, jobs, meanwhile)
     results, base_results = results[:len(structures)], results[len(structures):]
     if as_is:
-        results = [(predict_errors(model, val), [], dict(model.params_))] + results
+        results = [CandidateFit(predict_errors(model, val), [], dict(model.params_), None, False)] + results
     if isinstance(results[0], ModelError):
         raise ModelError(f"the model as it stands cannot be refitted on the estimation data: {results[0]}") from None
-    err_base = results[0][0]  # the model's own: as it stands, or its structure refitted (a CandidateFit)
+    err_base = results[0].errors  # the model's own: as it stands, or its structure refitted
     fitted, cautions, fitted_params, without_term, unconfirmed = [], {}, {}, {}, set()
     for c, res in zip(tested_cands, results[1:]):
         if isinstance(res, ModelError):
