@@ -15,7 +15,7 @@ from endocal._version import __version__  # one source for the package and pypro
 
 #: What ``import endocal as ec`` offers besides ``__version__`` (defined in :mod:`endocal.api`).
 _API = (
-    "Check", "ForceModel", "History", "Model", "Planes", "Report", "Run", "Suggestion", "Validation",
+    "BaseChange", "Check", "ForceModel", "History", "Model", "Planes", "Report", "Run", "Suggestion", "Validation",
     "check_probe", "fit", "fit_force", "fit_planes", "history", "load_model", "load_planes", "load_run", "make_report",
     "run_protocol", "use_effects", "validate",
 )

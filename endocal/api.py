@@ -55,7 +55,7 @@ from pathlib import Path
 from endocal.errors import ModelError, OutputExistsError
 
 __all__ = [
-    "Check", "ForceModel", "History", "Model", "Planes", "Report", "Run", "Suggestion", "Validation",
+    "BaseChange", "Check", "ForceModel", "History", "Model", "Planes", "Report", "Run", "Suggestion", "Validation",
     "check_probe", "fit", "fit_force", "fit_planes", "history", "load_model", "load_planes", "load_run", "make_report",
     "run_protocol", "use_effects", "validate",
 ]
@@ -376,8 +376,8 @@ class Model(_Saved):
     path : Path or None
         The file it was loaded from or saved to.
     start_from : Model or None
-        The model its fit started from (`Suggestion.refit` sets it); `validate`
-        compares with it.
+        The model it was refitted from (`Suggestion.refit` sets it, and `BaseChange.refit`, whose
+        fit starts afresh); `validate` compares with it.
     """
 
     def __init__(self, estimator, *, provenance: dict | None = None, path: str | Path | None = None,
@@ -605,7 +605,27 @@ def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = ()
 
 
 # ---------------------------------------------------------------------------- validation
-class Suggestion(_Result):
+class _Proposal(_Result):
+    """What `validate` proposes to refit (an effect, another base): the scan's object's `_FIELDS`, its `plan`, the
+    shell `command` of that plan."""
+
+    _FIELDS: tuple[str, ...] = ()
+
+    def __init__(self, found, validation: Validation) -> None:
+        self.plan = found.refit
+        self._validation = validation
+        for k in self._FIELDS:
+            setattr(self, k, getattr(found, k))
+
+    @property
+    def command(self) -> str:
+        """The refit as the shell command `endocal validate` prints (`endocal.shell.refit_command`)."""
+        from endocal.shell import refit_command
+
+        return refit_command(self.plan)
+
+
+class Suggestion(_Proposal):
     """An effect the validation suggests adding, tested: its gain on held-out data and its p-value.
 
     Attributes
@@ -634,20 +654,12 @@ class Suggestion(_Result):
         The library's object (`endocal.validation.suspects.Suspect`).
     """
 
+    _FIELDS = ("effect", "gain_pct", "p_value", "significant", "rmse_heldout_deg", "base_rmse_heldout_deg", "evidence",
+               "cause", "signature", "caution")
+
     def __init__(self, suspect, validation: Validation) -> None:
+        super().__init__(suspect, validation)
         self.suspect = suspect
-        self.plan = suspect.refit
-        self._validation = validation
-        for k in ("effect", "gain_pct", "p_value", "significant", "rmse_heldout_deg", "base_rmse_heldout_deg",
-                  "evidence", "cause", "signature", "caution"):
-            setattr(self, k, getattr(suspect, k))
-
-    @property
-    def command(self) -> str:
-        """The refit as the shell command `endocal validate` prints (`endocal.shell.refit_command`)."""
-        from endocal.shell import refit_command
-
-        return refit_command(self.plan)
 
     def to_dict(self) -> dict:
         """One entry of `suspects` in `endocal validate --json`: the suspect, with its refit's `command`."""
@@ -692,6 +704,60 @@ class Suggestion(_Result):
 _KINDS = {"time_series": "ts-", "loops": "loops-", "residuals": "resid-", "regimes": "regime-"}
 
 
+class BaseChange(_Proposal):
+    """Another base the validation suggests, tested as a candidate: its gain on held-out data and its p-value.
+
+    Attributes
+    ----------
+    base : str
+        As `model=` takes it (`bouc-wen`, `linear`).
+    added : tuple of str
+        Effects the change brings beside the model's (empty: the model's effects alone).
+    gain_pct, p_value, significant, rmse_heldout_deg, base_rmse_heldout_deg, evidence
+        As for a `Suggestion` (the same paired test, Holm-corrected among the bases).
+    return_point_memory : bool
+        Whether the base returns to the branch it left after a small reversal inside the loop.
+    plan : Refit
+        What to refit: the data, base, effects and planes of the fit the scan scored; `refit()` makes it.
+    command : str
+        The same refit as the `endocal fit hysteresis` command line `validate` prints.
+    candidate : BaseCandidate
+        The library's object (`endocal.validation.bases.BaseCandidate`).
+    """
+
+    _FIELDS = ("base", "added", "gain_pct", "p_value", "significant", "rmse_heldout_deg", "base_rmse_heldout_deg",
+               "evidence", "return_point_memory")
+
+    def __init__(self, candidate, validation: Validation) -> None:
+        super().__init__(candidate, validation)
+        self.candidate = candidate
+
+    def to_dict(self) -> dict:
+        """One entry of `scan.bases` in `endocal validate --json`, with its refit's `command`."""
+        from endocal.views import validation_dict
+
+        scan = self._validation.result.scan
+        return validation_dict(self._validation.result)["scan"]["bases"][list(scan.bases).index(self.candidate)]
+
+    def refit(self) -> Model:
+        """Fit this base with the effects the scan scored it with, on the data it was scored on: the fit
+        whose command `endocal validate` prints. Another base starts afresh (no values of the validated
+        model carry over), but the model returned has the validated one as `start_from`, so `validate`
+        shows the error falling from it."""
+        p = self.plan
+        new = fit(list(p.data_paths), axis=p.axis, model=p.base, effects=list(p.effects), planes=p.planes_path,
+                  settings=p.settings)
+        new.start_from = self._validation.model
+        return new
+
+    def summary(self) -> str:
+        """One line: the base, its gain and its p-value (`base: bouc-wen lowers the validation RMSE by ...`)."""
+        return self.candidate.line()
+
+    def __repr__(self) -> str:
+        return f"BaseChange: {self.summary()}"
+
+
 class Validation(_Result):
     """A model held against measurements: how far off, where, what is missing (`endocal validate`).
 
@@ -716,6 +782,9 @@ class Validation(_Result):
         Error metrics, error by regime, residual tests.
     suggestions : list of Suggestion
         Effects most likely missing, best first (empty: nothing clears the bar).
+    base_changes : list of BaseChange
+        Other bases that clear the same bar, best first; `base_first` says the summary's next
+        command is the first of them, not the first suggestion.
     untested : list of Pointer
         Effects the residual points at that the scan could not confirm, with the experiment
         that would (`endocal.validation.verdict.Pointer`).
@@ -742,6 +811,7 @@ class Validation(_Result):
         self.model = model
         self._records = list(records)
         self.suggestions = [Suggestion(s, self) for s in result.suspects]
+        self.base_changes = [BaseChange(b, self) for b in result.scan.base_suggestions]
 
     axis = property(lambda self: self.result.axis)
     metrics = property(lambda self: self.result.metrics)
@@ -756,6 +826,7 @@ class Validation(_Result):
     next = property(lambda self: self.result.next)
     request = property(lambda self: self.result.request)
     compare_found = property(lambda self: self.result.compare_found)
+    base_first = property(lambda self: bool(self.base_changes) and self.result.scan.base_first)
 
     def to_dict(self) -> dict:
         """What `endocal validate MODEL DATA --json` prints, key for key (`endocal.views.validation_dict`)."""
@@ -833,7 +904,8 @@ def validate(model: Model | str | Path, data, *, train=None, compare: Model | st
     compare : Model, path or bool, optional
         A previous model, shown beside this one under the same scheme. Default (None): the
         model this one was refitted from (`Model.start_from`, else the file the refit
-        command's naming points at, `M.json` for `M-EFFECT.json`), if any; False: none.
+        command's naming points at, `M.json` for `M-EFFECT.json` or a base change's `M-BASE.json`), if
+        any; False: none.
     cv : {"auto", "rolling", "split"}
         How effects are tested: the estimation/validation split when there is estimation
         data (`auto`), rolling-origin cross-validation on `data` alone (`rolling`), or

@@ -114,6 +114,67 @@ def test_the_real_piezo_recordings_suggestion_delivers_what_validate_promised(tm
     keep_promises(tmp_path / "m.json", [PIEZO], tmp_path, first_only=True)
 
 
+def test_a_base_changes_printed_refit_delivers_its_promise_and_its_validate_shows_the_fall(tmp_path):
+    """The loop's other turn: a base change. On the Bouc-Wen plant of tests/test_validation_bases.py (no
+    return-point memory) a B-spline fitted on the sweeps misses the validation record's minor loops;
+    `validate` puts the base change first and prints its refit (`M-BASE.json`, no --start-from: another
+    base starts afresh). That command run as printed, `validate` of what it wrote finds `M.json` by the
+    naming, shows the error falling from it, and the fall is at least 75 % of the promise."""
+    from tests.test_validation_bases import _plant, _records
+
+    est, val = _records(_plant("bouc-wen"))
+    for name, d in (("fit", est), ("check", val)):
+        pd.DataFrame({"t_s": d.t_s, "ap_cmd_deg": d.cmd_deg, "ap_meas_deg": d.meas_deg}).to_csv(
+            tmp_path / f"{name}.csv", index=False)
+    proc = endocal("fit", "hysteresis", tmp_path / "fit.csv", "--axis", "ap", "--model", "bspline", "--out",
+                   tmp_path / "m.json")
+    assert proc.returncode == 0, proc.stderr
+    d, stdout = _validate(tmp_path / "m.json", [tmp_path / "check.csv"], tmp_path / "v.json")
+    assert d["scan"]["base_first"], stdout
+    change = next(b for b in d["scan"]["bases"] if b["significant"])
+    assert "  " + change["command"] in stdout.splitlines(), stdout
+    argv = shlex.split(change["command"])
+    assert "--start-from" not in argv and argv[-1] == str(tmp_path / f"m-{change['base']}.json")
+    proc = endocal(*argv[1:], "--force")
+    assert proc.returncode == 0, proc.stderr
+    d2, stdout2 = _validate(Path(argv[-1]), [tmp_path / "check.csv"], tmp_path / "v2.json")
+    c = d2["compare"]
+    assert c is not None and c["path"] == str(tmp_path / "m.json"), c
+    promised, delivered = change["gain_pct"], -c["change_pct"]
+    assert delivered >= KEPT * promised, (promised, delivered)
+    assert stdout2.splitlines()[1].startswith(f"error fell {delivered:.0f} % since bspline (m.json)"), stdout2
+    # the API: the same change, its refit the printed command's fit, and validate compares with the model it replaces
+    import endocal as ec
+
+    v = ec.validate(tmp_path / "m.json", tmp_path / "check.csv")
+    assert v.base_first and v.base_changes[0].command == change["command"]
+    assert json.loads(v.base_changes[0].to_json()) == change and repr(v.base_changes[0]).startswith(f"BaseChange: base: {change['base']} ")
+    new = v.base_changes[0].refit()
+    assert new.params == pytest.approx(ec.load_model(argv[-1]).params, rel=1e-9)
+    v2 = ec.validate(new, tmp_path / "check.csv")
+    assert v2.compare.change_pct == pytest.approx(c["change_pct"], rel=1e-9) and v2.base_changes == []
+
+
+def test_a_refits_previous_model_is_found_by_the_refit_commands_naming(tmp_path):
+    """`validate M-EFFECT.json` compares with `M.json`, and so does `validate M-BASE.json` (a base change) and
+    `M-BASE-EFFECT.json` (a base change with an effect beside it); a name that only looks like one, or a
+    file that is not there, finds nothing."""
+    from endocal.validation.offline import previous_model_path
+
+    for name in ("m.json", "m-deadzone.json", "m-linear.json", "m-linear-deadzone.json", "m-linear-load-col-all.json"):
+        (tmp_path / name).write_text("{}")
+    found = lambda name, effects, base=None: previous_model_path(tmp_path / name, effects, base)  # noqa: E731
+    assert found("m-deadzone.json", ["envelope", "deadzone"], "pi") == tmp_path / "m.json"
+    assert found("m-linear.json", ["envelope"], "linear") == tmp_path / "m.json"
+    assert found("m-linear.json", ["envelope"], "pi") is None  # not this model's base
+    # the effect's naming first: M-linear-deadzone.json is an effect refit of M-linear.json where that exists
+    assert found("m-linear-deadzone.json", ["envelope", "deadzone"], "linear") == tmp_path / "m-linear.json"
+    (tmp_path / "m-linear.json").unlink()
+    assert found("m-linear-deadzone.json", ["envelope", "deadzone"], "linear") == tmp_path / "m.json"
+    assert found("m-linear-load-col-all.json", ["load:col"], "linear") == tmp_path / "m.json"
+    assert found("m.json", ["envelope"], "pi") is None and found("x-pi.json", [], "pi") is None  # no x.json
+
+
 def test_a_subsampled_scan_promises_the_range_its_refit_on_every_sample_lands_in():
     """The scan fits its candidates on 1 estimation sample in N; the refit fits every sample. The
     promise then gives a range (the candidate fitted on two interleaved subsamples, widened by half

@@ -223,21 +223,32 @@ class ValidationRequest:
     next_possible: bool = False
 
 
-def previous_model_path(model_path: str | Path, effects: Sequence[str]) -> Path | None:
-    """The model ``model_path`` was refitted from, by the naming of the refit command (``M-EFFECT.json``, or
-    ``M-EFFECT-all.json`` under ``refit_on="all"``, ``M-EFFECT-insample.json`` from estimation data that
-    holds the validated record, from ``M.json``), when that file exists."""
+def previous_model_path(model_path: str | Path, effects: Sequence[str], base: str | None = None) -> Path | None:
+    """The model ``model_path`` was refitted from, by the naming of the refit command, when that file exists:
+    ``M-EFFECT.json`` (``M-EFFECT-all.json`` under ``refit_on="all"``, ``M-EFFECT-insample.json`` from
+    estimation data that holds the validated record) from ``M.json``; and a base change's
+    ``M-BASE.json`` (``M-BASE-EFFECT.json`` with an effect added beside it, :func:`bases._refit`)
+    from ``M.json``, when ``base`` is the model's."""
     model_path = Path(model_path)
     name = model_path.name
     if not name.endswith(".json"):
         return None
     stem = name[:-5].removesuffix("-all").removesuffix("-insample")
-    for e in effects:
-        tag = "-" + e.replace(":", "-")
+    tags = ["-" + e.replace(":", "-") for e in effects]
+    for tag in tags:
         if stem.endswith(tag):
             cand = model_path.with_name(stem[: -len(tag)] + ".json")
             if cand.is_file():
                 return cand
+    if base:  # a base change: -BASE, then the effects added beside it, if any
+        rest = stem
+        while True:
+            if rest.endswith("-" + base) and (cand := model_path.with_name(rest[: -len(base) - 1] + ".json")).is_file():
+                return cand
+            tag = next((t for t in tags if rest.endswith(t)), None)
+            if tag is None:
+                return None
+            rest = rest[: -len(tag)]
     return None
 
 
@@ -307,8 +318,15 @@ def validate_records(model: HysteresisModel, tables: Sequence[AlignedData], *, m
                            planes_path=planes_path)
     found = False
     if compare is None and find_previous and model_path is not None:
-        compare_path = previous_model_path(model_path, effect_labels(model))
-        compare, found = (None, False) if compare_path is None else (load_model(compare_path), True)
+        compare_path = previous_model_path(model_path, effect_labels(model), model.base_name)
+        if compare_path is not None:  # found by its name only: one that does not load or fits another axis is no previous model
+            try:
+                compare = load_model(compare_path)
+            except EndocalError:
+                compare = None
+            found = compare is not None and compare.axis == model.axis
+            if not found:
+                compare, compare_path = None, None
     if compare is not None and compare.axis != model.axis:
         raise ModelError(f"compare {compare_path or 'model'} is a model of axis '{compare.axis}', but "
                          f"{model_path or 'this model'} is of axis '{model.axis}': compare with a model of the same axis")
