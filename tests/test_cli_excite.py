@@ -97,7 +97,7 @@ def test_same_seed_same_run_other_seed_other_noise(tmp_path):
         (["excite", "random", "--out", "{tmp}/r", "--seed", "-1"], ["--seed must be a non-negative integer"]),
         (["info", "{tmp}/missing.parquet"], ["does not exist"]),
         (["info", "{tmp}/nocols.csv"], ["_cmd_deg"]),
-        (["info", "{tmp}/nan.csv"], ["NaN", "row 2"]),
+        (["info", "{tmp}/nan.csv"], ["NaN", "at line 4;"]),  # the file's line: header 1, rows from 2
         (["info", "{tmp}/backwards.csv"], ["time must increase"]),
     ],
 )

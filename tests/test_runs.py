@@ -163,9 +163,9 @@ def test_killed_run_without_aligned_table_is_rebuilt_from_streams(tmp_path, tee)
     [
         (lambda df: df.drop(columns=["t_s"]), "no 't_s' column"),
         (lambda df: df.drop(columns=["ap_meas_deg", "ml_meas_deg"]), "found only ap_cmd_deg"),
-        (lambda df: df.assign(ap_meas_deg=df["ap_meas_deg"].where(df.index != 7)), "'ap_meas_deg' is NaN at row 7"),
-        (lambda df: df.assign(ml_cmd_deg=df["ml_cmd_deg"].where(df.index != 3, np.inf)), "'ml_cmd_deg' is infinite at row 3"),
-        (lambda df: df.assign(t_s=df["t_s"].where(df.index != 10, 0.0)), "time must increase"),
+        (lambda df: df.assign(ap_meas_deg=df["ap_meas_deg"].where(df.index != 7)), "'ap_meas_deg' is NaN at line 9; drop such rows (a tracker dropout)"),
+        (lambda df: df.assign(ml_cmd_deg=df["ml_cmd_deg"].where(df.index != 3, np.inf)), "'ml_cmd_deg' is infinite at line 5; drop or fill"),
+        (lambda df: df.assign(t_s=df["t_s"].where(df.index != 10, 0.0)), "time must increase, but t_s goes from 0.09 to 0 at line 12"),
         (lambda df: df.iloc[:0], "no rows"),
         (lambda df: df.assign(t_s=df["t_s"].astype(object).where(df.index != 4, "abc")), "'t_s' is not numeric"),
     ],
@@ -177,6 +177,22 @@ def test_bad_aligned_tables(tmp_path, mutate, message):
     mutate(df).to_csv(path, index=False)
     with pytest.raises(RunFormatError, match=message.replace("(", r"\(").replace(")", r"\)")):
         load_aligned(path)
+
+
+def test_a_bad_cell_is_named_by_its_line_in_a_csv_file_and_by_its_row_in_a_parquet_table(tmp_path):
+    """A CSV file's messages name the line an editor shows (the header is line 1; a logger's notes before it
+    and blank lines count); a Parquet table has no lines: its row (from 0)."""
+    t = np.arange(20) * 0.01
+    df = pd.DataFrame({"t_s": t, "ap_cmd_deg": np.sin(t), "ap_meas_deg": np.sin(t)})
+    df.loc[12, "ap_meas_deg"] = np.nan
+    rows = df.to_csv(index=False).splitlines()
+    (tmp_path / "a.csv").write_text("\n".join(["# logger v2", *rows[:6], "", *rows[6:]]) + "\n")
+    assert (tmp_path / "a.csv").read_text().splitlines()[15].endswith(",")  # line 16: row 12's empty cell
+    with pytest.raises(RunFormatError, match="'ap_meas_deg' is NaN at line 16; "):
+        load_aligned(tmp_path / "a.csv")
+    df.to_parquet(tmp_path / "a.parquet")
+    with pytest.raises(RunFormatError, match="'ap_meas_deg' is NaN at row 12; "):
+        load_aligned(tmp_path / "a.parquet")
 
 
 def test_user_tables_in_csv_and_parquet(tmp_path):

@@ -32,7 +32,7 @@ from endocal.errors import RunFormatError
 from endocal.kinematics.bending import bending_angles_deg, tip_in_base_mm
 from endocal.probe import ProbeConfig
 from endocal.runs.format import ALIGNED, MOTOR, RUN_JSON, TRACKER, read_run_json, sha256_of
-from endocal.runs.textable import read_csv_table
+from endocal.runs.textable import line_numbers, read_csv_table
 from endocal.streams import DROPOUT_STATUSES
 
 #: file suffixes read as CSV text tables (delimiter sniffed: endocal.runs.textable)
@@ -323,7 +323,12 @@ def _read_table(path: Path) -> pd.DataFrame:
     raise RunFormatError(f"{path}: expected a run folder, a .parquet or a .csv aligned table (.txt, .tsv and .dat read as CSV)")
 
 
-def check_aligned(df: pd.DataFrame, where: str) -> list[str]:
+def _csv_line(path: Path, df: pd.DataFrame):
+    """``row_name`` of a CSV table: the file's line of row ``i`` (read again only for a message)."""
+    return lambda i: f"line {line_numbers(path.read_bytes(), i + 1, df.attrs.get('headerless', False))[i]}"
+
+
+def check_aligned(df: pd.DataFrame, where: str, row_name=None) -> list[str]:
     """Check an aligned table and return its bending axes.
 
     Raises
@@ -331,8 +336,10 @@ def check_aligned(df: pd.DataFrame, where: str) -> list[str]:
     RunFormatError
         No ``t_s``, no axis with both command and measurement, an axis with a command in two
         units, non-numeric, NaN or infinite values in time/commands/measurements, or time that
-        does not increase.
+        does not increase. ``row_name(i)`` names row ``i`` in those messages (default ``row i``; a CSV
+        file's ``line N``, as an editor numbers it).
     """
+    row_name = row_name or (lambda i: f"row {i}")
     if "t_s" not in df.columns:
         if df.attrs.get("headerless"):
             raise RunFormatError(f"{where}: no header line (the first line is numbers): an aligned table names its "
@@ -364,13 +371,16 @@ def check_aligned(df: pd.DataFrame, where: str) -> list[str]:
         if bad.any():
             i = int(np.argmax(bad))
             kind = "NaN" if np.isnan(values[i]) else "infinite"
-            raise RunFormatError(f"{where}: column '{col}' is {kind} at row {i}; drop or fill such rows first")
+            fix = ("drop such rows (a tracker dropout), or import the log with `endocal import csv`, which leaves "
+                   "them out and counts them" if col.endswith(MEAS) else "drop or fill such rows first")
+            raise RunFormatError(f"{where}: column '{col}' is {kind} at {row_name(i)}; {fix}")
     t = df["t_s"].to_numpy(float)
     steps = np.diff(t)
     if (steps <= 0).any():
         i = int(np.argmax(steps <= 0)) + 1
         raise RunFormatError(
-            f"{where}: time must increase, but t_s goes from {t[i - 1]:g} to {t[i]:g} at row {i}; sort the table or fix its clock"
+            f"{where}: time must increase, but t_s goes from {t[i - 1]:g} to {t[i]:g} at {row_name(i)}; sort the table or fix "
+            "its clock"
         )
     return axes
 
@@ -414,5 +424,5 @@ def load_aligned(path: str | Path, max_gap_s: float = 0.2) -> AlignedData:
     if not path.exists():
         raise RunFormatError(f"{path} does not exist: give a run folder or an aligned table (.parquet or .csv)")
     df = _read_table(path)
-    axes = check_aligned(df, str(path))
+    axes = check_aligned(df, str(path), _csv_line(path, df) if path.suffix.lower() in CSV_SUFFIXES else None)
     return AlignedData(df, axes, path, sha256_of(path), {}, drive_units_of(df.columns))

@@ -67,7 +67,7 @@ from endocal.runs.csvchecks import (MAX_GAP_S, ReadingGaps, check_aligned_rows, 
 from endocal.runs.format import (atomic_write_bytes, check_parent, parquet_bytes, prepare_output, sample_rate_hz,
                                  software_versions)
 from endocal.runs.imported import tracker_stream, write_imported_run
-from endocal.runs.textable import comment_lines, read_csv_table, sniff_delimiter
+from endocal.runs.textable import line_numbers, read_csv_table
 
 #: What a drafted map (:mod:`endocal.runs.mapdraft`) writes where it could not place a column.
 UNFILLED = "FILL IN"
@@ -512,7 +512,7 @@ def _read_csv(raw: bytes, where: str) -> pd.DataFrame:
     if df.shape[1] < 2 or df.empty:
         raise RunFormatError(f"{where}: not a CSV table of a log (found {df.shape[1]} column(s), {len(df)} row(s))")
     # rows keep their line numbers in the file as the index, for messages (line 1 is the header)
-    df.index = _line_numbers(raw, len(df), df.attrs.get("headerless", False))
+    df.index = line_numbers(raw, len(df), df.attrs.get("headerless", False))
     _refuse_units_row(df, where)
     return df
 
@@ -536,21 +536,6 @@ def _refuse_units_row(df: pd.DataFrame, where: str) -> None:
         raise RunFormatError(f"{where}: line {df.index[0]} under the header holds text over numbers ({cells}...): a "
                              "units row? endocal reads one header row: delete that line and put each unit in its "
                              "column's name (Time (s), stage_pos_mm)")
-
-
-def _line_numbers(raw: bytes, n: int, headerless: bool) -> np.ndarray:
-    """The lines (1 the first, as an editor numbers them) of a table's first ``n`` rows.
-
-    pandas skips blank lines (spaces only; tabs too, unless they separate the cells), so the
-    rows after one are not at their count; a quoted cell that spans lines is not followed (a
-    logger writes none).
-    """
-    blank = b" \r" if sniff_delimiter(raw) == "\t" else b" \t\r"
-    skip = comment_lines(raw)  # a logger's notes before the header
-    filled = np.array([i + 1 for i, text in enumerate(raw.split(b"\n")) if i >= skip and text.strip(blank)], dtype=int)
-    rows = filled if headerless else filled[1:]
-    # lines ended by a lone \r (old Mac files) are one line here: count the rows instead
-    return rows[:n] if rows.size >= n else np.arange(n) + (1 if headerless else 2)
 
 
 def read_log_table(log: Path) -> tuple[pd.DataFrame, bytes]:

@@ -105,4 +105,19 @@ def read_csv_table(raw: bytes) -> pd.DataFrame:
     return df
 
 
-__all__ = ["DELIMITERS", "comment_lines", "read_csv_table", "sniff_delimiter"]
+def line_numbers(raw: bytes, n: int, headerless: bool) -> np.ndarray:
+    """The lines (1 the first, as an editor numbers them) of a table's first ``n`` rows.
+
+    pandas skips blank lines (spaces only; tabs too, unless they separate the cells), so the
+    rows after one are not at their count; a quoted cell that spans lines is not followed (a
+    logger writes none).
+    """
+    blank = b" \r" if sniff_delimiter(raw) == "\t" else b" \t\r"
+    skip = comment_lines(raw)  # a logger's notes before the header
+    filled = np.array([i + 1 for i, text in enumerate(raw.split(b"\n")) if i >= skip and text.strip(blank)], dtype=int)
+    rows = filled if headerless else filled[1:]
+    # lines ended by a lone \r (old Mac files) are one line here: count the rows instead
+    return rows[:n] if rows.size >= n else np.arange(n) + (1 if headerless else 2)
+
+
+__all__ = ["DELIMITERS", "comment_lines", "line_numbers", "read_csv_table", "sniff_delimiter"]
