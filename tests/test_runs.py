@@ -188,10 +188,10 @@ def test_a_bad_cell_is_named_by_its_line_in_a_csv_file_and_by_its_row_in_a_parqu
     rows = df.to_csv(index=False).splitlines()
     (tmp_path / "a.csv").write_text("\n".join(["# logger v2", *rows[:6], "", *rows[6:]]) + "\n")
     assert (tmp_path / "a.csv").read_text().splitlines()[15].endswith(",")  # line 16: row 12's empty cell
-    with pytest.raises(RunFormatError, match="'ap_meas_deg' is NaN at line 16; "):
+    with pytest.raises(RunFormatError, match="'ap_meas_deg' is NaN at line 16; .*import csv .*--draft-map"):
         load_aligned(tmp_path / "a.csv")
     df.to_parquet(tmp_path / "a.parquet")
-    with pytest.raises(RunFormatError, match="'ap_meas_deg' is NaN at row 12; "):
+    with pytest.raises(RunFormatError, match="'ap_meas_deg' is NaN at row 12; drop or fill such rows first$"):
         load_aligned(tmp_path / "a.parquet")
 
 

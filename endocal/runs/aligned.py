@@ -371,8 +371,9 @@ def check_aligned(df: pd.DataFrame, where: str, row_name=None) -> list[str]:
         if bad.any():
             i = int(np.argmax(bad))
             kind = "NaN" if np.isnan(values[i]) else "infinite"
-            fix = ("drop such rows (a tracker dropout), or import the log with `endocal import csv`, which leaves "
-                   "them out and counts them" if col.endswith(MEAS) else "drop or fill such rows first")
+            fix = (f"drop such rows (a tracker dropout), or import the table (`endocal import csv {where} --draft-map "
+                   "map.toml`), which interpolates the angle across short dropouts and counts them"
+                   if col.endswith(MEAS) and where.lower().endswith(CSV_SUFFIXES) else "drop or fill such rows first")
             raise RunFormatError(f"{where}: column '{col}' is {kind} at {row_name(i)}; {fix}")
     t = df["t_s"].to_numpy(float)
     steps = np.diff(t)
