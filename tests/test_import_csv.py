@@ -438,12 +438,20 @@ def test_a_draft_that_could_not_place_a_role_says_so_and_the_import_refuses_it(t
     one_line_exit_2(endocal("import", "csv", tmp_path / "opaque.csv", "--map", draft, "--out", tmp_path / "r.csv"),
                     "is still 'FILL IN' (a drafted map)")
     # with the columns named the units are still to give: no unit is guessed for a column no name placed
+    # (the draft listed b and c among its extras: named as the knob and the angle, they are no longer extras)
     text = draft.read_text().replace('position = "FILL IN"', 'position = "b"').replace('column = "FILL IN"',
                                                                                        'column = "c"')
-    draft.write_text(text.replace('"b",', "").replace('"c",', ""))
+    assert '"b",' in text and '"c",' in text
+    draft.write_text(text)
     one_line_exit_2(endocal("import", "csv", tmp_path / "opaque.csv", "--map", draft, "--out", tmp_path / "r.csv"),
                     "[knobs.ap]: the unit is still 'FILL IN' (a drafted map)", "deg, rad, ticks")
     assert not (tmp_path / "r.csv").exists()
+    draft.write_text(text.replace('unit = "FILL IN"', 'unit = "deg"'))
+    proc = endocal("import", "csv", tmp_path / "opaque.csv", "--map", draft, "--out", tmp_path / "r.csv")
+    assert proc.returncode == 0, proc.stderr
+    table = pd.read_csv(tmp_path / "r.csv")
+    assert {"ap_cmd_deg", "ap_meas_deg"} <= set(table.columns) and not {"b", "c"} & set(table.columns), table.columns
+    np.testing.assert_allclose(table["ap_meas_deg"], np.cos(t), atol=1e-6)
     # the options: a draft imports nothing, an import needs a map and an output, a draft is not overwritten
     one_line_exit_2(endocal("import", "csv", tmp_path / "opaque.csv", "--draft-map", tmp_path / "x.toml", "--map",
                             draft), "--draft-map writes a map and imports nothing")

@@ -493,6 +493,10 @@ def read_map(path: str | Path) -> CsvMap:
     if unfilled:
         raise _unfilled(where, unfilled[0])
     check_unit_names(cmap, where)
+    # a column that fills a role is no extra (a drafted map lists every column it could not place as one,
+    # and the user then names one of them as the knob or the angle): the role keeps it
+    placed = {c for role, c in cmap.roles() if role != "extras"}
+    cmap = replace(cmap, extras=tuple(c for c in cmap.extras if c not in placed))
     valid = {p.valid for p in (tip, base) if p is not None and p.valid}  # one flag may serve both sensors
     named = [(role, c) for role, c in cmap.roles() if c not in valid]
     cols = [c for _, c in named]
