@@ -376,8 +376,8 @@ class Model(_Saved):
     path : Path or None
         The file it was loaded from or saved to.
     start_from : Model or None
-        The model it was refitted from (`Suggestion.refit` sets it, and `BaseChange.refit`, whose
-        fit starts afresh); `validate` compares with it.
+        The model its fit started from (`Suggestion.refit` and `BaseChange.refit` set it); `validate`
+        compares with it.
     """
 
     def __init__(self, estimator, *, provenance: dict | None = None, path: str | Path | None = None,
@@ -560,8 +560,8 @@ def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = ()
         Bending planes (`fit_planes`): measured angles are mapped into the twisted
         planes the knob drives first.
     start_from : Model or path, optional
-        A fitted model of the same axis and base: the effects it has start at its values
-        (what `validate`'s refits do).
+        A fitted model of the same axis: the effects it has start at its values, and so does the
+        base when it is `model`'s, else the base starts afresh (what `validate`'s refits do).
     settings : mapping, optional
         Base-model settings, e.g. `{"n_operators": 30}` (`--set` on the command line).
     effects_file : path or sequence of paths, optional
@@ -577,7 +577,7 @@ def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = ()
     ------
     ModelError
         Unknown base, effect or setting; data no model can be fitted on; `start_from` of
-        another axis or base.
+        another axis.
     RunFormatError
         A missing or malformed record, a record without `axis`, or runs recorded on two
         probes.
@@ -740,15 +740,12 @@ class BaseChange(_Proposal):
         return validation_dict(self._validation.result)["scan"]["bases"][list(scan.bases).index(self.candidate)]
 
     def refit(self) -> Model:
-        """Fit this base with the effects the scan scored it with, on the data it was scored on: the fit
-        whose command `endocal validate` prints. Another base starts afresh (no values of the validated
-        model carry over), but the model returned has the validated one as `start_from`, so `validate`
-        shows the error falling from it."""
+        """Fit this base with the effects the scan scored it with, on the data it was scored on, its effects
+        starting from the validated model's values and the base afresh: the fit whose command `endocal
+        validate` prints. Its `start_from` is the validated model, so `validate` shows the error falling."""
         p = self.plan
-        new = fit(list(p.data_paths), axis=p.axis, model=p.base, effects=list(p.effects), planes=p.planes_path,
-                  settings=p.settings)
-        new.start_from = self._validation.model
-        return new
+        return fit(list(p.data_paths), axis=p.axis, model=p.base, effects=list(p.effects), planes=p.planes_path,
+                   start_from=self._validation.model, settings=p.settings)
 
     def summary(self) -> str:
         """One line: the base, its gain and its p-value (`base: bouc-wen lowers the validation RMSE by ...`)."""

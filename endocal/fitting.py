@@ -52,27 +52,26 @@ def fit_hysteresis(
     planes : PlanesCalibration, optional
         Bending planes; measured angles are mapped into the twisted planes first.
     start_from : HysteresisModel, optional
-        A fitted model of this axis and base whose parameters start the fit (every effect it
-        shares with the new model starts from its fitted values and skips its start search):
-        the refit ``validate`` prints starts from the model it validated, as its scan did, so
-        the refit is the fit the scan scored (from scratch, a fit can end in another local
-        minimum).
+        A fitted model of this axis whose parameters start the fit (every effect it shares with
+        the new model starts from its fitted values and skips its start search; so does its base
+        when it is ``base``, else the base starts afresh): the refit ``validate`` prints starts
+        from the model it validated, as its scan did, so the refit is the fit the scan scored
+        (from scratch, a fit can end in another local minimum).
     **settings
         Passed to the model (e.g. ``n_operators``, ``out_of_range``).
 
     Raises
     ------
     ModelError
-        ``start_from`` of another axis or base model, or of a drive in another unit (deg, mm).
+        ``start_from`` of another axis, or of a drive in another unit (deg, mm).
     RunFormatError
         Runs recorded on two probes (:func:`~endocal.runs.probes.check_one_probe`), or a table
         without ``axis``.
     """
     if start_from is not None:
-        if start_from.base_name != base or (start_from.axis and start_from.axis != axis):
-            raise ModelError(f"--start-from: that model is a {start_from.base_name} model of axis "
-                             f"{start_from.axis or '(none)'}, this fit a {base} model of axis {axis}; start from a "
-                             "model of the same axis and base model, or drop --start-from")
+        if start_from.axis and start_from.axis != axis:
+            raise ModelError(f"--start-from: that model is a model of axis {start_from.axis}, this fit one of axis "
+                             f"{axis}; start from a model of the same axis, or drop --start-from")
     datas = [p if isinstance(p, AlignedData) else load_aligned(p) for p in paths]
     probe = check_one_probe(datas)
     dropped: list = []

@@ -117,9 +117,10 @@ def test_the_real_piezo_recordings_suggestion_delivers_what_validate_promised(tm
 def test_a_base_changes_printed_refit_delivers_its_promise_and_its_validate_shows_the_fall(tmp_path):
     """The loop's other turn: a base change. On the Bouc-Wen plant of tests/test_validation_bases.py (no
     return-point memory) a B-spline fitted on the sweeps misses the validation record's minor loops;
-    `validate` puts the base change first and prints its refit (`M-BASE.json`, no --start-from: another
-    base starts afresh). That command run as printed, `validate` of what it wrote finds `M.json` by the
-    naming, shows the error falling from it, and the fall is at least 75 % of the promise."""
+    `validate` puts the base change first and prints its refit (`M-BASE.json`, started from `M.json`: its
+    effects at their values, the base afresh, as the scan fitted it). That command run as printed, `validate`
+    of what it wrote finds `M.json`, shows the error falling from it, and the fall is at least 75 % of the
+    promise."""
     from tests.test_validation_bases import _plant, _records
 
     est, val = _records(_plant("bouc-wen"))
@@ -134,7 +135,8 @@ def test_a_base_changes_printed_refit_delivers_its_promise_and_its_validate_show
     change = next(b for b in d["scan"]["bases"] if b["significant"])
     assert "  " + change["command"] in stdout.splitlines(), stdout
     argv = shlex.split(change["command"])
-    assert "--start-from" not in argv and argv[-1] == str(tmp_path / f"m-{change['base']}.json")
+    assert argv[argv.index("--start-from") + 1] == str(tmp_path / "m.json")
+    assert argv[-1] == str(tmp_path / f"m-{change['base']}.json")
     proc = endocal(*argv[1:], "--force")
     assert proc.returncode == 0, proc.stderr
     d2, stdout2 = _validate(Path(argv[-1]), [tmp_path / "check.csv"], tmp_path / "v2.json")

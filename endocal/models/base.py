@@ -419,7 +419,9 @@ class HysteresisModel(ABC):
     def fit_from(self, start: HysteresisModel, data, *, max_nfev: int | None = None, ftol: float | None = None):
         """Fit starting from ``start``, a fitted model with some of these effects (``--start-from``).
 
-        The effects ``start`` has begin at its values (:meth:`fit`'s ``warm_start``). When this model
+        The effects ``start`` has begin at its values (:meth:`fit`'s ``warm_start``). A ``start`` of
+        another base lends its effects' values only; this base starts afresh (validate's base changes
+        are fitted so, and the refit it prints for one). When this model
         holds ``start``'s effects and more, each of which can vanish, its least-squares optimum
         on ``data`` is never worse than ``start`` there: a warm fit that ends worse than ``start``
         predicts stopped in another local minimum (`pi` + `delay` + `envelope` on one sweep of a
@@ -430,13 +432,17 @@ class HysteresisModel(ABC):
         Parameters
         ----------
         start : HysteresisModel
-            A fitted model of the same base (validate's model, when it scans candidates).
+            A fitted model (validate's model, when it scans candidates or other bases).
         data : HysteresisData or list of them
             What to fit, as :meth:`fit` takes it.
         max_nfev, ftol : optional
             As :meth:`fit` takes them.
         """
         start.check_drive_unit(as_data(data)[0], "the data to fit")
+        if start.base_name != self.base_name:  # another base: only the effects' values carry over
+            own = f"{start.base_name}_"
+            return self.fit(data, max_nfev=max_nfev, warm_start={k: v for k, v in start.params_.items()
+                                                                 if not k.startswith(own)}, ftol=ftol)
         self.fit(data, max_nfev=max_nfev, warm_start=dict(start.params_), ftol=ftol)
         if not {e.label for e in start.effects_} <= {e.label for e in self.effects_}:
             return self  # an effect dropped: this model does not nest start, and may well fit worse

@@ -167,21 +167,16 @@ def _proxy(model: HysteresisModel, base: str) -> HysteresisModel:
     return make_model(base, axis=model.axis, fixed=fixed)
 
 
-def _warm(model: HysteresisModel) -> dict:
-    """The model's effect parameters (every base's fit of these effects starts from them)."""
-    own = f"{model.base_name}_"
-    return {k: v for k, v in model.params_.items() if not k.startswith(own)}
-
-
 def base_fit(model: HysteresisModel, base: str, train: HysteresisData, ftol: float | None = None,
              added: Sequence[str] = ()) -> HysteresisModel:
     """``base`` with ``model``'s effects (and ``added``) fitted on ``train``, its effects starting from ``model``'s
-    values; continued beyond its fitted range as validation scores it. ``ftol``: the fit's stopping rule
+    values (:meth:`~endocal.models.base.HysteresisModel.fit_from`, as the printed refit's ``--start-from``);
+    continued beyond its fitted range as validation scores it. ``ftol``: the fit's stopping rule
     (:func:`~endocal.validation.structure.scan_ftol`; None: the fit's own)."""
     proxy = _proxy(model, base)
     m = make_model(base, [*effect_labels(model), *added], axis=model.axis, fixed=proxy.fixed,
                    out_of_range="extrapolate")
-    return m.fit(train, warm_start=_warm(model), ftol=ftol)
+    return m.fit_from(model, train, ftol=ftol)
 
 
 def base_errors(model: HysteresisModel, base: str, train: HysteresisData, val: HysteresisData,
@@ -196,7 +191,8 @@ def _refit(model: HysteresisModel, base: str, data_paths: Sequence[str], model_p
     return Refit(data_paths=tuple(str(p) for p in data_paths), axis=model.axis, base=base,
                  effects=(*effect_labels(model), *added),
                  out_path=refit_path(model_path, "-".join([base, *added]), suffix),
-                 planes_path=None if planes_path is None else str(planes_path), start_from=None)
+                 planes_path=None if planes_path is None else str(planes_path),
+                 start_from=None if model_path is None else str(model_path))
 
 
 def _rank(model, rows, err_base: np.ndarray, alpha: float, min_gain_pct: float, data_paths, model_path,
