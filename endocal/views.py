@@ -39,13 +39,8 @@ def scheme_word(result) -> str:
 def promise(suspect, what: str) -> str:
     """``-45 % validation RMSE (2.45 -> 1.33 deg)``, and where the scan fitted a subsample, the range to
     expect of the refit on every sample: ``, its refit on every sample expected at 1.3 .. 1.41 deg``."""
-    line = (f"-{suspect.gain_pct:.0f} % {what} RMSE ({suspect.base_rmse_heldout_deg:.3g} -> "
-            f"{suspect.rmse_heldout_deg:.3g} deg)")
-    r = suspect.refit.expected_rmse_deg
-    if r is not None:  # a range that rounds to one number prints as that number
-        lo, hi = f"{r[0]:.3g}", f"{r[1]:.3g}"
-        line += f", its refit on every sample expected at {lo if lo == hi else f'{lo} .. {hi}'} deg"
-    return line
+    return (f"-{suspect.gain_pct:.0f} % {what} RMSE ({suspect.base_rmse_heldout_deg:.3g} -> "
+            f"{suspect.rmse_heldout_deg:.3g} deg)") + suspect.refit.expected_words()
 
 
 def suspect_dict(suspect) -> dict:

@@ -209,6 +209,30 @@ def test_a_subsampled_scan_promises_the_range_its_refit_on_every_sample_lands_in
     assert f"{lo:.3g} .. {hi:.3g} deg" in note, note
 
 
+def test_a_subsampled_scan_promises_a_base_change_the_range_its_refit_lands_in():
+    """The same for a base change: fitted on 1 estimation sample in 3 (the Bouc-Wen plant's records of
+    tests/test_validation_bases.py, a B-spline model), the change to a base without return-point memory comes
+    with the range to expect, in its line too, and its refit on every sample, from the model as the printed
+    --start-from starts it, lands in it give or take 2 %."""
+    import numpy as np
+
+    from endocal.models import make_model
+    from endocal.validation.offline import validate_offline
+    from endocal.validation.predict import predict_errors
+    from tests.test_validation_bases import _plant, _records
+
+    est, val = _records(_plant("bouc-wen"))
+    model = make_model("bspline", axis="ap").fit(est)
+    result = validate_offline(model, val, train=est, max_scan_samples=300, model_path="m.json", n_boot=50)
+    change = result.scan.base_suggestions[0]
+    lo, hi = change.refit.expected_rmse_deg
+    assert change.refit.scan_stride == 3 and lo <= change.rmse_heldout_deg <= hi
+    assert change.line().endswith(f", its refit on every sample expected at {lo:.3g} .. {hi:.3g} deg"), change.line()
+    refit = make_model(change.base, list(change.refit.effects), axis="ap").fit_from(model, est)
+    rmse = float(np.sqrt(np.mean(predict_errors(refit, val) ** 2)))
+    assert 0.98 * lo <= rmse <= 1.02 * hi, (rmse, lo, hi, change.rmse_heldout_deg)
+
+
 def test_the_refit_keeps_the_structure_the_fit_resolved():
     """A `weights="auto"` PI fitted as `exponential` (the paper's law, with the envelope) is refitted as
     `exponential`: the scan's candidates (`template`) and the printed refit (`Refit.settings`, as

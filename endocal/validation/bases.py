@@ -116,7 +116,7 @@ class BaseCandidate:
         verb = f"lowers the {what} RMSE by {self.gain_pct:.0f} %" if self.gain_pct >= 0 else \
             f"raises the {what} RMSE by {-self.gain_pct:.0f} %"
         return (f"base: {self.name} {verb}, p = {self.p_value:.2g} ({self.base_rmse_heldout_deg:.3g} -> "
-                f"{self.rmse_heldout_deg:.3g} deg)")
+                f"{self.rmse_heldout_deg:.3g} deg)") + self.refit.expected_words()
 
     def to_dict(self) -> dict:
         """JSON-able; a base that could not be fitted has ``null`` gain and RMSE."""

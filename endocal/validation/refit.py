@@ -73,6 +73,14 @@ class Refit:
     scan_stride: int = 1
     expected_rmse_deg: tuple[float, float] | None = None
 
+    def expected_words(self) -> str:
+        """``, its refit on every sample expected at 1.3 .. 1.41 deg`` where the scan fitted a subsample, else ``""``
+        (a range that rounds to one number prints as that number)."""
+        if self.expected_rmse_deg is None:
+            return ""
+        lo, hi = (f"{x:.3g}" for x in self.expected_rmse_deg)
+        return f", its refit on every sample expected at {lo if lo == hi else f'{lo} .. {hi}'} deg"
+
     def to_dict(self) -> dict:
         return {"data_paths": list(self.data_paths), "axis": self.axis, "base": self.base,
                 "effects": list(self.effects), "settings": dict(self.settings), "planes_path": self.planes_path,

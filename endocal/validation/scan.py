@@ -335,6 +335,15 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
             joint=list(zip(pairs, joint)), effect_rmse={s.effect: s.rmse_heldout_deg for s in tested})
     notes += [Message(n, "memory-rule") for n in held_back(model, bases, val, alpha, min_gain_pct)]
     change = next((b for b in bases if b.significant), None)
+    if stride > 1 and change is not None:  # the base change's promise too: the range its refit on every sample lands in
+        r0 = change.rmse_heldout_deg
+        try:
+            again = base_errors(model, change.base, other_half(train, stride), val, SCAN_FTOL, change.added)
+            expected = spread(r0, float(np.sqrt(np.mean(again**2))))
+        except ModelError:  # the other half cannot be fitted: the scanned RMSE alone
+            expected = spread(r0, r0)
+        bases = tuple(replace(b, refit=replace(b.refit, scan_stride=stride, expected_rmse_deg=expected))
+                      if b is change else b for b in bases)
     base_errs = {**{(b, ()): e for b, e in zip(bases_fitted, base_results)},
                  **({(b, (e,)): err for (b, e), err in zip(pairs, joint)} if pairs else {})}
     err_change = None if change is None else base_errs.get((change.base, change.added))
@@ -365,8 +374,7 @@ def expected_ranges(model: HysteresisModel, effects: Sequence[str], train: Hyste
     the optimum of the other subsample lies near, instead of searching every start again (several times
     quicker; the same basin the scan scored).
     """
-    phase = stride // 2
-    dt2 = train.take([np.arange(sl.start + phase, sl.stop, stride) for sl in train.run_slices()])
+    dt2 = other_half(train, stride)
     have = effect_labels(model)
     starts = list(starts) if starts is not None else [None] * len(effects)
 
@@ -378,13 +386,21 @@ def expected_ranges(model: HysteresisModel, effects: Sequence[str], train: Hyste
 
     with one_blas_thread():
         again = map_jobs(again_errors, list(range(len(effects))), jobs)
-    out = []
-    for r0, err in zip(rmse_scanned, again):
-        r1 = r0 if isinstance(err, Exception) else float(np.sqrt(np.mean(err**2)))
-        lo, hi = min(r0, r1), max(r0, r1)
-        pad = 0.5 * (hi - lo)
-        out.append((max(lo - pad, 0.0), hi + pad))
-    return out
+    return [spread(r0, r0 if isinstance(err, Exception) else float(np.sqrt(np.mean(err**2))))
+            for r0, err in zip(rmse_scanned, again)]
+
+
+def other_half(train: HysteresisData, stride: int) -> HysteresisData:
+    """The samples halfway between those the scan fitted (``stride // 2, stride // 2 + stride, ...`` of each run)."""
+    return train.take([np.arange(sl.start + stride // 2, sl.stop, stride) for sl in train.run_slices()])
+
+
+def spread(r0: float, r1: float) -> tuple[float, float]:
+    """The range between two subsamples' validation RMSEs (deg), widened by half their gap on each side: two
+    draws pin a spread only roughly."""
+    lo, hi = min(r0, r1), max(r0, r1)
+    pad = 0.5 * (hi - lo)
+    return max(lo - pad, 0.0), hi + pad
 
 
 def check_fit_data(data: HysteresisData, what: str = "data") -> None:
