@@ -734,10 +734,9 @@ class BaseChange(_Proposal):
 
     def to_dict(self) -> dict:
         """One entry of `scan.bases` in `endocal validate --json`, with its refit's `command`."""
-        from endocal.views import validation_dict
+        from endocal.views import base_dict
 
-        scan = self._validation.result.scan
-        return validation_dict(self._validation.result)["scan"]["bases"][list(scan.bases).index(self.candidate)]
+        return base_dict(self.candidate)
 
     def refit(self) -> Model:
         """Fit this base with the effects the scan scored it with, on the data it was scored on, its effects

@@ -53,6 +53,12 @@ def suspect_dict(suspect) -> dict:
     return out
 
 
+def base_dict(candidate) -> dict:
+    """A base candidate's JSON (:class:`~endocal.validation.bases.BaseCandidate`): its fields, with ``command``
+    (its refit as shell text)."""
+    return {**candidate.to_dict(), "command": refit_command(candidate.refit)}
+
+
 def validation_dict(result) -> dict:
     """The JSON of a :class:`~endocal.validation.offline.ValidationResult`: ``result.to_dict()`` with every
     suspect's (and tested candidate's) ``command`` and, with a next experiment, its ``excite_commands``."""
@@ -60,8 +66,7 @@ def validation_dict(result) -> dict:
     d["suspects"] = [suspect_dict(s) for s in result.scan.suspects]
     d["scan"]["suspects"] = [suspect_dict(s) for s in result.scan.suspects]
     d["scan"]["tested"] = [suspect_dict(s) for s in result.scan.tested]
-    for bd, b in zip(d["scan"].get("bases", []), result.scan.bases, strict=True):  # the base candidates too
-        bd["command"] = refit_command(b.refit)
+    d["scan"]["bases"] = [base_dict(b) for b in result.scan.bases]  # the base candidates too
     if result.next is not None:
         d["next"] = {**d["next"], "excite_commands": excite_commands(result.next.excite)}
     return d

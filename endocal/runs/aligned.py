@@ -20,6 +20,7 @@ another unit. The hysteresis maths is the same in either unit; the bending angle
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -323,12 +324,12 @@ def _read_table(path: Path) -> pd.DataFrame:
     raise RunFormatError(f"{path}: expected a run folder, a .parquet or a .csv aligned table (.txt, .tsv and .dat read as CSV)")
 
 
-def _csv_line(path: Path, df: pd.DataFrame):
+def _csv_line(path: Path, df: pd.DataFrame) -> Callable[[int], str]:
     """``row_name`` of a CSV table: the file's line of row ``i`` (read again only for a message)."""
     return lambda i: f"line {line_numbers(path.read_bytes(), i + 1, df.attrs.get('headerless', False))[i]}"
 
 
-def check_aligned(df: pd.DataFrame, where: str, row_name=None) -> list[str]:
+def check_aligned(df: pd.DataFrame, where: str, row_name: Callable[[int], str] | None = None) -> list[str]:
     """Check an aligned table and return its bending axes.
 
     Raises

@@ -298,7 +298,8 @@ class _Drafter:
                   and c not in self.components and _values(self.df, c).size == len(self.df) > 0]
         if extras:  # a top-level key: before the first table
             w.lines[5:5] = ["# further numeric columns, carried into the table (covariates for load:COLUMN): drop "
-                            "what is not one (a column named below as the knob or the angle is no extra)", "extras = [" + "".join(f"\n    {_toml(c)}," for c in extras) + "\n]"]
+                            "what is not one (a column named below as the knob or the angle is no extra)",
+                            "extras = [" + "".join(f"\n    {_toml(c)}," for c in extras) + "\n]"]
             self.roles["extras"] = ", ".join(extras)
         return Draft("\n".join(w.lines) + "\n", self.roles, w.checks, self.unmatched, angles=not poses,
                      repeated_stamps=self.repeated_stamps)
