@@ -540,7 +540,8 @@ def _planes_path(planes) -> Path | None:
 
 
 def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = (), planes=None,
-        start_from: Model | str | Path | None = None, settings: Mapping | None = None, effects_file=None) -> Model:
+        start_from: Model | str | Path | None = None, settings: Mapping | None = None, effects_file=None,
+        start_values: Mapping[str, float] | None = None) -> Model:
     """Fit a hysteresis model of one axis to runs (`endocal fit hysteresis`).
 
     Parameters
@@ -566,6 +567,10 @@ def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = ()
         Base-model settings, e.g. `{"n_operators": 30}` (`--set` on the command line).
     effects_file : path or sequence of paths, optional
         Python files of one's own effects and bases (`--effects-file`, :func:`use_effects`).
+    start_values : mapping, optional
+        Start values of effect parameters by full name (`--start-value`), e.g.
+        `{"deadzone_slack_deg": 2.4}`: an effect whose every free parameter is given skips its start
+        search (a suggestion's refit gives the values its candidate reached).
 
     Returns
     -------
@@ -596,9 +601,11 @@ def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = ()
 
         cal = _load(planes_path)
     result = fit_hysteresis(datas, axis, model, effects,
-                            planes=cal, start_from=None if start is None else start.estimator, **dict(settings or {}))
+                            planes=cal, start_from=None if start is None else start.estimator,
+                            start_values=dict(start_values or {}), **dict(settings or {}))
     command = _call("fit", [str(d.source) for d in datas], axis=axis, model=model,
-                    effects=[e.label for e in result.model.effects_], **({"settings": dict(settings)} if settings else {}))
+                    effects=[e.label for e in result.model.effects_], **({"settings": dict(settings)} if settings else {}),
+                    **({"start_values": dict(start_values)} if start_values else {}))
     prov = fit_provenance(result, command=command, planes_path=planes_path,
                           start_from_path=None if start is None else start.path)
     return Model(result.model, provenance=prov, fit_info=result, start_from=start)
@@ -689,7 +696,7 @@ class Suggestion(_Proposal):
         """
         p = self.plan
         return fit(list(p.data_paths), axis=p.axis, model=p.base, effects=list(p.effects), planes=p.planes_path,
-                   start_from=self._validation.model, settings=p.settings)
+                   start_from=self._validation.model, settings=p.settings, start_values=p.start_values)
 
     def summary(self) -> str:
         """One line: the effect, its gain and its p-value (or why it is not significant)."""
@@ -744,7 +751,7 @@ class BaseChange(_Proposal):
         validate` prints. Its `start_from` is the validated model, so `validate` shows the error falling."""
         p = self.plan
         return fit(list(p.data_paths), axis=p.axis, model=p.base, effects=list(p.effects), planes=p.planes_path,
-                   start_from=self._validation.model, settings=p.settings)
+                   start_from=self._validation.model, settings=p.settings, start_values=p.start_values)
 
     def summary(self) -> str:
         """One line: the base, its gain and its p-value (`base: bouc-wen lowers the validation RMSE by ...`)."""

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -9,7 +11,8 @@ import numpy as np
 
 from endocal.errors import ModelError
 from endocal.models import make_model
-from endocal.models.base import HysteresisModel
+from endocal.models.base import HysteresisModel, in_drive_unit
+from endocal.models.effects.base import InputEffect
 from endocal.models.start import RecordStart
 from endocal.runs.aligned import AlignedData, load_aligned
 from endocal.runs.format import sample_rate_hz
@@ -33,9 +36,33 @@ class HysteresisFit:
     rate_hz: float = 0.0  # the records' sample rate (endocal.runs.format.sample_rate_hz; 0: no two samples)
 
 
+def effect_start_values(model: HysteresisModel, values: dict[str, float], unit: str = "deg") -> dict[str, float]:
+    """``values`` (effect parameters by full name, as printed for a drive in ``unit``) by the model's own names.
+
+    Raises
+    ------
+    ModelError
+        A name no effect of ``model`` has, or a value that is not a finite number.
+    """
+    if not values:
+        return {}
+    effects = model._effects()
+    known = {in_drive_unit(n, unit) if isinstance(e, InputEffect) else n: n for e in effects for n in e.full_names()}
+    out = {}
+    for name, v in values.items():
+        if name not in known:
+            have = ", ".join(known) or "none (the model has no effects)"
+            raise ModelError(f"--start-value {name}: no effect of this model has that parameter; its effects' "
+                             f"parameters are: {have}")
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ModelError(f"--start-value {name}={v!r}: a start value is a finite number")
+        out[known[name]] = float(v)
+    return out
+
+
 def fit_hysteresis(
     paths: list[Path | AlignedData], axis: str, base: str, effects: list[str] | None = None, planes=None,
-    start_from: HysteresisModel | None = None, **settings
+    start_from: HysteresisModel | None = None, start_values: dict[str, float] | None = None, **settings
 ) -> HysteresisFit:
     """Fit ``base`` + ``effects`` to ``axis`` of every run folder or aligned table in ``paths``.
 
@@ -57,13 +84,22 @@ def fit_hysteresis(
         when it is ``base``, else the base starts afresh): the refit ``validate`` prints starts
         from the model it validated, as its scan did, so the refit is the fit the scan scored
         (from scratch, a fit can end in another local minimum).
+    start_values : dict, optional
+        A second start (``--start-value``): effect parameters by full name as the model prints them
+        (``deadzone_slack_deg``, ``deadzone_slack_mm`` for a linear drive), over ``start_from``'s; an
+        effect whose every free parameter is given skips its start search there. The fit from it is
+        kept where it ends lower on the data than the fit from ``start_from`` (or from scratch)
+        alone. The refit ``validate`` prints gives the values its candidate reached for the effect
+        it adds, so the refit is never worse on the estimation data than the one from the candidate's
+        values (:meth:`~endocal.models.base.HysteresisModel.fit_from`).
     **settings
         Passed to the model (e.g. ``n_operators``, ``out_of_range``).
 
     Raises
     ------
     ModelError
-        ``start_from`` of another axis, or of a drive in another unit (deg, mm).
+        ``start_from`` of another axis, or of a drive in another unit (deg, mm); a start value
+        of a parameter no effect of the model has.
     RunFormatError
         Runs recorded on two probes (:func:`~endocal.runs.probes.check_one_probe`), or a table
         without ``axis``.
@@ -82,7 +118,14 @@ def fit_hysteresis(
         except ModelError as exc:
             raise ModelError(f"--start-from: {exc}") from None
     model = make_model(base, effects=effects or (), axis=axis, **settings)
-    model = model.fit_from(start_from, data) if start_from is not None else model.fit(data)
+    given = effect_start_values(model, start_values or {}, data.cmd_unit)
+    if start_from is not None:
+        model = model.fit_from(start_from, data, start_values=given)
+    else:
+        model = model.fit(data)
+        if given:  # a second start, kept where it ends lower (HysteresisModel.fit_from)
+            other = copy.deepcopy(model).fit(data, warm_start=given)
+            model = other if other.fit_report_.rmse_deg < model.fit_report_.rmse_deg else model
     span = sum(float(np.ptp(d.table["t_s"])) for d in datas)
     starts = [RecordStart.from_dict(s) for s in model.fit_report_.estimated_starts]
     cut = cut_start(data, model.predict(data) - data.meas_deg, "fitted record", starts)

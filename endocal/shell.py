@@ -25,9 +25,10 @@ if TYPE_CHECKING:  # the command line's help must not load the library (numpy, s
 
 def refit_argv(refit: Refit) -> list[str]:
     """``endocal fit hysteresis DATA... --axis AXIS --model BASE --effects E1,E2 [--planes P] [--set K=V...]
-    [--start-from M] --out OUT`` as an argument list.
+    [--start-from M] [--start-value NAME=V...] --out OUT`` as an argument list.
 
-    Setting values are written as ``--set`` reads them (:func:`setting_value`).
+    Setting values are written as ``--set`` reads them (:func:`setting_value`); start values with the 6
+    significant digits a start needs (the fit refines them).
     """
     parts = ["endocal", "fit", "hysteresis", *refit.data_paths]
     if refit.axis:
@@ -41,6 +42,8 @@ def refit_argv(refit: Refit) -> list[str]:
         parts += ["--set", f"{k}={setting_value(v)}"]
     if refit.start_from:
         parts += ["--start-from", refit.start_from]
+    for k, v in refit.start_values.items():
+        parts += ["--start-value", f"{k}={v:.6g}"]
     return parts + effects_file_args(refit.base, refit.effects) + ["--out", refit.out_path]
 
 

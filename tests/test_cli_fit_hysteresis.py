@@ -131,3 +131,48 @@ def test_the_fit_states_its_sample_rate_and_questions_a_clock_in_ms(run, tmp_pat
     assert slow.returncode == 0 and "is t_s in seconds? (a clock in ms reads 1000x too slow" in slow.stdout, slow.stdout
     val = endocal("validate", tmp_path / "a.json", tmp_path / "ms.csv", "--cv", "rolling")
     assert val.returncode == 0 and "warning[slow-clock]:" in val.stdout and "is t_s in seconds?" in val.stdout, val.stdout
+
+
+def test_a_start_value_is_a_second_start_kept_where_it_ends_lower(run, tmp_path):
+    """`--start-value` (what validate's refit commands give for an effect whose start the scan searched): the fit
+    from those values is made beside the fit from `--start-from`, and the one ending lower on the data is kept,
+    so a refit is never worse on its estimation data than either start: the model kept is the lower of the two
+    fits, to the digit; a start at a fit's own values keeps that fit's minimum. Bad names and values are one line,
+    exit code 2, nothing written."""
+    base = tmp_path / "pi.json"
+    assert endocal("fit", "hysteresis", run, "--axis", "ap", "--model", "pi", "--out", base).returncode == 0
+    plain = tmp_path / "pi-dz.json"
+    assert endocal("fit", "hysteresis", run, "--axis", "ap", "--model", "pi", "--effects", "deadzone",
+                   "--start-from", base, "--out", plain).returncode == 0
+    own = load_model(plain)
+    far = tmp_path / "far.json"
+    proc = endocal("fit", "hysteresis", run, "--axis", "ap", "--model", "pi", "--effects", "deadzone",
+                   "--start-from", base, "--start-value", "deadzone_slack_deg=30", "--start-value",
+                   "deadzone_band_deg=0", "--start-value", "deadzone_center_deg=20", "--out", far)
+    assert proc.returncode == 0, proc.stderr
+    from endocal.models import make_model
+    from endocal.validation.data import axis_data
+
+    # the far start alone (the fit --start-value adds beside the one from --start-from)
+    d = axis_data(load_aligned(run), "ap")
+    alone = make_model("pi", ["deadzone"], axis="ap").fit(d, warm_start={
+        **load_model(base).params_, "deadzone_slack_deg": 30.0, "deadzone_band_deg": 0.0, "deadzone_center_deg": 20.0})
+    kept = load_model(far)
+    lower = min(own, alone, key=lambda m: m.fit_report_.rmse_deg)
+    assert kept.fit_report_.rmse_deg == pytest.approx(lower.fit_report_.rmse_deg, rel=1e-12)
+    assert kept.params_ == pytest.approx(lower.params_, rel=1e-9)
+    at_own = {k: v for k, v in own.params_.items() if k.startswith("deadzone_")}
+    again = tmp_path / "again.json"
+    assert endocal("fit", "hysteresis", run, "--axis", "ap", "--model", "pi", "--effects", "deadzone",
+                   "--start-from", base, *(a for k, v in at_own.items() for a in ("--start-value", f"{k}={v!r}")),
+                   "--out", again).returncode == 0
+    assert load_model(again).fit_report_.rmse_deg <= own.fit_report_.rmse_deg * (1 + 1e-9)
+    one_line_error(endocal("fit", "hysteresis", run, "--axis", "ap", "--model", "pi", "--effects", "deadzone",
+                           "--start-value", "delay_s=0.1", "--out", tmp_path / "a.json"),
+                   "--start-value delay_s: no effect of this model has that parameter; its effects' parameters are: "
+                   "deadzone_slack_deg, deadzone_band_deg, deadzone_center_deg")
+    one_line_error(endocal("fit", "hysteresis", run, "--axis", "ap", "--model", "pi", "--effects", "deadzone",
+                           "--start-value", "deadzone_slack_deg=wide", "--out", tmp_path / "b.json"), "finite number")
+    one_line_error(endocal("fit", "hysteresis", run, "--axis", "ap", "--model", "pi", "--effects", "deadzone",
+                           "--start-value", "deadzone_slack_deg", "--out", tmp_path / "c.json"), "expects key=value")
+    assert not any((tmp_path / f"{n}.json").exists() for n in "abc")

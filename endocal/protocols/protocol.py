@@ -467,7 +467,7 @@ def list_protocols() -> list[tuple[str, str, Path]]:
     return [(name, read_protocol_file(path).description, path) for name, path in sorted(_known_files().items())]
 
 
-def parse_overrides(pairs: list[str]) -> dict:
+def parse_overrides(pairs: list[str], option: str = "--set") -> dict:
     """``["amplitude_deg=40", "axes=['ml']", "method=log"]`` -> ``{"amplitude_deg": 40.0, ...}``.
 
     Values are read as TOML values (numbers, lists, booleans, quoted strings); anything
@@ -476,14 +476,14 @@ def parse_overrides(pairs: list[str]) -> dict:
     Raises
     ------
     ProtocolError
-        A pair without ``=`` or with an empty key.
+        A pair without ``=`` or with an empty key (the message names ``option``).
     """
     overrides: dict = {}
     for pair in pairs:
         key, sep, value = pair.partition("=")
         key, value = key.strip(), value.strip()
         if not sep or not key:
-            raise ProtocolError(f"--set expects key=value, got '{pair}'")
+            raise ProtocolError(f"{option} expects key=value, got '{pair}'")
         try:
             overrides[key] = tomllib.loads(f"v = {value}")["v"]
         except tomllib.TOMLDecodeError:

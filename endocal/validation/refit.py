@@ -11,7 +11,9 @@ library with its fields.
 A refit is a promise: it rebuilds the candidate the scan scored, with the same resolved
 structure (:func:`~endocal.validation.structure.resolved_settings`: a ``weights="auto"`` fitted
 as ``exponential`` is refitted as ``exponential``), the same settings and the same start (the
-validated model). Where the scan fitted its candidates on 1 estimation sample in N and the
+validated model; and for an effect whose start the scan searched, the values its candidate reached as a
+second start, :attr:`Refit.start_values`, kept where it ends lower: a search of its own on every sample can
+pick another start and end in a worse minimum than the candidate scored). Where the scan fitted its candidates on 1 estimation sample in N and the
 refit fits every sample, the refit's RMSE on the validation data is not the scan's number, and
 :attr:`Refit.expected_rmse_deg` gives the range to expect.
 """
@@ -52,6 +54,12 @@ class Refit:
         fit the scan scored rather than a fit from scratch that may stop in another local minimum.
     out_path : str
         Suggested model file (:func:`refit_path`).
+    start_values : dict
+        Start values of the added effect's parameters (full names as the model prints them), where
+        its fit searches a start among candidates (a slack, a lag): the values the scan's candidate
+        reached, a second start the refit fits from beside its own search and keeps where it ends
+        lower on the estimation data (``fit hysteresis --start-value``). Empty for an effect without
+        a start search.
     scan_stride : int
         The scan fitted the candidate on 1 estimation sample in this many (1: every sample, as
         the refit does).
@@ -70,6 +78,7 @@ class Refit:
     settings: dict = field(default_factory=dict)
     planes_path: str | None = None
     start_from: str | None = None
+    start_values: dict = field(default_factory=dict)
     scan_stride: int = 1
     expected_rmse_deg: tuple[float, float] | None = None
 
@@ -84,7 +93,8 @@ class Refit:
     def to_dict(self) -> dict:
         return {"data_paths": list(self.data_paths), "axis": self.axis, "base": self.base,
                 "effects": list(self.effects), "settings": dict(self.settings), "planes_path": self.planes_path,
-                "start_from": self.start_from, "out_path": self.out_path, "scan_stride": self.scan_stride,
+                "start_from": self.start_from, "start_values": dict(self.start_values), "out_path": self.out_path,
+                "scan_stride": self.scan_stride,
                 "expected_rmse_deg": None if self.expected_rmse_deg is None else list(self.expected_rmse_deg)}
 
 
@@ -100,7 +110,7 @@ def refit_path(model_path: str | None, effect: str, suffix: str = "") -> str:
 
 
 def suggest_refit(model: HysteresisModel, effect: str, data_paths: Sequence[str], *, model_path: str | None = None,
-                  planes_path: str | None = None, suffix: str = "") -> Refit:
+                  planes_path: str | None = None, suffix: str = "", start_values: dict | None = None) -> Refit:
     """The refit of ``model``'s structure with ``effect`` added, on ``data_paths``, starting from ``model_path``.
 
     Parameters
@@ -117,8 +127,13 @@ def suggest_refit(model: HysteresisModel, effect: str, data_paths: Sequence[str]
         The bending planes the model was fitted through.
     suffix : str
         Ends the suggested file name (:func:`refit_path`).
+    start_values : dict, optional
+        :attr:`Refit.start_values`.
     """
     return Refit(data_paths=tuple(str(p) for p in data_paths), axis=model.axis, base=model.base_name,
                  effects=(*effect_labels(model), effect), out_path=refit_path(model_path, effect, suffix),
                  settings=changed_settings(model), planes_path=None if planes_path is None else str(planes_path),
-                 start_from=None if model_path is None else str(model_path))
+                 start_from=None if model_path is None else str(model_path),
+                 # to the 6 digits the command prints (endocal.shell.refit_argv), so the printed refit and
+                 # Suggestion.refit() start from the same numbers
+                 start_values={k: float(f"{v:.6g}") for k, v in (start_values or {}).items()})

@@ -102,6 +102,9 @@ class CandidateFit(NamedTuple):
     #: the only cautions say that no record holds what would confirm the effects
     #: (:func:`~endocal.validation.ambiguity.cautioned_last`)
     unconfirmed_only: bool
+    #: the fitted values of the new effects whose fit searched a start, as the model prints their names: the
+    #: refit starts there (:attr:`~endocal.validation.refit.Refit.start_values`)
+    start_values: dict | None = None
 
 
 def _split_candidate(model: HysteresisModel, effects: Sequence[str], train: HysteresisData,
@@ -119,7 +122,20 @@ def _split_candidate(model: HysteresisModel, effects: Sequence[str], train: Hyst
     unconfirmed = [c for e in new for c in unheld_cautions(e, train, val)]
     err = predict_errors(m, val)
     return CandidateFit(err, cautions + unconfirmed, dict(m.params_), _without_own_share(m, new, val),
-                        bool(unconfirmed) and not cautions)
+                        bool(unconfirmed) and not cautions, searched_values(m, new))
+
+
+def searched_values(m: HysteresisModel, new: Sequence) -> dict[str, float]:
+    """The fitted free parameters of ``new`` effects of ``m`` that search their start among candidates (a slack, a
+    lag: :meth:`~endocal.models.effects.base.Effect.start_candidates`), by the names ``m`` prints.
+
+    A fit on every sample of the estimation data searches again, and can pick another candidate than the scan's
+    fit on a subsample did and stop in a worse minimum (a tip-side slack: 0.171 deg training RMSE from its own
+    search against 0.158 from the scan's values, on a Bouc-Wen drive's log; scripts/stress_promises.py seed 30).
+    """
+    labels = m.parameter_labels()
+    return {labels[n]: float(m.params_[n]) for e in new if hasattr(e, "start_candidates")
+            for n in e.full_names() if n in m.param_names_}
 
 
 def _without_own_share(m: HysteresisModel, new: list, val: HysteresisData) -> np.ndarray | None:
@@ -225,7 +241,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     if isinstance(results[0], ModelError):
         raise ModelError(f"the model as it stands cannot be refitted on the estimation data: {results[0]}") from None
     err_base = results[0].errors  # the model's own: as it stands, or its structure refitted
-    fitted, cautions, fitted_params, without_term, unconfirmed = [], {}, {}, {}, set()
+    fitted, cautions, fitted_params, without_term, unconfirmed, searched = [], {}, {}, {}, set(), {}
     for c, res in zip(tested_cands, results[1:]):
         if isinstance(res, ModelError):
             untestable[c] = f"could not be fitted on the estimation data ({res})"
@@ -233,6 +249,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
             fitted.append((c, res.errors))
             cautions[c] = "; ".join(res.cautions)
             fitted_params[c] = res.params
+            searched[c] = res.start_values
             if res.unconfirmed_only:
                 unconfirmed.add(c)
             if res.without_own is not None:
@@ -271,7 +288,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
                     f"under the {min_gain_pct:g} % bar (p = {pa:.2g} over {units.n} {units.kind}s)" if pa < alpha else
                     f"not significant (p = {pa:.2g} over {units.n} {units.kind}s; {more})")
         refit = suggest_refit(model, c, data_paths, model_path=model_path, planes_path=planes_path,
-                              suffix=refit_suffix)
+                              suffix=refit_suffix, start_values=searched.get(c))
         tested.append(Suspect(effect=c, column=_column(c), gain_pct=gain, p_value=float(pa), p_raw=float(p),
                               rmse_heldout_deg=rmse, base_rmse_heldout_deg=rmse_base, significant=significant,
                               refit=refit, cause=cls.cause, signature=cls.signature, protocol=cls.protocol,
