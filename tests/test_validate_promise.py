@@ -284,3 +284,38 @@ def test_every_hidden_effect_suggestion_delivers_what_validate_promised(hidden, 
                    *(["--effects", ",".join(effects)] if effects else []), "--out", tmp_path / "m.json")
     assert proc.returncode == 0, proc.stderr
     keep_promises(tmp_path / "m.json", paths, tmp_path)
+
+
+def test_a_searched_starts_refit_keeps_its_promise_where_its_own_search_would_not(tmp_path):
+    """The stress run's broken promise (scripts/stress_promises.py seed 30, 2026-12-05): a linear drive whose tip
+    lags through one smooth friction element, fitted with `bouc-wen`. `validate` suggests `deadzone:tip` (-11 %,
+    fitted on 1 sample in 3). Its refit on every sample, searching the slack's start afresh, picked another start
+    and stopped in a worse minimum: 0.171 deg training RMSE against the 0.158 of the scan's values, -7 % on the
+    validation record, under 75 % of the promise. The printed command gives the scan candidate's values as a
+    second start (`--start-value`), kept where it ends lower: the promise is kept, and without those options the
+    same command breaks it (the test can fail)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("stress_promises", ROOT / "scripts" / "stress_promises.py")
+    stress = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(stress)
+    case = stress.make_case(30, tmp_path)
+    assert case["base"] == "bouc-wen" and not case["effects"]  # the case as the stress run drew it
+    model = tmp_path / "m.json"
+    assert endocal("fit", "hysteresis", *case["fit"], "--axis", "ap", "--model", "bouc-wen",
+                   "--out", model).returncode == 0
+    d, _ = _validate(model, case["check"], tmp_path / "v.json")
+    s = next(x for x in d["suspects"] if x["effect"] == "deadzone:tip")
+    assert set(s["refit"]["start_values"]) == {"deadzone_tip_slack_deg", "deadzone_tip_band_deg",
+                                               "deadzone_tip_center_deg"}
+    # an effect without a start search (the envelope's start is its hinge fit) gets none
+    assert all(x["refit"]["start_values"] == {} for x in d["suspects"] if x["effect"] == "envelope")
+    argv = shlex.split(s["command"])
+    delivered = {}
+    for how, args in (("printed", argv), ("own search only", [a for i, a in enumerate(argv) if not (
+            a == "--start-value" or (i > 0 and argv[i - 1] == "--start-value"))])):
+        assert endocal(*args[1:], "--force").returncode == 0
+        d2, _ = _validate(Path(argv[-1]), case["check"], tmp_path / "v2.json")
+        delivered[how] = -d2["compare"]["change_pct"]
+    assert delivered["printed"] >= KEPT * s["gain_pct"], (s["gain_pct"], delivered)
+    assert delivered["own search only"] < KEPT * s["gain_pct"], (s["gain_pct"], delivered)
