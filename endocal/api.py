@@ -568,9 +568,10 @@ def fit(data, *, axis: str, model: str = "pi", effects: Sequence[str] | str = ()
     effects_file : path or sequence of paths, optional
         Python files of one's own effects and bases (`--effects-file`, :func:`use_effects`).
     start_values : mapping, optional
-        Start values of effect parameters by full name (`--start-value`), e.g.
-        `{"deadzone_slack_deg": 2.4}`: an effect whose every free parameter is given skips its start
-        search (a suggestion's refit gives the values its candidate reached).
+        A second start for effect parameters by full name (`--start-value`), e.g.
+        `{"deadzone_slack_deg": 2.4}`: the fit from it is made beside the one from `start_from` (or from
+        scratch) and kept where it ends lower on the data (a suggestion's refit gives the values its
+        candidate reached).
 
     Returns
     -------
