@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml
 
 # endocal's modules compiled to bytecode, as pip compiles a wheel's at install: an editable install is read
 # from the source tree, and where PYTHONDONTWRITEBYTECODE is set (it is on this workplace's machines) every command
-# would compile the 170 modules it imports afresh (0.1 s of each `endocal validate`; bench/bench_loop.py).
+# would compile the modules it imports afresh (0.13 s of each `endocal validate`; bench/bench_loop.py).
 # Quick when nothing changed; run before the targets that time or start many commands.
 compile: $(STAMP)
 	@$(BIN)/python -m compileall -q endocal

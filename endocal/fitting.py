@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import copy
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -11,8 +10,7 @@ import numpy as np
 
 from endocal.errors import ModelError
 from endocal.models import make_model
-from endocal.models.base import HysteresisModel, in_drive_unit
-from endocal.models.effects.base import InputEffect
+from endocal.models.base import HysteresisModel, parameter_label
 from endocal.models.start import RecordStart
 from endocal.runs.aligned import AlignedData, load_aligned
 from endocal.runs.format import sample_rate_hz
@@ -46,8 +44,7 @@ def effect_start_values(model: HysteresisModel, values: dict[str, float], unit: 
     """
     if not values:
         return {}
-    effects = model._effects()
-    known = {in_drive_unit(n, unit) if isinstance(e, InputEffect) else n: n for e in effects for n in e.full_names()}
+    known = {parameter_label(n, e, unit): n for e in model._effects() for n in e.full_names()}
     out = {}
     for name, v in values.items():
         if name not in known:
@@ -58,6 +55,24 @@ def effect_start_values(model: HysteresisModel, values: dict[str, float], unit: 
             raise ModelError(f"--start-value {name}={v!r}: a start value is a finite number")
         out[known[name]] = float(v)
     return out
+
+
+def check_start_values_whole(model: HysteresisModel, given: dict[str, float]) -> None:
+    """Refuse start values that give some but not all free parameters of an effect of the fitted ``model``: its
+    fit would search its start as without them (only an effect given whole starts from them).
+
+    Raises
+    ------
+    ModelError
+    """
+    labels, free = model.parameter_labels(), set(model.param_names_)
+    for e in model.effects_:
+        names = [n for n in e.full_names() if n in free]
+        have = [n for n in names if n in given]
+        if have and len(have) < len(names):
+            missing = ", ".join(labels[n] for n in names if n not in given)
+            raise ModelError(f"--start-value gives {', '.join(labels[n] for n in have)} of effect '{e.label}' but not "
+                             f"{missing}: give every free parameter of the effect, or none")
 
 
 def fit_hysteresis(
@@ -91,7 +106,7 @@ def fit_hysteresis(
         kept where it ends lower on the data than the fit from ``start_from`` (or from scratch)
         alone. The refit ``validate`` prints gives the values its candidate reached for the effect
         it adds, so the refit is never worse on the estimation data than the one from the candidate's
-        values (:meth:`~endocal.models.base.HysteresisModel.fit_from`).
+        values (:meth:`~endocal.models.base.HysteresisModel.try_start`).
     **settings
         Passed to the model (e.g. ``n_operators``, ``out_of_range``).
 
@@ -99,7 +114,7 @@ def fit_hysteresis(
     ------
     ModelError
         ``start_from`` of another axis, or of a drive in another unit (deg, mm); a start value
-        of a parameter no effect of the model has.
+        of a parameter no effect of the model has, or start values of part of an effect's free parameters.
     RunFormatError
         Runs recorded on two probes (:func:`~endocal.runs.probes.check_one_probe`), or a table
         without ``axis``.
@@ -119,13 +134,10 @@ def fit_hysteresis(
             raise ModelError(f"--start-from: {exc}") from None
     model = make_model(base, effects=effects or (), axis=axis, **settings)
     given = effect_start_values(model, start_values or {}, data.cmd_unit)
-    if start_from is not None:
-        model = model.fit_from(start_from, data, start_values=given)
-    else:
-        model = model.fit(data)
-        if given:  # a second start, kept where it ends lower (HysteresisModel.fit_from)
-            other = copy.deepcopy(model).fit(data, warm_start=given)
-            model = other if other.fit_report_.rmse_deg < model.fit_report_.rmse_deg else model
+    model = model.fit_from(start_from, data) if start_from is not None else model.fit(data)
+    if given:  # a second start, kept where it ends lower (HysteresisModel.try_start)
+        check_start_values_whole(model, given)
+        model.try_start(data, {**(model.lent_values(start_from) if start_from is not None else {}), **given})
     span = sum(float(np.ptp(d.table["t_s"])) for d in datas)
     starts = [RecordStart.from_dict(s) for s in model.fit_report_.estimated_starts]
     cut = cut_start(data, model.predict(data) - data.meas_deg, "fitted record", starts)

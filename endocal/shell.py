@@ -27,8 +27,8 @@ def refit_argv(refit: Refit) -> list[str]:
     """``endocal fit hysteresis DATA... --axis AXIS --model BASE --effects E1,E2 [--planes P] [--set K=V...]
     [--start-from M] [--start-value NAME=V...] --out OUT`` as an argument list.
 
-    Setting values are written as ``--set`` reads them (:func:`setting_value`); start values with the 6
-    significant digits a start needs (the fit refines them).
+    Setting values are written as ``--set`` reads them (:func:`setting_value`); start values as the refit
+    holds them (already rounded to the digits a start needs, so the command and ``Suggestion.refit()`` agree).
     """
     parts = ["endocal", "fit", "hysteresis", *refit.data_paths]
     if refit.axis:
@@ -43,7 +43,7 @@ def refit_argv(refit: Refit) -> list[str]:
     if refit.start_from:
         parts += ["--start-from", refit.start_from]
     for k, v in refit.start_values.items():
-        parts += ["--start-value", f"{k}={v:.6g}"]
+        parts += ["--start-value", f"{k}={v!r}"]
     return parts + effects_file_args(refit.base, refit.effects) + ["--out", refit.out_path]
 
 

@@ -137,8 +137,8 @@ def test_a_start_value_is_a_second_start_kept_where_it_ends_lower(run, tmp_path)
     """`--start-value` (what validate's refit commands give for an effect whose start the scan searched): the fit
     from those values is made beside the fit from `--start-from`, and the one ending lower on the data is kept,
     so a refit is never worse on its estimation data than either start: the model kept is the lower of the two
-    fits, to the digit; a start at a fit's own values keeps that fit's minimum. Bad names and values are one line,
-    exit code 2, nothing written."""
+    fits, to the digit; a start at a fit's own values keeps that fit's minimum. Bad names and values, and part of
+    an effect's parameters, are one line, exit code 2, nothing written."""
     base = tmp_path / "pi.json"
     assert endocal("fit", "hysteresis", run, "--axis", "ap", "--model", "pi", "--out", base).returncode == 0
     plain = tmp_path / "pi-dz.json"
@@ -175,4 +175,9 @@ def test_a_start_value_is_a_second_start_kept_where_it_ends_lower(run, tmp_path)
                            "--start-value", "deadzone_slack_deg=wide", "--out", tmp_path / "b.json"), "finite number")
     one_line_error(endocal("fit", "hysteresis", run, "--axis", "ap", "--model", "pi", "--effects", "deadzone",
                            "--start-value", "deadzone_slack_deg", "--out", tmp_path / "c.json"), "expects key=value")
-    assert not any((tmp_path / f"{n}.json").exists() for n in "abc")
+    # part of an effect's start would be silently unused (its start is searched as without it)
+    one_line_error(endocal("fit", "hysteresis", run, "--axis", "ap", "--model", "pi", "--effects", "deadzone",
+                           "--start-value", "deadzone_slack_deg=3", "--out", tmp_path / "d.json"),
+                   "--start-value gives deadzone_slack_deg of effect 'deadzone' but not deadzone_band_deg, "
+                   "deadzone_center_deg: give every free parameter of the effect, or none")
+    assert not any((tmp_path / f"{n}.json").exists() for n in "abcd")

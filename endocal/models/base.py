@@ -89,6 +89,12 @@ def in_drive_unit(text: str, unit: str) -> str:
     return text if unit == "deg" else re.sub(r"(?<![A-Za-z])deg\b", unit, text)
 
 
+def parameter_label(name: str, owner, unit: str) -> str:
+    """A parameter's full name as printed for a drive in ``unit``: an input effect's in the drive's unit
+    (:func:`in_drive_unit`), the base's and the others' as they are (they act on the bending angle)."""
+    return in_drive_unit(name, unit) if isinstance(owner, InputEffect) else name
+
+
 def min_fit_samples(n_free: int) -> int:
     """The fewest samples a fit of ``n_free`` parameters accepts: two per parameter and 20 spare.
 
@@ -422,8 +428,7 @@ class HysteresisModel(ABC):
             if token is not None:
                 _FTOL_NOW.reset(token)
 
-    def fit_from(self, start: HysteresisModel, data, *, max_nfev: int | None = None, ftol: float | None = None,
-                 start_values: dict[str, float] | None = None):
+    def fit_from(self, start: HysteresisModel, data, *, max_nfev: int | None = None, ftol: float | None = None):
         """Fit starting from ``start``, a fitted model with some of these effects (``--start-from``).
 
         The effects ``start`` has begin at its values (:meth:`fit`'s ``warm_start``). A ``start`` of
@@ -444,59 +449,59 @@ class HysteresisModel(ABC):
             What to fit, as :meth:`fit` takes it.
         max_nfev, ftol : optional
             As :meth:`fit` takes them.
-        start_values : dict, optional
-            A second start (full names, over ``start``'s values; an effect whose every free parameter is
-            given skips its start search there): fitted from as well, and kept where it ends lower on
-            ``data``. The refit ``validate`` prints gives the values its candidate reached for the
-            effect it adds: a search of the effect's start on every sample can end in a worse minimum
-            than the scan's on a subsample (a tip-side slack: 0.171 deg training RMSE against 0.158,
-            scripts/stress_promises.py seed 30), and the scan's values alone, beside the model's, can
-            too (the demo's slack: 1.42 against 1.05 deg).
         """
         start.check_drive_unit(as_data(data)[0], "the data to fit")
-        self._fit_from(start, data, max_nfev, ftol)
-        if start_values:  # a second start, kept where it ends lower on these data
-            mine = dict(self.__dict__)
-            own = f"{start.base_name}_"
-            lent = {k: v for k, v in start.params_.items() if start.base_name == self.base_name or not k.startswith(own)}
-            try:
-                self.fit(data, max_nfev=max_nfev, warm_start={**lent, **start_values}, ftol=ftol)
-            except ModelError:
-                self.__dict__.update(mine)
-                return self
-            if not self.fit_report_.rmse_deg < mine["fit_report_"].rmse_deg:
-                self.__dict__.update(mine)
-        return self
-
-    def _fit_from(self, start: HysteresisModel, data, max_nfev, ftol) -> None:
-        """:meth:`fit_from` from ``start`` alone."""
-        if start.base_name != self.base_name:  # another base: only the effects' values carry over
-            own = f"{start.base_name}_"
-            self.fit(data, max_nfev=max_nfev, warm_start={k: v for k, v in start.params_.items()
-                                                          if not k.startswith(own)}, ftol=ftol)
-            return
-        self.fit(data, max_nfev=max_nfev, warm_start=dict(start.params_), ftol=ftol)
+        self.fit(data, max_nfev=max_nfev, warm_start=self.lent_values(start), ftol=ftol)
+        if start.base_name != self.base_name:  # another base: only the effects' values carried over
+            return self
         if not {e.label for e in start.effects_} <= {e.label for e in self.effects_}:
-            return  # an effect dropped: this model does not nest start, and may well fit worse
+            return self  # an effect dropped: this model does not nest start, and may well fit worse
         d, _ = as_data(data)
         scored = copy.copy(start)
         scored.out_of_range = "extrapolate"
         try:
             start_rmse = float(np.sqrt(np.mean((scored.predict(d) - d.meas_deg) ** 2)))
         except ModelError:  # start reads columns this data lacks: nothing to hold the fit to
-            return
+            return self
         warm_rmse = self.fit_report_.rmse_deg
         if not warm_rmse > start_rmse * (1.0 + (NESTED_TOL if ftol is None or ftol <= FTOL else NESTED_TOL_QUICK)):
-            return
+            return self
         warm = dict(self.__dict__)
         self.fit(data, max_nfev=max_nfev, ftol=ftol)
         if not self.fit_report_.rmse_deg < warm_rmse:
             self.__dict__.update(warm)
-            return
+            return self
         self.fit_report_.warnings.insert(0, Message(
             f"from the start model's values the fit ended at {warm_rmse:.3g} deg RMSE, worse than the start model "
             f"itself ({start_rmse:.3g} deg; a local minimum): fitted from scratch "
             f"({self.fit_report_.rmse_deg:.3g} deg)", "local-minimum"))
+        return self
+
+    def lent_values(self, start: HysteresisModel) -> dict[str, float]:
+        """What ``start``, a fitted model, lends this one's fit as its warm start (:meth:`fit_from`): every
+        fitted value when its base is this one's, else its effects' values only (the base starts afresh)."""
+        if start.base_name == self.base_name:
+            return dict(start.params_)
+        own = f"{start.base_name}_"
+        return {k: v for k, v in start.params_.items() if not k.startswith(own)}
+
+    def try_start(self, data, warm_start: dict[str, float], *, max_nfev: int | None = None,
+                  ftol: float | None = None):
+        """Fit this fitted model once more from ``warm_start`` (:meth:`fit`'s), and keep that fit only where it
+        ends lower on ``data`` than the fit it has: a second start, never a worse model.
+
+        ``fit hysteresis --start-value`` (validate's refits of an effect whose start is searched) gives the values
+        the scan's candidate reached: a search of the effect's start on every sample can end in a worse minimum
+        than the scan's on a subsample (a tip-side slack: 0.171 deg training RMSE against 0.158,
+        scripts/stress_promises.py seed 30), and those values, beside the model's, can too (the demo's slack:
+        1.42 against 1.05 deg); so neither start is taken blindly.
+        """
+        self._require_fitted()
+        first = dict(self.__dict__)
+        self.fit(data, max_nfev=max_nfev, warm_start=warm_start, ftol=ftol)
+        if not self.fit_report_.rmse_deg < first["fit_report_"].rmse_deg:
+            self.__dict__.update(first)
+        return self
 
     def _fit(self, data, meas_deg, *, t_s, extras, max_nfev, warm_start=None):
         self._check_common()
@@ -887,8 +892,7 @@ class HysteresisModel(ABC):
         """Each parameter's full name as printed: an input effect's in the drive's unit
         (``deadzone_slack_deg`` reads ``deadzone_slack_mm`` for a linear drive; :func:`in_drive_unit`)."""
         self._require_fitted()
-        return {n: in_drive_unit(n, self.drive_unit_) if isinstance(owner, InputEffect) else n
-                for n, (owner, _) in self._owner_map_.items()}
+        return {n: parameter_label(n, owner, self.drive_unit_) for n, (owner, _) in self._owner_map_.items()}
 
     def parameter_names(self) -> list[str]:
         """Full names of all parameters (base first, then effects); needs a fitted model or no data-dependent structure."""

@@ -134,6 +134,6 @@ def suggest_refit(model: HysteresisModel, effect: str, data_paths: Sequence[str]
                  effects=(*effect_labels(model), effect), out_path=refit_path(model_path, effect, suffix),
                  settings=changed_settings(model), planes_path=None if planes_path is None else str(planes_path),
                  start_from=None if model_path is None else str(model_path),
-                 # to the 6 digits the command prints (endocal.shell.refit_argv), so the printed refit and
-                 # Suggestion.refit() start from the same numbers
+                 # 6 digits, which a start needs (the fit refines it) and the printed command keeps short; the
+                 # command (endocal.shell.refit_argv) and Suggestion.refit() both use these very numbers
                  start_values={k: float(f"{v:.6g}") for k, v in (start_values or {}).items()})
