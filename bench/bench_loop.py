@@ -45,7 +45,7 @@ RECORDS = {"train": ("damped-sine", 85.0, 2), "chirp": ("chirp", 50.0, 4), "test
            "check": ("triangle", 50.0, 5)}
 TARGET_S = 2.5
 #: What ``validate`` imports before it reads a record: the numerical stack, the table reader, the CLI.
-LIBRARIES = "import numpy, scipy.optimize, numba, pandas, pyarrow.parquet, typer"
+LIBRARIES = "import numpy, scipy.optimize, numba, pyarrow.parquet, typer"
 ROOT = Path(__file__).resolve().parents[1]
 
 

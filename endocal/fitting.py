@@ -138,11 +138,11 @@ def fit_hysteresis(
     if given:  # a second start, kept where it ends lower (HysteresisModel.try_start)
         check_start_values_whole(model, given)
         model.try_start(data, {**(model.lent_values(start_from) if start_from is not None else {}), **given})
-    span = sum(float(np.ptp(d.table["t_s"])) for d in datas)
+    span = sum(float(np.ptp(d.t_s)) for d in datas)
     starts = [RecordStart.from_dict(s) for s in model.fit_report_.estimated_starts]
     cut = cut_start(data, model.predict(data) - data.meas_deg, "fitted record", starts)
     return HysteresisFit(model, [d.source for d in datas], [d.sha256 for d in datas], len(data.cmd_deg), span, cut,
-                         glitch_note(dropped, axis), probe, sample_rate_hz(*(d.table["t_s"] for d in datas)) or 0.0)
+                         glitch_note(dropped, axis), probe, sample_rate_hz(*(d.t_s for d in datas)) or 0.0)
 
 
 def fit_provenance(fit: HysteresisFit, *, command: str | None, planes_path: str | Path | None = None,

@@ -255,3 +255,45 @@ def test_an_aligned_table_reads_the_same_however_the_csv_was_written(tmp_path, w
     for col in ("t_s", "ap_cmd_deg", "ap_meas_deg"):
         np.testing.assert_allclose(data.table[col], df[col], rtol=1e-12, atol=1e-12)
     assert (data.table["fixture"] == "clampA").all()
+
+
+def test_read_columns_gives_the_values_and_dtypes_pandas_reads(tmp_path):
+    """validate and fit read aligned tables without pandas (endocal.runs.aligned.read_columns); a column must
+    come out as the DataFrame read_parquet makes holds it: floats, integers, integers with nulls (NaN floats),
+    booleans, text, an empty table, and a table written in several row groups (several Arrow chunks)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from endocal.runs.aligned import read_columns, read_parquet
+
+    n = 1000
+    table = pa.table({"t_s": np.arange(n) * 0.01, "count": np.arange(n, dtype=np.int64), "small": np.arange(n, dtype=np.int16),
+                      "gappy": pa.array([None if i % 7 == 0 else i for i in range(n)], pa.int64()),
+                      "flag": np.arange(n) % 2 == 0, "note": [f"n{i}" for i in range(n)],
+                      "f32": np.linspace(0, 1, n, dtype=np.float32)})
+    for name, t, kw in (("one", table, {}), ("groups", table, {"row_group_size": 128}), ("empty", table.slice(0, 0), {}),
+                        ("sliced", table.slice(3, 500), {})):
+        path = tmp_path / f"{name}.parquet"
+        pq.write_table(t, path, **kw)
+        want = read_parquet(path)
+        got = read_columns(path)
+        assert list(got) == list(want.columns)
+        for c in want.columns:
+            assert got[c].dtype == want[c].to_numpy().dtype, (name, c)
+            np.testing.assert_array_equal(got[c], want[c].to_numpy(), err_msg=f"{name}: {c}")
+            if got[c].dtype.kind in "iuf":
+                got[c][:1] = 0  # writable, as a DataFrame's column is
+
+
+def test_validate_reads_and_scores_records_without_pandas(tmp_path, tee):
+    """pandas is 0.15 s of a command's start (bench/bench_loop.py): loading a record, its planes and a model, and
+    scoring them, must not import it. A fresh interpreter, as a user's shell starts one."""
+    import subprocess
+    import sys
+
+    run_excitation(sine_traj(tee, seconds=4.0), GeometryBackend(tee), tee, tmp_path / "run", protocol_info={}, seed=0)
+    code = ("import sys; from endocal.runs.aligned import load_aligned; d = load_aligned(sys.argv[1]); "
+            "import endocal.planes, endocal.fitting, endocal.cli.validate, endocal.cli.fit, endocal.validation.scan; "
+            "d.meas_deg('ap'), d.cmd_deg('ap'), d.t_s; print('pandas' in sys.modules)")
+    done = subprocess.run([sys.executable, "-c", code, str(tmp_path / "run")], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "False", done.stderr

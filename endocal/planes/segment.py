@@ -10,14 +10,17 @@ knob positive/negative), together with counts of every frame it had to drop.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 from scipy.spatial.transform import Rotation
 
 from endocal.errors import RunFormatError
 from endocal.planes.halfplanes import HALF_PLANES, knob_half_plane
 from endocal.probe import ProbeConfig
+
+if TYPE_CHECKING:  # pandas is imported where a tracker stream is read: loading planes (validate) never needs it
+    import pandas as pd
 
 _POSE_COLUMNS = ("t_s", "sensor", "x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz")
 
@@ -131,6 +134,8 @@ def tip_in_base_from_tracker(tracker: pd.DataFrame, max_pair_gap_s: float = 0.01
     missing = [c for c in _POSE_COLUMNS if c not in tracker.columns]
     if missing:
         raise RunFormatError(f"{where}: tracker stream lacks column(s) {', '.join(missing)}")
+    import pandas as pd
+
     seen = sorted(str(s) for s in pd.unique(tracker["sensor"]))
     for sensor in ("tip", "base"):
         if sensor not in seen:

@@ -20,12 +20,14 @@ another unit. The hysteresis maths is the same in either unit; the bending angle
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
@@ -35,6 +37,9 @@ from endocal.probe import ProbeConfig
 from endocal.runs.format import ALIGNED, MOTOR, RUN_JSON, TRACKER, read_run_json, sha256_of
 from endocal.runs.textable import line_numbers, read_csv_table
 from endocal.streams import DROPOUT_STATUSES
+
+if TYPE_CHECKING:  # pandas is imported where a DataFrame is made: loading a record and fitting or validating it
+    import pandas as pd  # reads its columns without it (0.15 s of every such command; bench/bench_loop.py)
 
 #: file suffixes read as CSV text tables (delimiter sniffed: endocal.runs.textable)
 CSV_SUFFIXES = (".csv", ".txt", ".tsv", ".dat")
@@ -53,7 +58,8 @@ def cmd_column(axis: str, unit: str = "deg") -> str:
 
 def drive_units_of(columns) -> dict[str, str]:
     """Bending axis -> the unit of its command, for every axis with a command and a measured
-    angle among ``columns`` (an axis with two command columns is refused by :func:`check_aligned`)."""
+    angle among ``columns`` (names; a DataFrame or a mapping of columns gives its own) (an axis with two
+    command columns is refused by :func:`check_aligned`)."""
     cols = [str(c) for c in columns]
     have = set(cols)
     out: dict[str, str] = {}
@@ -97,18 +103,53 @@ def read_parquet(source: Path | list[Path], where: str | None = None) -> pd.Data
         The file is missing, not Parquet (a text file renamed ``.parquet``) or corrupt:
         the message names the file and pyarrow's reason.
     """
-    where = where or str(source)
-    try:
+    with _parquet_errors(where or str(source)):
         if isinstance(source, list):
             return pq.read_table(source).to_pandas()
-        # one column at a time (decoding a whole file at once holds its pages and the decoded table
-        # together), then converted column by column, each Arrow column released once pandas has it
-        # (to_pandas() would hold the Arrow table and a consolidated copy at once: 3x the table's size)
+        # converted column by column, each Arrow column released once pandas has it (to_pandas() would hold
+        # the Arrow table and a consolidated copy at once: 3x the table's size)
+        return _read_columns_arrow(source).to_pandas(self_destruct=True, split_blocks=True)
+
+
+def read_columns(source: Path, where: str | None = None) -> dict[str, np.ndarray]:
+    """Read a Parquet file as its columns, name -> (n,) array, as :func:`read_parquet` reads them into a DataFrame
+    (the same values and dtypes: a float column that has nulls holds NaN; text is an object array), without pandas.
+
+    Raises
+    ------
+    RunFormatError
+        As :func:`read_parquet`.
+    """
+    with _parquet_errors(where or str(source)):
         pf = pq.ParquetFile(source)
-        schema = pf.schema_arrow
-        table = pa.Table.from_arrays([pf.read(columns=[name], use_threads=False).column(0) for name in schema.names],
-                                     schema=schema)
-        return table.to_pandas(self_destruct=True, split_blocks=True)
+        return {name: _to_numpy(pf.read(columns=[name], use_threads=False).column(0)) for name in pf.schema_arrow.names}
+
+
+def _read_columns_arrow(source: Path) -> pa.Table:
+    """A Parquet file's table, decoded one column at a time (decoding a whole file at once holds its pages and the
+    decoded table together)."""
+    pf = pq.ParquetFile(source)
+    schema = pf.schema_arrow
+    return pa.Table.from_arrays([pf.read(columns=[name], use_threads=False).column(0) for name in schema.names],
+                                schema=schema)
+
+
+def _to_numpy(column: pa.ChunkedArray) -> np.ndarray:
+    """An Arrow column as a writable numpy array: integers and floats without nulls straight from their buffers
+    (pyarrow's own conversion loads pandas, 0.15 s), anything else through pyarrow."""
+    kind = column.type
+    if not (pa.types.is_integer(kind) or pa.types.is_floating(kind)) or column.null_count:
+        return column.to_numpy()
+    dtype = np.dtype(kind.to_pandas_dtype())
+    parts = [np.frombuffer(c.buffers()[1], dtype, count=len(c), offset=c.offset * dtype.itemsize) for c in column.chunks]
+    return np.concatenate(parts) if parts else np.empty(0, dtype)
+
+
+@contextmanager
+def _parquet_errors(where: str):
+    """pyarrow's and the file system's errors on the file ``where`` names as one RunFormatError line."""
+    try:
+        yield
     except FileNotFoundError:
         raise RunFormatError(f"{where} does not exist") from None
     except (pa.ArrowException, OSError) as exc:
@@ -148,6 +189,8 @@ def _check_stream(df: pd.DataFrame, name: str, where: str) -> None:
     ------
     RunFormatError
     """
+    import pandas as pd
+
     need = TRACKER_COLUMNS if name == TRACKER else ("t_s",)
     missing = [c for c in need if c not in df.columns]
     if missing:
@@ -197,6 +240,8 @@ def align(motor: pd.DataFrame, tracker: pd.DataFrame, probe: ProbeConfig, max_ga
     max_gap_s : float
         Longest tracking gap to interpolate across, seconds.
     """
+    import pandas as pd
+
     missing = [s for s in ("tip", "base") if s not in set(tracker["sensor"].astype(str))]
     if missing:
         raise RunFormatError(f"tracker stream has no '{missing[0]}' sensor frames: eq. 1 needs both tip and base sensors")
@@ -240,14 +285,27 @@ def align(motor: pd.DataFrame, tracker: pd.DataFrame, probe: ProbeConfig, max_ga
     return Alignment(pd.DataFrame(out), n_frames, n_invalid, int((~ok).sum()), max_gap_s, by_status)
 
 
+def columns_of(table) -> dict:
+    """A table's columns, name -> (n,) array: a mapping of them as it is, a DataFrame's column by column."""
+    if isinstance(table, Mapping):
+        return dict(table)
+    return {c: table[c].to_numpy() for c in table.columns}
+
+
+def is_number_array(values: np.ndarray, *, bool_ok: bool = True) -> bool:
+    """Whether a column holds numbers (integers, floats; booleans unless ``bool_ok`` is False), as its dtype says."""
+    return np.asarray(values).dtype.kind in ("biufc" if bool_ok else "iufc")
+
+
 @dataclass
 class AlignedData:
     """An aligned table, checked, with where it came from.
 
     Attributes
     ----------
-    table : DataFrame
-        ``t_s``, ``<axis>_cmd_deg`` (or ``_cmd_mm``), ``<axis>_meas_deg`` per axis, and numeric extras.
+    columns : dict of str to array
+        ``t_s``, ``<axis>_cmd_deg`` (or ``_cmd_mm``), ``<axis>_meas_deg`` per axis, and numeric extras, one
+        (n,) array each. A DataFrame given here is read column by column (:func:`columns_of`).
     axes : list of str
         Bending axes present (those with both a command and a measurement column).
     source : Path
@@ -261,18 +319,39 @@ class AlignedData:
         command column names.
     """
 
-    table: pd.DataFrame
+    columns: dict
     axes: list[str]
     source: Path
     sha256: str
     meta: dict = field(default_factory=dict)
     drive_units: dict = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        if not isinstance(self.columns, Mapping):  # a DataFrame: the table view is the one given
+            self.__dict__["table"] = self.columns
+            self.columns = columns_of(self.columns)
+
+    @cached_property
+    def table(self) -> pd.DataFrame:
+        """The columns as a DataFrame (made on first use: the commands that fit and validate never need one)."""
+        import pandas as pd
+
+        return pd.DataFrame(self.columns)
+
+    @property
+    def n_rows(self) -> int:
+        """Samples (rows) of the table."""
+        return len(self.columns["t_s"])
+
+    def column(self, name: str) -> np.ndarray:
+        """The column ``name`` as floats."""
+        return np.asarray(self.columns[name], float)
+
     @property
     def extras(self) -> list[str]:
         """Numeric columns beyond time, commands and measurements."""
         core = {"t_s"} | {self.cmd_column(a) for a in self.axes} | {a + MEAS for a in self.axes}
-        return [c for c in self.table.columns if c not in core]
+        return [c for c in self.columns if c not in core]
 
     def drive_unit(self, axis: str) -> str:
         """The unit of ``axis``' command: ``deg`` (a knob) or ``mm`` (a linear stage pulling the tendon), as
@@ -280,7 +359,7 @@ class AlignedData:
         axis = self._axis(axis)
         if axis in self.drive_units:
             return self.drive_units[axis]
-        return next((u for u in DRIVE_UNITS if cmd_column(axis, u) in self.table.columns), "deg")
+        return next((u for u in DRIVE_UNITS if cmd_column(axis, u) in self.columns), "deg")
 
     def cmd_column(self, axis: str) -> str:
         """The command column of ``axis`` (``ap_cmd_deg``, ``ap_cmd_mm``)."""
@@ -288,7 +367,7 @@ class AlignedData:
 
     def cmd(self, axis: str) -> np.ndarray:
         """The command of ``axis`` in its drive unit (:meth:`drive_unit`)."""
-        return self.table[self.cmd_column(axis)].to_numpy(float)
+        return self.column(self.cmd_column(axis))
 
     def cmd_deg(self, axis: str) -> np.ndarray:
         """The command of a knob-driven ``axis`` in deg (an axis driven in mm is refused: :meth:`cmd`)."""
@@ -298,11 +377,11 @@ class AlignedData:
         return self.cmd(axis)
 
     def meas_deg(self, axis: str) -> np.ndarray:
-        return self.table[self._axis(axis) + MEAS].to_numpy(float)
+        return self.column(self._axis(axis) + MEAS)
 
     @property
     def t_s(self) -> np.ndarray:
-        return self.table["t_s"].to_numpy(float)
+        return self.column("t_s")
 
     def _axis(self, axis: str) -> str:
         if axis not in self.axes:
@@ -310,18 +389,22 @@ class AlignedData:
         return axis
 
 
-def _read_table(path: Path) -> pd.DataFrame:
+def _read_table(path: Path) -> dict | pd.DataFrame:
+    """An aligned table file's columns (Parquet), or the DataFrame its CSV text reads as."""
     suffix = path.suffix.lower()
+    if suffix == ".parquet":
+        return read_columns(path)
+    if suffix not in CSV_SUFFIXES:
+        raise RunFormatError(f"{path}: expected a run folder, a .parquet or a .csv aligned table (.txt, .tsv and .dat "
+                             "read as CSV)")
+    import pandas as pd
+
     try:
-        if suffix == ".parquet":
-            return read_parquet(path)
-        if suffix in CSV_SUFFIXES:
-            return read_csv_table(path.read_bytes())
+        return read_csv_table(path.read_bytes())
     except FileNotFoundError:
         raise RunFormatError(f"{path} does not exist") from None
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError) as exc:
         raise RunFormatError(f"{path} cannot be read as {suffix[1:].upper()}: {str(exc).splitlines()[0]}") from None
-    raise RunFormatError(f"{path}: expected a run folder, a .parquet or a .csv aligned table (.txt, .tsv and .dat read as CSV)")
 
 
 def _csv_line(path: Path, df: pd.DataFrame) -> Callable[[int], str]:
@@ -329,8 +412,8 @@ def _csv_line(path: Path, df: pd.DataFrame) -> Callable[[int], str]:
     return lambda i: f"line {line_numbers(path.read_bytes(), i + 1, df.attrs.get('headerless', False))[i]}"
 
 
-def check_aligned(df: pd.DataFrame, where: str, row_name: Callable[[int], str] | None = None) -> list[str]:
-    """Check an aligned table and return its bending axes.
+def check_aligned(table, where: str, row_name: Callable[[int], str] | None = None) -> list[str]:
+    """Check an aligned table (a DataFrame, or its columns: :func:`columns_of`) and return its bending axes.
 
     Raises
     ------
@@ -340,34 +423,36 @@ def check_aligned(df: pd.DataFrame, where: str, row_name: Callable[[int], str] |
         does not increase. ``row_name(i)`` names row ``i`` in those messages (default ``row i``; a CSV
         file's ``line N``, as an editor numbers it).
     """
+    headerless = bool(getattr(table, "attrs", {}).get("headerless"))  # a CSV read without a header line
+    df = columns_of(table)
     row_name = row_name or (lambda i: f"row {i}")
-    if "t_s" not in df.columns:
-        if df.attrs.get("headerless"):
+    if "t_s" not in df:
+        if headerless:
             raise RunFormatError(f"{where}: no header line (the first line is numbers): an aligned table names its "
                                  "columns t_s, <axis>_cmd_deg, <axis>_meas_deg; add that line, or map the numbered "
                                  "columns (\"1\", \"2\", ...) with `endocal import csv --map`")
         raise RunFormatError(f"{where}: no 't_s' column (an aligned table needs t_s, <axis>_cmd_deg, <axis>_meas_deg; "
                              "a log with its own column names goes through `endocal import csv LOG --map MAP`)")
-    units = drive_units_of(df.columns)
+    units = drive_units_of(df)
     axes = list(units)
     if not axes:
-        lonely = [c for c in df.columns if str(c).endswith((*CMD_SUFFIXES, MEAS))]
+        lonely = [c for c in df if str(c).endswith((*CMD_SUFFIXES, MEAS))]
         hint = f" (found only {', '.join(lonely)})" if lonely else ""
         raise RunFormatError(
             f"{where}: no bending axis with both '<axis>_cmd_deg' (or '<axis>_cmd_mm', a linear drive) and "
             f"'<axis>_meas_deg' columns{hint}"
         )
-    twice = next((a for a in axes if all(cmd_column(a, u) in df.columns for u in DRIVE_UNITS)), None)
+    twice = next((a for a in axes if all(cmd_column(a, u) in df for u in DRIVE_UNITS)), None)
     if twice is not None:
         raise RunFormatError(f"{where}: axis '{twice}' has a command in deg and one in mm "
                              f"({', '.join(cmd_column(twice, u) for u in DRIVE_UNITS)}): keep the one its drive "
                              "was commanded in")
-    if len(df) == 0:
+    if len(df["t_s"]) == 0:
         raise RunFormatError(f"{where}: the table has no rows")
     for col in ["t_s"] + [c for a in axes for c in (cmd_column(a, units[a]), a + MEAS)]:
-        if not pd.api.types.is_numeric_dtype(df[col]):
+        if not is_number_array(df[col]):
             raise RunFormatError(f"{where}: column '{col}' is not numeric")
-        values = df[col].to_numpy(float)
+        values = np.asarray(df[col], float)
         bad = ~np.isfinite(values)
         if bad.any():
             i = int(np.argmax(bad))
@@ -376,7 +461,7 @@ def check_aligned(df: pd.DataFrame, where: str, row_name: Callable[[int], str] |
                    "map.toml`), which interpolates the angle across short dropouts and counts them"
                    if col.endswith(MEAS) and where.lower().endswith(CSV_SUFFIXES) else "drop or fill such rows first")
             raise RunFormatError(f"{where}: column '{col}' is {kind} at {row_name(i)}; {fix}")
-    t = df["t_s"].to_numpy(float)
+    t = np.asarray(df["t_s"], float)
     steps = np.diff(t)
     if (steps <= 0).any():
         i = int(np.argmax(steps <= 0)) + 1
@@ -403,7 +488,7 @@ def load_aligned(path: str | Path, max_gap_s: float = 0.2) -> AlignedData:
     if path.is_dir():
         meta = read_run_json(path)
         if (path / ALIGNED).is_file():
-            df = read_parquet(path / ALIGNED)
+            df = read_columns(path / ALIGNED)
             digest = sha256_of(path / ALIGNED)
         else:
             probe = ProbeConfig.from_dict(meta.get("probe"), where=str(path / RUN_JSON))
@@ -415,7 +500,7 @@ def load_aligned(path: str | Path, max_gap_s: float = 0.2) -> AlignedData:
                                      f"'{probe.name}' its run.json names; record or import the run again") from None
             digest = sha256_of(path)
         axes = check_aligned(df, str(path))
-        units = drive_units_of(df.columns)
+        units = drive_units_of(df)
         recorded = meta.get("drive_units") or {}
         wrong = next((a for a in axes if a in recorded and recorded[a] != units[a]), None)
         if wrong is not None:
@@ -427,4 +512,4 @@ def load_aligned(path: str | Path, max_gap_s: float = 0.2) -> AlignedData:
         raise RunFormatError(f"{path} does not exist: give a run folder or an aligned table (.parquet or .csv)")
     df = _read_table(path)
     axes = check_aligned(df, str(path), _csv_line(path, df) if path.suffix.lower() in CSV_SUFFIXES else None)
-    return AlignedData(df, axes, path, sha256_of(path), {}, drive_units_of(df.columns))
+    return AlignedData(df, axes, path, sha256_of(path), {}, drive_units_of(df))

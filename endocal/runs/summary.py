@@ -54,7 +54,7 @@ def summarize(path: str | Path | AlignedData) -> DataSummary:
     t = data.t_s
     axes = []
     for axis in data.axes:
-        cmd, meas = data.cmd(axis), data.table[axis + MEAS].to_numpy(float)
+        cmd, meas = data.cmd(axis), data.column(axis + MEAS)
         axes.append(
             AxisSummary(
                 axis,

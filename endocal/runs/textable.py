@@ -14,8 +14,12 @@ from __future__ import annotations
 import io
 import re
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import pandas as pd
+
+if TYPE_CHECKING:  # imported when a CSV is read: a Parquet record is read without pandas (runs.aligned)
+    import pandas as pd
 
 #: delimiters recognised in the header line, most common first (ties go to the earlier one)
 DELIMITERS = (",", ";", "\t", "|")
@@ -87,6 +91,8 @@ def read_csv_table(raw: bytes) -> pd.DataFrame:
     headerless = bool(first) and all(_is_number(f, sep) for f in fields)
     header = None if headerless else "infer"
     skip = comment_lines(raw)
+    import pandas as pd
+
     df = pd.read_csv(io.BytesIO(raw), sep=sep, skipinitialspace=sep != r"\s+", header=header, skiprows=skip)
     if sep not in (",", r"\s+"):
         text = [c for c in df.columns if df[c].dtype == object or pd.api.types.is_string_dtype(df[c])]

@@ -24,13 +24,12 @@ from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
-import pandas as pd
 from scipy.ndimage import median_filter
 
 from endocal.errors import ModelError
 from endocal.messages import Message
 from endocal.models.data import OTHER_CMD, HysteresisData, common_drive_unit, is_constant, speed_dps
-from endocal.runs.aligned import AlignedData
+from endocal.runs.aligned import AlignedData, is_number_array
 
 #: Extra column holding the other bending axis's measured angle (deg).
 OTHER_MEAS = "other_meas_deg"
@@ -184,11 +183,11 @@ def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str, planes=No
     # The other axis is used only when every table has the same single one (coupling needs a
     # consistent meaning of "the other knob").
     other = others[0][0] if all(len(o) == 1 and o[0] == others[0][0] for o in others) and others[0] else None
-    numeric = [c for c in sorted(common) if all(_is_number_column(a.table[c]) for a in tables)]
-    numeric = [c for c in numeric if all(np.isfinite(a.table[c].to_numpy(float)).all() for a in tables)]
+    numeric = [c for c in sorted(common) if all(is_number_array(a.columns[c], bool_ok=False) for a in tables)]
+    numeric = [c for c in numeric if all(np.isfinite(a.column(c)).all() for a in tables)]
     runs = []
     for a in tables:
-        extras = {c: a.table[c].to_numpy(float) for c in numeric}
+        extras = {c: a.column(c) for c in numeric}
         if other is not None:
             extras[OTHER_CMD] = a.cmd(other)
             extras[OTHER_MEAS] = a.meas_deg(other)
@@ -209,10 +208,6 @@ def axis_data(aligned: AlignedData | Sequence[AlignedData], axis: str, planes=No
     return runs[0] if len(runs) == 1 else HysteresisData.from_runs(runs)
 
 
-def _is_number_column(col: pd.Series) -> bool:
-    return pd.api.types.is_numeric_dtype(col) and not pd.api.types.is_bool_dtype(col)
-
-
 def _through_planes(data: AlignedData, axis: str, planes) -> AlignedData:
     if len(data.axes) != 2:
         raise ModelError(f"{data.source}: the model was fitted through bending planes, which need both bending "
@@ -220,9 +215,8 @@ def _through_planes(data: AlignedData, axis: str, planes) -> AlignedData:
                          "a model fitted without --planes")
     first, second = data.axes
     comp = planes.compensate(data.meas_deg(first), data.meas_deg(second))
-    table = data.table.copy(deep=False)  # copy-on-write: the new column only, not every column again
-    table[f"{axis}_meas_deg"] = np.asarray(comp[0] if axis == first else comp[1], float)
-    return replace(data, table=table)
+    return replace(data, columns={**data.columns,
+                                  f"{axis}_meas_deg": np.asarray(comp[0] if axis == first else comp[1], float)})
 
 
 

@@ -386,8 +386,8 @@ def _axis_of(datas, model: HysteresisModel, axis: str | None, planes, bending_ax
     dropped: list = []
     data = axis_data(tables, ax, planes, dropped)
     model.check_drive_unit(data, f"{', '.join(str(a.source) for a in tables)} ({what})")
-    info = [{"source": str(a.source), "sha256": a.sha256, "n_samples": len(a.table),
-             "duration_s": float(np.ptp(a.table["t_s"].to_numpy()))} for a in tables]
+    info = [{"source": str(a.source), "sha256": a.sha256, "n_samples": a.n_rows,
+             "duration_s": float(np.ptp(a.t_s))} for a in tables]
     for src, n_cmd, n_meas, n_held, t0 in dropped:
         entry = next(d for d in info if d["source"] == src)
         entry["glitches_left_out"] = {"command": n_cmd, "measured": n_meas, "held": n_held, "first_t_s": t0}
