@@ -32,7 +32,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from endocal.errors import ModelError
+from endocal.errors import EndocalError, ModelError
 from endocal.messages import Message
 from endocal.models import EFFECTS, HysteresisData
 from endocal.models.base import HysteresisModel
@@ -105,6 +105,10 @@ class CandidateFit(NamedTuple):
     #: the fitted values of the new effects whose fit searched a start, as the model prints their names: the
     #: refit starts there (:attr:`~endocal.validation.refit.Refit.start_values`)
     start_values: dict | None = None
+    #: the validation RMSE (deg) of the same candidate fitted on the other subsample (:func:`expected_ranges`), when
+    #: its job fitted that too (None: the other subsample cannot be fitted); only with ``again_fitted``
+    again_rmse_deg: float | None = None
+    again_fitted: bool = False
 
 
 def _split_candidate(model: HysteresisModel, effects: Sequence[str], train: HysteresisData,
@@ -231,21 +235,37 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     bases_fitted = other_bases(model) if candidates is None else []
     structures = ([] if as_is else [have]) + [have + [c] for c in tested_cands]
     ftol = scan_ftol(stride)
+    # the model as it stands is the yardstick before any candidate is fitted: a candidate that clears the gain bar
+    # against it may become a suspect, whose expected range needs it fitted on the other subsample; its job fits that
+    # too, on the core that is warm with it, instead of a second round of jobs after the scan
+    own = CandidateFit(predict_errors(model, val), [], dict(model.params_), None, False) if as_is else None
+    ahead = None if own is None or stride == 1 else (
+        other_half(train, stride), float(np.sqrt(np.mean(own.errors**2))) * (1.0 - min_gain_pct / 100.0))
+
+    def job(j):
+        if not isinstance(j, list):
+            return base_errors(model, j, dt, val, ftol)
+        res = _split_candidate(model, j, dt, val, ftol)
+        if ahead is not None and float(np.sqrt(np.mean(res.errors**2))) <= ahead[1]:
+            res = res._replace(again_rmse_deg=_again_rmse(model, j, ahead[0], val, res.params), again_fitted=True)
+        return res
 
     with one_blas_thread():
-        results = map_jobs(lambda job: _split_candidate(model, job, dt, val, ftol) if isinstance(job, list)
-                           else base_errors(model, job, dt, val, ftol), structures + bases_fitted, jobs, meanwhile)
+        results = map_jobs(job, structures + bases_fitted, jobs, meanwhile)
     results, base_results = results[:len(structures)], results[len(structures):]
     if as_is:
-        results = [CandidateFit(predict_errors(model, val), [], dict(model.params_), None, False)] + results
+        results = [own] + results
     if isinstance(results[0], ModelError):
         raise ModelError(f"the model as it stands cannot be refitted on the estimation data: {results[0]}") from None
     err_base = results[0].errors  # the model's own: as it stands, or its structure refitted
     fitted, cautions, fitted_params, without_term, unconfirmed, searched = [], {}, {}, {}, set(), {}
+    again_known = {}
     for c, res in zip(tested_cands, results[1:]):
         if isinstance(res, ModelError):
             untestable[c] = f"could not be fitted on the estimation data ({res})"
         else:
+            if res.again_fitted:
+                again_known[c] = res.again_rmse_deg
             fitted.append((c, res.errors))
             cautions[c] = "; ".join(res.cautions)
             fitted_params[c] = res.params
@@ -314,7 +334,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     if stride > 1 and suspects:
         ranges = expected_ranges(model, [s.effect for s in suspects], train, val, stride,
                                  [s.rmse_heldout_deg for s in suspects], jobs,
-                                 starts=[fitted_params.get(s.effect) for s in suspects])
+                                 starts=[fitted_params.get(s.effect) for s in suspects], known=again_known)
         suspects = [replace(s, refit=replace(s.refit, scan_stride=stride, expected_rmse_deg=r))
                     for s, r in zip(suspects, ranges)]
         tested = [next((x for x in suspects if x.effect == s.effect), s) for s in tested]
@@ -377,7 +397,8 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
 
 def expected_ranges(model: HysteresisModel, effects: Sequence[str], train: HysteresisData, val: HysteresisData,
                     stride: int, rmse_scanned: Sequence[float], jobs: int | None = None,
-                    starts: Sequence[dict | None] | None = None) -> list[tuple[float, float]]:
+                    starts: Sequence[dict | None] | None = None,
+                    known: dict[str, float | None] | None = None) -> list[tuple[float, float]]:
     """The validation RMSE (deg) to expect of each refit ``base + effects + effect`` on every sample of ``train``,
     when the scan fitted it on 1 sample in ``stride``.
 
@@ -389,22 +410,32 @@ def expected_ranges(model: HysteresisModel, effects: Sequence[str], train: Hyste
 
     ``starts`` (per effect, the candidate's values as the scan fitted them): the second fit starts there, where
     the optimum of the other subsample lies near, instead of searching every start again (several times
-    quicker; the same basin the scan scored).
+    quicker; the same basin the scan scored). ``known``: effect -> the second fit's RMSE (None: it could not be
+    fitted), for the effects the scan's own jobs already fitted twice (:func:`_again_rmse`); the others are fitted here.
     """
     dt2 = other_half(train, stride)
     have = effect_labels(model)
     starts = list(starts) if starts is not None else [None] * len(effects)
-
-    def again_errors(k: int) -> np.ndarray:
-        if starts[k]:
-            return predict_errors(template(model, have + [effects[k]]).fit(dt2, warm_start=starts[k], ftol=SCAN_FTOL),
-                                 val)
-        return _split_candidate(model, have + [effects[k]], dt2, val, SCAN_FTOL).errors
-
+    known = known or {}
+    todo = [k for k, e in enumerate(effects) if e not in known]
     with one_blas_thread():
-        again = map_jobs(again_errors, list(range(len(effects))), jobs)
-    return [spread(r0, r0 if isinstance(err, Exception) else float(np.sqrt(np.mean(err**2))))
-            for r0, err in zip(rmse_scanned, again)]
+        again = map_jobs(lambda k: _again_rmse(model, have + [effects[k]], dt2, val, starts[k]), todo, jobs)
+    rmse = {**known, **{effects[k]: r for k, r in zip(todo, again)}}
+    return [spread(r0, r0 if rmse[e] is None else rmse[e]) for r0, e in zip(rmse_scanned, effects)]
+
+
+def _again_rmse(model: HysteresisModel, effects: list[str], dt2: HysteresisData, val: HysteresisData,
+                start: dict | None) -> float | None:
+    """The validation RMSE (deg) of ``base + effects`` fitted on the other subsample ``dt2`` (:func:`other_half`),
+    from the scan's fitted values ``start`` where there are some; None where ``dt2`` cannot be fitted."""
+    try:
+        if start:
+            err = predict_errors(template(model, effects).fit(dt2, warm_start=start, ftol=SCAN_FTOL), val)
+        else:
+            err = _split_candidate(model, effects, dt2, val, SCAN_FTOL).errors
+    except EndocalError:
+        return None
+    return float(np.sqrt(np.mean(err**2)))
 
 
 def other_half(train: HysteresisData, stride: int) -> HysteresisData:
