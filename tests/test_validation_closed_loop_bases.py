@@ -9,7 +9,8 @@ and the loop are those of tests/test_validation_closed_loop.py (issue 27's user-
 one step added: when `validate` suggests another base (`scan.base_suggestions`, the same paired
 test as the effects) and the summary's next refit is that change (``scan.base_first``: it gains more than
 the first effect suspect and beats its refit in a paired test), the loop refits with that base (the printed
-refit: `--model BASE` with the model's effects, and any effect the change brings) instead of adding an effect.
+refit: `--model BASE` with the model's effects and any effect the change brings, `--start-from` the
+model; :func:`~tests.test_validation_closed_loop.printed_refit`) instead of adding an effect.
 
 The bars (issue 32, "How good"): the loop names the base change (to a base without return-point
 memory); it ends within 1.2x the noise (the final structure refitted on its final estimation data
@@ -41,7 +42,7 @@ from endocal.runs.aligned import load_aligned
 from endocal.sim import SimConfig
 from endocal.validation.data import axis_data
 from endocal.validation.offline import validate_offline
-from tests.test_validation_closed_loop import SCAN_SAMPLES, _record, follow, start_for
+from tests.test_validation_closed_loop import SCAN_SAMPLES, _record, follow, printed_refit, start_for
 from tests.test_validation_hidden import NO_SLACK, simulate
 from tests.test_validation_user_style import HIDDEN
 
@@ -109,7 +110,7 @@ def run_loop(hidden: str | None, variant: str | None = None) -> BaseLoop:
             out.bases.append(change.base)
             out.named += list(change.added)  # a change that needs an effect beside it brings it (validation.bases)
             base = change.base
-            model = make_model(base, list(change.refit.effects), axis="ap").fit(axis_data(est, "ap"))
+            model = printed_refit(change.refit, model, est)
             continue
         step = follow(res, base, model, cfg, est, val, tmp, out)
         if step is None:
