@@ -132,6 +132,16 @@ def _request_of(result):
     return ValidationRequest(model_path=result.model.get("path"), data=tuple(str(d["source"]) for d in result.data))
 
 
+def _named(s, result) -> str:
+    """A suspect as the summary names it: a form tried in place of the plain term the model carries says so."""
+    from endocal.models.effects import plain_form
+
+    plain = plain_form(s.effect)
+    if plain is not None and plain in result.model.get("effects", ()):
+        return f"{s.effect} (in place of {plain})"
+    return s.effect
+
+
 def _verdict(result) -> tuple[str, list[str]]:
     """What is missing, in one line, and the next command (lines)."""
     req = result.request or _request_of(result)
@@ -150,7 +160,7 @@ def _verdict(result) -> tuple[str, list[str]]:
         s = result.suspects[0]
         thin = not any(x.significant for x in result.suspects)
         others = [x.effect for x in result.suspects[1:]]
-        verdict = (f"{'first candidate' if thin else 'missing'}: {s.effect}: {promise(s, what)}, "
+        verdict = (f"{'first candidate' if thin else 'missing'}: {_named(s, result)}: {promise(s, what)}, "
                    + (s.evidence if thin else f"p = {s.p_value:.2g}")
                    + (f"; also: {', '.join(others)}" if others else ""))
         if result.beyond_samples > 0.5 * n:

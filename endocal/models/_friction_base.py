@@ -34,8 +34,8 @@ from endocal.models._smooth_friction import (
     friction_inverse,
     friction_states,
     inverse_step,
+    scaled_friction_inverse,
     scaled_friction_states,
-    speed_factors,
 )
 from endocal.models.base import HysteresisModel
 from endocal.models.data import HysteresisData
@@ -155,13 +155,14 @@ class SmoothFrictionModel(HysteresisModel):
 
     # ------------------------------------------------------------------ forward / inverse
     def _base_forward(self, structure: dict, p: dict, v: np.ndarray, run_starts: np.ndarray,
-                      speed: tuple | None = None) -> np.ndarray:
-        """``speed``: ``(gain, t_s)`` when the friction's bound grows with the input's speed (``rate:friction``)."""
+                      factor: np.ndarray | None = None) -> np.ndarray:
+        """``factor`` (n,): the friction's bound at each sample, times its own, where effects scale it
+        (``rate:friction``, ``load:friction:COLUMN``; :meth:`HysteresisModel._friction_factor`)."""
         family, k_lin, k_hys, rho, sigma, expo, offset = self._law(structure, p)
         v = np.ascontiguousarray(v, dtype=float)
-        if speed is None:
+        if factor is None:
             return k_lin * v + k_hys * friction_states(family, v, rho, sigma, expo, run_starts) + offset
-        f = speed_factors(v, np.ascontiguousarray(speed[1], dtype=float), float(speed[0]), run_starts)
+        f = np.ascontiguousarray(factor, dtype=float)
         return k_lin * v + k_hys * f * scaled_friction_states(family, v, rho, sigma, expo, run_starts, f) + offset
 
     def _unreachable(self, miss: float) -> str:
@@ -208,11 +209,16 @@ class SmoothFrictionModel(HysteresisModel):
                              "compensation")
         self._inverse_checked = key
 
-    def _base_inverse(self, structure: dict, p: dict, y: np.ndarray, run_starts: np.ndarray, v_range) -> np.ndarray:
+    def _base_inverse(self, structure: dict, p: dict, y: np.ndarray, run_starts: np.ndarray, v_range,
+                      factor: np.ndarray | None = None) -> np.ndarray:
+        """``factor``: the friction's bound at each sample times its own, known ahead (a logged condition,
+        ``load:friction:COLUMN``)."""
         self.check_inverse()
         family, k_lin, k_hys, rho, sigma, expo, offset = self._law(structure, p)
-        v, worst = friction_inverse(family, np.ascontiguousarray(y, dtype=float) - offset, k_lin, k_hys, rho, sigma,
-                                    expo, float(v_range[0]), float(v_range[1]), run_starts)
+        y = np.ascontiguousarray(y, dtype=float) - offset
+        f = np.ones(y.size) if factor is None else np.ascontiguousarray(factor, dtype=float)
+        v, worst = scaled_friction_inverse(family, y, k_lin, k_hys, rho, sigma, expo, float(v_range[0]),
+                                           float(v_range[1]), run_starts, f)
         if worst > INVERSE_TOL * max(1.0, float(np.max(np.abs(y))) if y.size else 1.0):
             raise CompensationRefusedError(self._unreachable(worst))
         return v

@@ -221,6 +221,14 @@ def first_input(y, k_lin, v_lo, v_hi):
 @njit(cache=True)
 def friction_inverse(family, y, k_lin, k_hys, rho, sigma, expo, v_lo, v_hi, run_starts):
     """The input (n,) whose output follows ``y`` (n,, offset removed) and the largest miss (deg)."""
+    return scaled_friction_inverse(family, y, k_lin, k_hys, rho, sigma, expo, v_lo, v_hi, run_starts, np.ones(y.shape[0]))
+
+
+@njit(cache=True)
+def scaled_friction_inverse(family, y, k_lin, k_hys, rho, sigma, expo, v_lo, v_hi, run_starts, f):
+    """:func:`friction_inverse` of a friction whose bound is ``f`` (n,, > 0, known ahead: a logged condition) times
+    its own (:func:`scaled_friction_states`). At each sample the step map ``v -> k_lin v + k_hys f w`` is that of the
+    unscaled law with ``k_hys f`` and ``rho / f`` from the rescaled state, so it stays non-decreasing in ``v``."""
     n = y.shape[0]
     v = np.empty(n)
     worst = 0.0
@@ -236,7 +244,8 @@ def friction_inverse(family, y, k_lin, k_hys, rho, sigma, expo, v_lo, v_hi, run_
         if miss > worst:
             worst = miss
         for k in range(a + 1, b):
-            vk, wk, miss = inverse_step(family, y[k], vk, wk, k_lin, k_hys, rho, sigma, expo, v_lo, v_hi)
+            vk, wk, miss = inverse_step(family, y[k], vk, _rescaled(wk, f[k - 1], f[k]), k_lin, k_hys * f[k],
+                                        rho / f[k], sigma, expo, v_lo, v_hi)
             v[k] = vk
             if miss > worst:
                 worst = miss

@@ -41,7 +41,7 @@ from endocal.errors import CompensationRefusedError, ModelError, OutOfRangeWarni
 from endocal.messages import KEYS, Message, key_of
 from endocal.models.compensator import StreamingCompensator
 from endocal.models.data import HysteresisData, as_data
-from endocal.models.effects import resolve_effects
+from endocal.models.effects import plain_form, resolve_effects
 from endocal.models.effects.base import Effect, InputEffect, OutputEffect
 from endocal.models.effects.base import OutputFilter
 from endocal.models.params import Parameter
@@ -212,21 +212,27 @@ class HysteresisModel(ABC):
         return effects
 
     def refuses(self, effect: Effect) -> str:
-        """Why this base cannot carry ``effect`` (``""``: it can): an effect that scales the holding force of one
-        friction state (``rate:friction``) needs a base that has one (``dahl``, ``bouc-wen``)."""
-        if hasattr(effect, "friction_speed_gain") and not self.friction_state:
-            return (f"effect '{effect.label}' scales the holding force of a friction base's one friction state; the "
-                    f"{self.base_name} base has none: fit --model dahl or bouc-wen, or use '{effect.name}' (a play in "
-                    "front of any base)")
+        """Why this base cannot carry ``effect`` (``""``: it can): a form that acts on one friction state
+        (``Effect.needs_friction_state``: ``rate:friction``, ``load:friction:COLUMN``, ``envelope:tip``) needs a base
+        that has one (``dahl``, ``bouc-wen``)."""
+        if effect.needs_friction_state and not self.friction_state:
+            plain = plain_form(effect.label) or effect.name
+            return (f"effect '{effect.label}' needs a base with one friction state ({effect.needs_friction_state}); the "
+                    f"{self.base_name} base has none: fit --model dahl or bouc-wen, or use '{plain}'")
         return ""
 
-    def _friction_speed(self, eff_p: dict[int, dict], data: HysteresisData, effects: list[Effect]) -> dict:
-        """``{"speed": (gain, t_s)}`` for the base when an effect scales its friction with the input's speed
-        (``rate:friction``), else ``{}``."""
+    @staticmethod
+    def _friction_factor(eff_p: dict[int, dict], v: np.ndarray, data: HysteresisData,
+                         effects: list[Effect]) -> dict:
+        """``{"factor": f}`` for the base when effects scale its friction's bound (``f`` (n,) > 0, the product of
+        each one's ``friction_factor``: ``rate:friction``'s speed, ``load:friction:COLUMN``'s condition), else ``{}``.
+        ``v`` is the command reaching the base, None in the inverse (where only a factor known ahead is asked for)."""
+        f = None
         for e in effects:
-            if hasattr(e, "friction_speed_gain"):
-                return {"speed": (float(e.friction_speed_gain(eff_p[id(e)])), data.require_time(f"effect '{e.label}'"))}
-        return {}
+            if hasattr(e, "friction_factor"):
+                fe = np.asarray(e.friction_factor(eff_p[id(e)], v, data), dtype=float)
+                f = fe if f is None else f * fe
+        return {} if f is None else {"factor": f}
 
     # ------------------------------------------------------------------ base hooks
     @abstractmethod
@@ -317,7 +323,7 @@ class HysteresisModel(ABC):
         for e in effects:
             if isinstance(e, InputEffect):
                 u = e.apply(eff_p[id(e)], u, data)
-        y = self._base_forward(structure, base_p, u, data.run_starts, **self._friction_speed(eff_p, data, effects))
+        y = self._base_forward(structure, base_p, u, data.run_starts, **self._friction_factor(eff_p, u, data, effects))
         for e in effects:
             if isinstance(e, OutputFilter):
                 y = e.apply(eff_p[id(e)], y, data)
@@ -342,7 +348,7 @@ class HysteresisModel(ABC):
         filters = [e for e in effects if isinstance(e, OutputFilter)]
         outputs = [e for e in effects if isinstance(e, OutputEffect)]
         if (any(not hasattr(e, "apply_jac") for e in inputs + filters) or any(not hasattr(e, "term_jac") for e in outputs)
-                or any(hasattr(e, "friction_speed_gain") for e in effects)):
+                or any(hasattr(e, "friction_factor") for e in effects)):
             return None
         u = data.cmd_deg
         M = np.zeros((u.size, 0))
@@ -1059,7 +1065,10 @@ class HysteresisModel(ABC):
             y_base = y_des - terms
             for e in reversed(filters):
                 y_base = e.invert(eff_p[id(e)], y_base, d)
-            v = self._base_inverse(self.structure_, base_p, y_base, d.run_starts, v_range)
+            # a friction bound scaled by a logged condition is known ahead (an effect whose factor follows the
+            # command has no inverse: check_effects_invert refused it above)
+            v = self._base_inverse(self.structure_, base_p, y_base, d.run_starts, v_range,
+                                   **self._friction_factor(eff_p, None, d, self.effects_))
             u = v
             for e in reversed(inputs):
                 u = e.invert(eff_p[id(e)], u, d)

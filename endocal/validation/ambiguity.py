@@ -17,8 +17,10 @@ import numpy as np
 
 from endocal.errors import ModelError
 from endocal.models import EFFECTS, HysteresisData
+from endocal.models.effects import make_effect, plain_form
 from endocal.validation.identifiability import untestable_reason
 from endocal.validation.paired import paired_test, unit_test
+from endocal.validation.structure import with_candidate
 from endocal.validation.suspects import Suspect
 
 def tell_apart(a: str, b: str) -> str | None:
@@ -83,15 +85,31 @@ def _alike(a: Suspect, b: Suspect, errs: dict, alpha: float, close_pct: float) -
 
 
 def plain_first(suspects: list[Suspect], errs: dict, alpha: float, close_pct: float = 5.0) -> list[Suspect]:
-    """An effect's other form (``Effect.variants``: ``deadzone:tip``) ranks after the plain form when the two explain
-    the residual alike: the variant is suggested only where the records prefer it."""
+    """Two forms of one effect that explain the residual alike rank by their physics, not by a few per cent.
+
+    The plain form goes first (``deadzone`` before ``deadzone:tip``): another form is suggested only where the
+    records prefer it. A form that acts on the base's one friction state (``Effect.needs_friction_state``:
+    ``envelope:tip``, ``load:friction:COLUMN``, ``rate:friction``) is the other way round: it is the plain term's
+    physics written for a base of one friction element (the stiffening past that element, a load that scales its
+    holding force), and is a candidate only on such a base, so there it goes first, and the plain form, a second
+    element in front of the first, only where the records prefer it.
+    """
     out = list(suspects)
-    for i, s in enumerate(out):
-        name = s.effect.partition(":")[0]
-        if name not in EFFECTS or s.effect not in EFFECTS[name].variants:
+    for i in range(len(out)):
+        s = out[i]
+        plain = plain_form(s.effect)
+        if plain is not None:
+            partner, preferred = plain, (s.effect if make_effect(s.effect).needs_friction_state else plain)
+        else:
+            later = [x.effect for x in out[i + 1:] if plain_form(x.effect) == s.effect]
+            if not later:
+                continue
+            partner = later[0]
+            preferred = partner if make_effect(partner).needs_friction_state else s.effect
+        if preferred == s.effect:
             continue
-        j = next((k for k in range(i + 1, len(out)) if out[k].effect == name), None)
-        if j is not None and s.effect in errs and name in errs and _alike(s, out[j], errs, alpha, close_pct)[0]:
+        j = next((k for k in range(i + 1, len(out)) if out[k].effect == partner), None)
+        if j is not None and s.effect in errs and partner in errs and _alike(s, out[j], errs, alpha, close_pct)[0]:
             out.insert(i, out.pop(j))
     return out
 
@@ -241,7 +259,7 @@ def settle_lookalikes(suspects: list[Suspect], tested: list[Suspect], errs: dict
             continue
         try:
             err_b = errs[b] if b in errs else fit_errors(have + [b])
-            err_ab = fit_errors(have + [top.effect, b])
+            err_ab = fit_errors(with_candidate(have, top.effect) + [b])
         except ModelError as exc:
             out.append(Settlement(top.effect, b, False, why=f"{b} could not be fitted on these records ({exc})",
                                   apart=apart))

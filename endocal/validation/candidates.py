@@ -1,7 +1,9 @@
 """The candidate effects a scan tests: every catalog effect the model lacks that the data can show.
 
 ``load`` takes a column (``load:sheath_wrap_deg``) and is tried on every extra column that
-varies; an effect's other forms (``Effect.variants``: ``deadzone:tip``) are tried beside it; an
+varies; an effect's other forms (``Effect.variants``: ``deadzone:tip``, ``load:friction:COLUMN``) are tried
+beside it, and a form that scales a friction base's holding force in place of the plain term the model carries
+(:func:`_swaps_in`: a model changed to a friction base may hold the play its first base forced); an
 effect the data cannot reveal or fit (what it declares in ``Effect.requires``,
 :mod:`endocal.validation.identifiability`) is not tested, and why is said.
 """
@@ -13,7 +15,7 @@ from collections.abc import Sequence
 from endocal.errors import ModelError
 from endocal.models import EFFECTS, HysteresisData
 from endocal.models.base import HysteresisModel
-from endocal.models.effects import make_effect
+from endocal.models.effects import make_effect, plain_form, variant_forms
 from endocal.validation.data import load_candidates
 from endocal.validation.identifiability import untestable_reason
 from endocal.validation.structure import effect_labels
@@ -26,6 +28,17 @@ def takes_column(name: str) -> bool:
     except (ModelError, TypeError):
         return True
     return False
+
+
+def _swaps_in(model: HysteresisModel, form: str, have: Sequence[str]) -> bool:
+    """Whether ``form`` is tried in place of the plain effect ``model`` carries: a form that acts on the base's one
+    friction state (``Effect.needs_friction_state``: ``load:friction:COLUMN``, ``rate:friction``, ``envelope:tip``),
+    which the model's base carries now but a base without one refused, so a model changed to this base may hold the
+    plain form only because its first base did."""
+    if form in have or plain_form(form) not in have:
+        return False
+    effect = make_effect(form)
+    return bool(effect.needs_friction_state) and not model.refuses(effect)
 
 
 def candidate_effects(model: HysteresisModel, data: HysteresisData, candidates: Sequence[str] | None,
@@ -70,7 +83,7 @@ def candidate_effects(model: HysteresisModel, data: HysteresisData, candidates: 
                     cols, constant = load_candidates(data, bending_axes)
                 else:
                     cols = list(load_columns)
-                modelled = [c for c in cols if f"{name}:{c}" in have]
+                modelled = [c for c in cols if any(lab in have for lab in (f"{name}:{c}", *variant_forms(name, c)))]
                 cols = [c for c in cols if c not in modelled]
                 if not cols and not modelled:
                     where = "the estimation data" if not rolling else "the data"
@@ -78,10 +91,15 @@ def candidate_effects(model: HysteresisModel, data: HysteresisData, candidates: 
                             f"{where} has no extra column")
                     untestable[name] = (f"{what}: {name} cannot be identified (log a covariate such as "
                                         "sheath_wrap_deg, at two or more values)")
-                cands += [f"{name}:{c}" for c in cols]
+                # a form the base cannot carry is not a candidate (load:friction:COLUMN needs a friction state)
+                cands += [lab for c in cols for lab in (f"{name}:{c}", *variant_forms(name, c))
+                          if lab == f"{name}:{c}" or not model.refuses(make_effect(lab))]
+                cands += [lab for c in modelled for lab in variant_forms(name, c) if _swaps_in(model, lab, have)]
             elif name not in have_names:
                 # a variant the base cannot carry is not a candidate (rate:friction needs a friction state)
-                cands += [name, *(v for v in EFFECTS[name].variants if not model.refuses(make_effect(v)))]
+                cands += [name, *(v for v in variant_forms(name) if not model.refuses(make_effect(v)))]
+            else:  # a form of a term the model carries, tried in its place (_swaps_in)
+                cands += [v for v in variant_forms(name) if _swaps_in(model, v, have)]
     else:
         cands = [c for c in candidates if c not in have]
     tested = []

@@ -14,7 +14,7 @@ import numpy as np
 
 from endocal.errors import ModelError
 from endocal.messages import Message, key_of
-from endocal.models import HysteresisData
+from endocal.models import HysteresisData, make_effect
 from endocal.models.base import HysteresisModel
 from endocal.runs.aligned import AlignedData
 from endocal.validation.bases import minor_loops
@@ -526,7 +526,7 @@ def validate_offline(model: HysteresisModel, datas, *, train=None, axis: str | N
     labels = effect_labels(model)
     # load:COLUMN is fitted where the scan fits (the estimation data, else these data): the column must
     # vary there; the validation data only need it (a record at one sheath curvature is valid data)
-    own = [lab.partition(":")[2] for lab in labels if lab.startswith("load:")] + list(load_columns or [])
+    own = [e.column for e in map(make_effect, labels) if e.name == "load"] + list(load_columns or [])
     check_columns(data, own, vary=est is None)
     if est is not None:
         check_columns(est, own, what="the estimation data")

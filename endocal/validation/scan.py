@@ -35,6 +35,7 @@ import numpy as np
 from endocal.errors import EndocalError, ModelError
 from endocal.messages import Message
 from endocal.models import EFFECTS, HysteresisData
+from endocal.models.effects import plain_form
 from endocal.models.base import HysteresisModel
 from endocal.models.data import half_cycles
 from endocal.validation.ambiguity import ambiguities, cautioned_last, demoted, plain_first, settle_lookalikes
@@ -49,7 +50,8 @@ from endocal.validation.power import estimate_power, evidence_phrase
 from endocal.validation.predict import predict_errors
 from endocal.validation.refit import suggest_refit
 from endocal.validation.regimes import turning_points
-from endocal.validation.structure import SCAN_FTOL, effect_labels, fitted_on, scan_ftol, split_fit, template
+from endocal.validation.structure import (SCAN_FTOL, effect_labels, fitted_on, scan_ftol, split_fit, template,
+                                         with_candidate)
 from endocal.validation.suspects import ScanResult, Suspect
 from endocal.validation.units import make_units
 
@@ -69,7 +71,10 @@ MIN_SAMPLES_PER_CYCLE = 25
 def _column(candidate: str) -> str | None:
     """The column a candidate names (``load:sheath_wrap_deg``); None for a plain effect or another form of one."""
     name, _, arg = candidate.partition(":")
-    return arg if arg and candidate not in EFFECTS[name].variants else None
+    plain = plain_form(candidate)
+    if plain is not None:
+        arg = plain.partition(":")[2]
+    return arg or None
 
 
 def scan_stride(data: HysteresisData, max_samples: int = MAX_SCAN_SAMPLES) -> int:
@@ -233,7 +238,7 @@ def scan_split(model: HysteresisModel, train: HysteresisData, val: HysteresisDat
     as_is = fitted_on(model, train)
     # the other bases (scored after the effects) are fitted among the same jobs, so both cores stay busy
     bases_fitted = other_bases(model) if candidates is None else []
-    structures = ([] if as_is else [have]) + [have + [c] for c in tested_cands]
+    structures = ([] if as_is else [have]) + [with_candidate(have, c) for c in tested_cands]
     ftol = scan_ftol(stride)
     # the model as it stands is the yardstick before any candidate is fitted: a candidate that clears the gain bar
     # against it may become a suspect, whose expected range needs it fitted on the other subsample; its job fits that
@@ -419,7 +424,7 @@ def expected_ranges(model: HysteresisModel, effects: Sequence[str], train: Hyste
     known = known or {}
     todo = [k for k, e in enumerate(effects) if e not in known]
     with one_blas_thread():
-        again = map_jobs(lambda k: _again_rmse(model, have + [effects[k]], dt2, val, starts[k]), todo, jobs)
+        again = map_jobs(lambda k: _again_rmse(model, with_candidate(have, effects[k]), dt2, val, starts[k]), todo, jobs)
     rmse = {**known, **{effects[k]: r for k, r in zip(todo, again)}}
     return [spread(r0, r0 if rmse[e] is None else rmse[e]) for r0, e in zip(rmse_scanned, effects)]
 
@@ -542,7 +547,7 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
         rmse_base = float(np.sqrt(np.mean(err_base**2)))
 
         def candidate(c: str):
-            first = fold_errors(model, have + [c], d, bounds[0], SCAN_FTOL)
+            first = fold_errors(model, with_candidate(have, c), d, bounds[0], SCAN_FTOL)
             train_gain = 100.0 * (1.0 - first[1].fit_report_.rmse_deg / base_train_rmse) if base_train_rmse > 0 else 0.0
             if train_gain < screen_pct * min_gain_pct:
                 # screened on its training fit alone: no held-out data was looked at to decide
@@ -550,7 +555,7 @@ def scan_effects(model: HysteresisModel, data: HysteresisData, *, folds: int = 5
                 rmse0 = float(np.sqrt(np.mean(e0**2)))
                 base0 = float(np.sqrt(np.mean(err_base[:e0.size] ** 2)))
                 return (c, None, rmse0 * rmse_base / base0 if base0 > 0 else rmse0, 1.0, 0)
-            rest = [fold_errors(model, have + [c], d, bd, SCAN_FTOL) for bd in bounds[1:]]
+            rest = [fold_errors(model, with_candidate(have, c), d, bd, SCAN_FTOL) for bd in bounds[1:]]
             err = np.concatenate([first[0]] + [e for e, _ in rest])
             p, nb = paired_test(err_base, err)
             return (c, err, float(np.sqrt(np.mean(err**2))), p, nb)

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 
 from endocal.models import HysteresisData, make_model
 from endocal.models.base import HysteresisModel
+from endocal.models.effects import plain_form
 
 #: The stopping rule of the fits validation makes on a subsample of the estimation data (candidates,
 #: bases, expected ranges: :func:`scan_ftol`) and on rolling-origin folds: stop when a step lowers the
@@ -60,6 +61,16 @@ def effect_labels(model: HysteresisModel) -> list[str]:
     """The model's effects as ``--effects`` writes them."""
     effects = model.effects_ if hasattr(model, "effects_") else model._effects()
     return [e.label for e in effects]
+
+
+def with_candidate(labels: Sequence[str], candidate: str) -> list[str]:
+    """The effects ``labels`` with ``candidate``: in place of the effect it is another form of
+    (:func:`~endocal.models.effects.plain_form`) where ``labels`` hold that one, else added (a form swap:
+    ``load:friction:sheath_wrap_deg`` for ``load:sheath_wrap_deg`` once the base has a friction state)."""
+    plain = plain_form(candidate)
+    if plain is not None and plain in labels:
+        return [candidate if lab == plain else lab for lab in labels]
+    return [*labels, candidate]
 
 
 def changed_settings(model: HysteresisModel) -> dict:

@@ -16,7 +16,7 @@ from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 
 from endocal.errors import ModelError
-from endocal.models.effects.base import Effect, InputEffect, OutputEffect, OutputFilter
+from endocal.models.effects.base import COLUMN, Effect, InputEffect, OutputEffect, OutputFilter
 from endocal.models.effects.coupling import Coupling
 from endocal.models.effects.creep import Creep
 from endocal.models.effects.deadzone import Deadzone
@@ -95,6 +95,34 @@ def catalog() -> list[EffectInfo]:
             variants={v: make_effect(v).kind for v in cls.variants},
         ))
     return out
+
+
+def variant_forms(name: str, column: str | None = None) -> list[str]:
+    """The other forms of catalog effect ``name`` (``Effect.variants``), as ``--effects`` writes them; a column
+    effect's forms are written for ``column`` (``load:friction:sheath_wrap_deg``), and left out without it."""
+    out = []
+    for v in EFFECTS[name].variants:
+        if COLUMN in v.partition(":")[2].split(":"):
+            if column is not None:
+                out.append(v.replace(COLUMN, column))
+        elif column is None:
+            out.append(v)
+    return out
+
+
+def plain_form(label: str) -> str | None:
+    """The plain effect of which ``label`` is another form (``deadzone:tip`` -> ``deadzone``,
+    ``load:friction:sheath_wrap_deg`` -> ``load:sheath_wrap_deg``), or None for a plain form."""
+    name, _, arg = label.partition(":")
+    if name not in EFFECTS:
+        return None
+    for v in EFFECTS[name].variants:
+        head, sep, _ = v.partition(COLUMN)
+        if sep and label.startswith(head) and len(label) > len(head):
+            return f"{name}:{label[len(head):]}"
+        if label == v:
+            return name
+    return None
 
 
 def register(cls: type[Effect]) -> type[Effect]:

@@ -26,6 +26,20 @@ from endocal.models.data import HysteresisData
 from endocal.models.params import Parameter, fmt_value
 
 
+#: The placeholder of a column in a column effect's other forms (``Effect.variants``: ``load:friction:COLUMN``).
+COLUMN = "COLUMN"
+
+
+def from_form(name: str, settings: dict, forms: dict, plain: str) -> Effect:
+    """The effect a model file's entry describes, for an effect of several forms: ``settings["form"]`` (``plain``
+    when absent, as files written before the forms are) picks its class in ``forms``; the rest are its arguments."""
+    settings = dict(settings)
+    form = settings.pop("form", plain)
+    if form not in forms:
+        raise ModelError(f"{name}: unknown form '{form}' ({' or '.join(f or '(none)' for f in forms)})")
+    return forms[form](**settings)
+
+
 class Effect(ABC):
     """Base of all effect terms.
 
@@ -85,8 +99,13 @@ class Effect(ABC):
     null: ClassVar[dict[str, float]] = {}
     #: other forms of the effect that ``validate`` tries as candidates of their own, as ``--effects`` writes
     #: them (``deadzone:tip``: the slack on the other side of the friction); each must parse to an effect
-    #: of this name
+    #: of this name. A column effect writes its column as :data:`COLUMN` (``load:friction:COLUMN``), and the scan
+    #: tries the form for each column it tries the plain effect on
     variants: ClassVar[tuple[str, ...]] = ()
+    #: why the effect needs a base with one friction state (``HysteresisModel.friction_state``: ``dahl``, ``bouc-wen``),
+    #: in words; "" for an effect any base carries. A base without one refuses it in one line, and ``validate`` tries
+    #: such a form in place of the plain term a model changed to a friction base carries
+    needs_friction_state: ClassVar[str] = ""
     #: which of its effect's forms this class is (``tip`` for ``deadzone:tip``); "" for the plain one. A form's
     #: parameters are prefixed ``<name>_<form>`` and its model-file settings say ``{"form": ...}``
     form: ClassVar[str] = ""
@@ -100,10 +119,12 @@ class Effect(ABC):
     #: the measured angle (deg, (n,)) of ``data.meas_deg`` with this effect added, for a simulator
     #: that hides a user's effect in a record (defined by subclasses that can; absent otherwise)
     simulate = None
-    #: optional (absent otherwise): ``friction_speed_gain(self, p) -> float``, ``gamma`` of an effect that scales the
-    #: base's friction bound by ``1 + gamma |dv/dt|`` instead of transforming the command (``rate:friction``). Only a
-    #: base with one friction state carries it (``HysteresisModel.friction_state``; the others refuse it in one line),
-    #: and the fit then differentiates numerically.
+    #: optional (absent otherwise): ``friction_factor(self, p, v, data) -> ndarray``, the bound of the base's friction at
+    #: each sample (n,, > 0) times its own, for an effect that scales the base's holding force instead of transforming
+    #: the command (``rate:friction``: ``1 + gamma |dv/dt|``; ``load:friction:COLUMN``: linear in the condition); ``v``
+    #: is the command reaching the base. Only a base with one friction state carries it
+    #: (``HysteresisModel.friction_state``; the others refuse it in one line), the factors of several such effects
+    #: multiply, and the fit then differentiates numerically.
 
     @property
     def prefix(self) -> str:

@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from endocal.models.data import OTHER_CMD, HysteresisData
-from endocal.models.effects.base import Effect, InputEffect, OutputEffect, OutputFilter
+from endocal.models.effects.base import COLUMN, Effect, InputEffect, OutputEffect, OutputFilter
 from endocal.models.effects.requirements import Requirement
 from endocal.models.params import Parameter
 
@@ -144,7 +144,7 @@ def _run_checks(cls: type) -> list[str]:
     out = _check_instance(eff, data)
     for spec in cls.variants:
         try:
-            var = cls.from_argument(spec.partition(":")[2])
+            var = cls.from_argument(spec.partition(":")[2].replace(COLUMN, SAMPLE_COLUMN))
         except Exception as exc:
             out.append(f"variant '{spec}' cannot be made: {type(exc).__name__}: {exc}")
             continue
@@ -191,6 +191,13 @@ def _check_instance(eff: Effect, data) -> list[str]:
         return [f"its predict returns shape {y.shape}, not ({data.n_samples},)"]
     if not np.all(np.isfinite(y)):
         return ["its predict returns NaN or inf on a sample record"]
+    if hasattr(eff, "friction_factor"):  # the base's friction bound, times its own: positive at every sample
+        try:
+            f = np.asarray(eff.friction_factor(p, u, data), dtype=float)
+        except Exception as exc:
+            return [f"friction_factor(p, v, data) failed on a sample record: {type(exc).__name__}: {exc}"]
+        if f.shape != (data.n_samples,) or not np.all(np.isfinite(f) & (f > 0.0)):
+            return [f"friction_factor(p, v, data) must return ({data.n_samples},) finite positive factors"]
     try:  # validate words a candidate's caution with it (validation.scan): a crash there would end the scan
         why = eff.implausible(p, data)
     except Exception as exc:

@@ -39,7 +39,7 @@ from numba import njit
 
 from endocal.errors import ModelError
 from endocal.models.data import HysteresisData
-from endocal.models.effects.base import InputEffect, OutputFilter
+from endocal.models.effects.base import InputEffect, OutputFilter, from_form
 from endocal.models.params import Parameter
 
 
@@ -245,11 +245,7 @@ class _Slack:
     @classmethod
     def from_settings(cls, settings: dict):
         """A model file's entry: ``{"form": "tip"}`` for the tip's side; files without it are the knob's."""
-        settings = dict(settings)
-        side = settings.pop("form", "knob")
-        if side not in SIDES:
-            raise ModelError(f"deadzone: unknown form '{side}' (tip, or none for the knob's side)")
-        return SIDES[side](**settings)
+        return from_form("deadzone", settings, SIDES, "knob")
 
     def _scale(self, data: HysteresisData, u: np.ndarray) -> np.ndarray:
         """The signal whose range the start and bounds are taken from."""

@@ -30,6 +30,21 @@ made the fit crawl), the term what the covariate adds. (Two one-signed play gain
 gain keep the model smooth where the sign would change, so the fit does not stall at zero.)
 The inverse is exact for a logged covariate (the batch inverse needs the column); the
 future covariate is unknown to a control loop, so the effect does not stream.
+
+``load:friction:COLUMN`` (:class:`FrictionLoad`) is the same physics where the base is one friction element
+(``dahl``, ``bouc-wen``): the condition scales the element's holding force, as ``rate:friction`` scales it with
+speed. A play in front of such a base adds a second friction, whose lag opens as a dead band after each
+reversal; a sheath that wraps more holds more of the same exponential instead. Written on the base's
+friction bound (:func:`endocal.models._smooth_friction.scaled_friction_states`)::
+
+    f_k = 1 + g · (x_k - (x_lo + x_hi) / 2)
+
+``g`` (``load_friction_<COLUMN>_gain``, per unit of ``x``, signed) is bounded so that ``f`` stays within
+0.05..1.95 over the fitted range: a holding force proportional to the wrap (Coulomb friction of a sheath
+whose normal force grows with its curvature) is ``g = 2 / (x_lo + x_hi)``, inside the bound when ``x_lo``
+is positive. Unlike ``rate:friction`` it has an inverse: the condition is logged, so the bound at each sample is
+known ahead and each sample's step map stays monotone in the command (the batch inverse needs the column; it
+does not stream, as ``load:COLUMN`` does not).
 """
 
 from __future__ import annotations
@@ -39,7 +54,7 @@ import numpy as np
 from endocal.errors import ModelError
 from endocal.models._kernels import causal_play_inverse, varplay_forward_jac
 from endocal.models.data import HysteresisData
-from endocal.models.effects.base import InputEffect
+from endocal.models.effects.base import InputEffect, from_form
 from endocal.models.effects.requirements import condition_varying
 from endocal.models.params import Parameter, fmt_value
 
@@ -81,10 +96,22 @@ class Load(InputEffect):
             raise ModelError("load needs a column name: write load:COLUMN (e.g. load:sheath_wrap_deg)")
         self.column = column.strip()
 
+    #: the form for a friction base: the condition scales its holding force (``load:friction:COLUMN``)
+    variants = ("load:friction:COLUMN",)
+
     @classmethod
     def from_argument(cls, arg: str) -> Load:
-        """``load:COLUMN``."""
+        """``load:COLUMN``, or ``load:friction:COLUMN`` (a friction base's holding force scales with the column)."""
+        form, sep, column = arg.partition(":")
+        if sep and form.strip() == "friction":
+            return FrictionLoad(column=column)
         return cls(column=arg)
+
+    @classmethod
+    def from_settings(cls, settings: dict) -> Load:
+        """A model file's entry: ``{"form": "friction", "column": ...}`` for :class:`FrictionLoad`; files without a
+        form are the play's."""
+        return from_form("load", settings, {"play": cls, "friction": FrictionLoad}, "play")
 
     @property
     def prefix(self) -> str:
@@ -188,3 +215,68 @@ class Load(InputEffect):
 
     def is_zero(self, p: dict) -> bool:
         return all(p.get(k, 0.0) == 0.0 for k in ("up", "down", "up_amp", "down_amp", "gain"))
+
+
+class FrictionLoad(Load):
+    """``load:friction:COLUMN``: a friction base's holding force scales with a logged condition (module docstring).
+
+    Fitted parameter (prefix ``load_friction_<COLUMN>_``): ``gain`` (per unit of the column), the relative change
+    of the holding force per unit of the condition about the fitted range's middle; ``lo``, ``hi`` the range, held
+    fixed. The command passes unchanged: the base scales its friction (:meth:`friction_factor`); a base without a
+    friction state refuses it.
+    """
+
+    form = "friction"
+    usage = "load:friction:COLUMN"
+    needs_friction_state = "it scales that state's holding force"
+    units = {"gain": "1/unit", "lo": "", "hi": ""}
+
+    @property
+    def prefix(self) -> str:
+        return f"load_friction_{self.column}"
+
+    @property
+    def label(self) -> str:
+        return f"load:friction:{self.column}"
+
+    def settings(self) -> dict:
+        return {"form": self.form, "column": self.column}
+
+    def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
+        c = self.constants(data)
+        g_max = 0.95 / (0.5 * (c["hi"] - c["lo"]))  # the factor stays within 0.05..1.95 over the fitted range
+        return [Parameter(f"{self.prefix}_gain", 0.0, -g_max, g_max),
+                Parameter(f"{self.prefix}_lo", c["lo"]), Parameter(f"{self.prefix}_hi", c["hi"])]
+
+    def start_candidates(self, data: HysteresisData, u: np.ndarray) -> list[dict]:
+        """Start values tried before the fit (the best is kept): the force constant, or growing or falling by a
+        third over the fitted range."""
+        c = self.constants(data)
+        third = (1.0 / 3.0) / (c["hi"] - c["lo"])
+        return [{"gain": 0.0}, {"gain": third}, {"gain": -third}]
+
+    def friction_factor(self, p: dict, v: np.ndarray | None, data: HysteresisData) -> np.ndarray:
+        """The base's friction bound, ``1 + g (x - (x_lo + x_hi) / 2)`` times its own, floored at 1e-3 for a
+        condition beyond the fitted range."""
+        x = data.column(self.column)
+        return np.maximum(1.0 + p["gain"] * (x - 0.5 * (p["lo"] + p["hi"])), 1e-3)
+
+    def apply(self, p: dict, u: np.ndarray, data: HysteresisData) -> np.ndarray:
+        return np.asarray(u, dtype=float)
+
+    apply_jac = None  # the base's friction carries the term: the fit differentiates numerically
+
+    def invert(self, p: dict, v: np.ndarray, data: HysteresisData) -> np.ndarray:
+        """The command passes unchanged: the base's inverse carries the scaled bound (``friction_factor``)."""
+        return np.asarray(v, dtype=float)
+
+    def wrap(self, inner: str) -> str:
+        return inner
+
+    def describe(self, p: dict, se: dict) -> str:
+        mid = 0.5 * (p["lo"] + p["hi"])
+        return (f"friction x (1 + g ({self.column} - {mid:.4g})): load:friction:{self.column}"
+                f"[g={fmt_value(p['gain'], se.get('gain'), '')}]")
+
+    def is_zero(self, p: dict) -> bool:
+        return p["gain"] == 0.0

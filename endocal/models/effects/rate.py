@@ -67,8 +67,9 @@ from numba import njit
 
 from endocal.errors import CompensationRefusedError, ModelError
 from endocal.models._kernels import HOLD_TOL, play_reference, play_reference_jit, varplay_forward_jac
+from endocal.models._smooth_friction import speed_factors
 from endocal.models.data import HysteresisData
-from endocal.models.effects.base import InputEffect
+from endocal.models.effects.base import InputEffect, from_form
 from endocal.models.effects.requirements import TIME_STAMPS, speeds_spanning
 from endocal.models.params import Parameter
 
@@ -261,11 +262,7 @@ class Rate(InputEffect):
     @classmethod
     def from_settings(cls, settings: dict):
         """A model file's entry: ``{"form": "friction"}`` for :class:`FrictionRate`; files without it are the play's."""
-        settings = dict(settings)
-        form = settings.pop("form", "play")
-        if form not in ("play", "friction"):
-            raise ModelError(f"rate: unknown form '{form}' (play or friction)")
-        return cls(**settings) if form == "play" else FrictionRate(**settings)
+        return from_form("rate", settings, {"play": cls, "friction": FrictionRate}, "play")
 
     def __init__(self, speed_filter_s: float = 0.1):
         if not (isinstance(speed_filter_s, (int, float)) and math.isfinite(speed_filter_s) and speed_filter_s > 0):
@@ -380,13 +377,14 @@ class FrictionRate(Rate):
 
     Fitted parameter (prefix ``rate_friction_``): ``gain_s_per_deg`` (``γ``, s/deg), the relative growth of the
     holding force per deg/s of the base's input. The command passes unchanged: the base scales its friction
-    (``HysteresisModel._friction_speed``); a base without a friction state refuses it.
+    (:meth:`friction_factor`); a base without a friction state refuses it.
     """
 
     units = {"gain_s_per_deg": "s/deg"}
     form = "friction"
     usage = "rate:friction"
     streamable = False
+    needs_friction_state = "it scales that state's holding force"
     has_inverse = False
     no_inverse = ("its friction follows the knob's speed, so a knob that slows lets the element slip ahead and one "
                   "angle is reached by several commands; 'rate' (a play) has an inverse")
@@ -397,9 +395,11 @@ class FrictionRate(Rate):
     def settings(self) -> dict:
         return {"form": self.form}
 
-    def friction_speed_gain(self, p: dict) -> float:
-        """``γ``: the base's friction bound is ``1 + γ |v̇|`` times its own."""
-        return float(p["gain_s_per_deg"])
+    def friction_factor(self, p: dict, v: np.ndarray, data: HysteresisData) -> np.ndarray:
+        """The base's friction bound, ``1 + γ |v̇|`` times its own (the speed over the step that ends at each sample)."""
+        t = data.require_time(f"effect '{self.label}'")
+        return speed_factors(np.ascontiguousarray(v, dtype=float), np.ascontiguousarray(t, dtype=float),
+                             float(p["gain_s_per_deg"]), data.run_starts)
 
     def _upper(self, u: np.ndarray, data: HysteresisData) -> float:
         # the holding force at most ten times its own at the fastest speed of the data
