@@ -13,6 +13,9 @@ is to blame for a gap.
   the probe's limits (the record `--next` asks for) a smooth friction base with `rate:friction` (the holding force
   times 1 + g |dv/dt|) fits it at 1.16x the noise; with `rate`, a play in front of the base that widens with
   speed, every base stays above 3x. `rate:friction` has no inverse: the last test shows why.
+- the bending section's shape: the simulator's stiffening maps the pull past the friction element. With it on the
+  bend (`envelope:tip`) both friction bases fit the ladder at 1.13x the noise; with `envelope`, on the command in front
+  of the element, `dahl` stays at 1.21x.
 """
 
 from __future__ import annotations
@@ -79,10 +82,10 @@ def _ladder(hidden):
 
 
 def test_without_speed_dependence_a_friction_base_fits_the_ladder_near_the_noise():
-    """The floor of the issue's 1.2x bar on the loop's last record: in-sample, `bouc-wen` + `delay` + `envelope`
-    reaches 1.15x and `dahl` 1.21x (2026-11-29). The loop changes base to the first base 10 % better than its own,
-    `dahl` on this plant (1-4 points ahead of `bouc-wen` on the first records), and no later base is 10 % better:
-    its end on this record then sits at the bar unless another term takes up what the Dahl law misses."""
+    """In-sample on the loop's last record, with the shape on the command: `bouc-wen` + `delay` + `envelope` reaches
+    1.15x and `dahl` 1.21x (2026-11-29). The loop changes base to the first base 10 % better than its own, `dahl` on
+    this plant (1-4 points ahead of `bouc-wen` on the first records), and no later base is 10 % better: with
+    `envelope` its end on this record sat at the bar; `envelope:tip` (below) takes up what it misses."""
     rec, noise = _ladder(None)
     assert _in_sample_ratio([rec], noise, "bouc-wen", ["delay", "envelope"]) < 1.2
     assert 1.18 < _in_sample_ratio([rec], noise, "dahl", ["delay", "envelope"]) < 1.25

@@ -51,11 +51,14 @@ def test_the_shape_on_the_command_cannot_take_the_shape_on_the_bend(fitted):
     assert front.fit_report_.rmse_deg > 1.2 * NOISE_DEG
 
 
-def test_the_inverse_gives_the_command_back_and_the_file_keeps_the_form(fitted, tmp_path):
+def test_the_inverses_give_the_command_back_and_the_file_keeps_the_form(fitted, tmp_path):
     d, m = fitted
     y = m.predict(d.cmd_deg)
     # the bisection's tolerance, far below a servo's resolution (0.088 deg)
     assert np.max(np.abs(m.inverse(y) - d.cmd_deg)) < 1e-6
+    # the shape holds no state: the streaming compensator gives the batch inverse's commands
+    comp = m.compensator()
+    assert np.max(np.abs(np.array([comp.step(v) for v in y]) - d.cmd_deg)) < 1e-6
     save_model(m, tmp_path / "m.json")
     again = load_model(tmp_path / "m.json")
     assert [e.label for e in again.effects_] == ["envelope:tip"]
@@ -68,3 +71,12 @@ def test_a_base_with_return_point_memory_refuses_it_in_one_line(base):
         make_model(base, ["envelope:tip"]).fit(_record())
     msg = str(exc.value)
     assert "\n" not in msg and "envelope:tip" in msg and "'envelope'" in msg and "bouc-wen" in msg
+
+
+def test_the_c_export_names_the_base_it_cannot_generate_before_any_effect(fitted):
+    """A friction base has no C generator: that is the one line, not the effect (leaving it out would not help)."""
+    from endocal.export.c import generate_c
+
+    with pytest.raises(ModelError) as exc:
+        generate_c(fitted[1])
+    assert str(exc.value).startswith("the 'bouc-wen' base has no C code generator"), str(exc.value)

@@ -286,14 +286,18 @@ def test_every_hidden_effect_suggestion_delivers_what_validate_promised(hidden, 
     keep_promises(tmp_path / "m.json", paths, tmp_path)
 
 
-def test_a_searched_starts_refit_keeps_its_promise_where_its_own_search_would_not(tmp_path):
+def test_a_searched_starts_refit_keeps_its_promise_and_its_second_start_never_loses(tmp_path):
     """The stress run's broken promise (scripts/stress_promises.py seed 30, 2026-12-05): a linear drive whose tip
     lags through one smooth friction element, fitted with `bouc-wen`. `validate` suggests `deadzone:tip` (-11 %,
     fitted on 1 sample in 3). Its refit on every sample, searching the slack's start afresh, picked another start
     and stopped in a worse minimum: 0.171 deg training RMSE against the 0.158 of the scan's values, -7 % on the
     validation record, under 75 % of the promise. The printed command gives the scan candidate's values as a
     second start (`--start-value`), kept where it ends lower: the promise is kept, and without those options the
-    same command breaks it (the test can fail)."""
+    same command broke it. On 2026-12-07 (and already at abd3083, before the friction forms) the case differs:
+    `deadzone:tip` gains the same -11 % at p = 0.063 (Holm), so it is listed with its refit, not suggested, and the
+    refit's own search now reaches the scan's minimum too (both deliver -11.4 %). What still holds, and is asserted:
+    the printed refit keeps the promise, and the second start never leaves it worse than the search alone (the fit
+    keeps the lower of the two: tests/test_cli_fit_hysteresis.py)."""
     import importlib.util
 
     spec = importlib.util.spec_from_file_location("stress_promises", ROOT / "scripts" / "stress_promises.py")
@@ -305,11 +309,11 @@ def test_a_searched_starts_refit_keeps_its_promise_where_its_own_search_would_no
     assert endocal("fit", "hysteresis", *case["fit"], "--axis", "ap", "--model", "bouc-wen",
                    "--out", model).returncode == 0
     d, _ = _validate(model, case["check"], tmp_path / "v.json")
-    s = next(x for x in d["suspects"] if x["effect"] == "deadzone:tip")
+    s = next(x for x in d["scan"]["tested"] if x["effect"] == "deadzone:tip")
     assert set(s["refit"]["start_values"]) == {"deadzone_tip_slack_deg", "deadzone_tip_band_deg",
                                                "deadzone_tip_center_deg"}
-    # an effect without a start search (the envelope's start is its hinge fit) gets none
-    assert all(x["refit"]["start_values"] == {} for x in d["suspects"] if x["effect"] == "envelope")
+    # an effect without a start search (the envelope's start is its hinge fit, on either side) gets none
+    assert all(x["refit"]["start_values"] == {} for x in d["suspects"] if x["effect"] in ("envelope", "envelope:tip"))
     argv = shlex.split(s["command"])
     delivered = {}
     for how, args in (("printed", argv), ("own search only", [a for i, a in enumerate(argv) if not (
@@ -318,4 +322,5 @@ def test_a_searched_starts_refit_keeps_its_promise_where_its_own_search_would_no
         d2, _ = _validate(Path(argv[-1]), case["check"], tmp_path / "v2.json")
         delivered[how] = -d2["compare"]["change_pct"]
     assert delivered["printed"] >= KEPT * s["gain_pct"], (s["gain_pct"], delivered)
-    assert delivered["own search only"] < KEPT * s["gain_pct"], (s["gain_pct"], delivered)
+    # on the validation record, within the rounding of the two fits' ends (0.1 % of the RMSE)
+    assert delivered["printed"] >= delivered["own search only"] - 0.1, (s["gain_pct"], delivered)

@@ -793,6 +793,8 @@ def generate_c(model, *, name: str | None = None, real: str = "double", dt_s: fl
     parts: list[_Part] = []
     chain: list[str] = []
     base_name = getattr(model, "base_name", type(model).__name__)
+    if not isinstance(comp._base, (_PIStepper, _GPlayStepper)):  # the base first: without it no effect helps
+        raise ModelError(f"the '{base_name}' base has no C code generator: the C export covers pi, linear and bspline")
     for (e, p), state in zip(comp._filters, comp._filter_states):
         parts.append(_emit(emitters, e, p, state, real))
         chain.append(e.label)
@@ -802,11 +804,9 @@ def generate_c(model, *, name: str | None = None, real: str = "double", dt_s: fl
         part, define = _pi_base(comp._base, real, f"{NAME}_N_PLAYS")
         defines.append(define)
         chain.append(f"{base_name}{comp._base.r_inv.size - 1} inverse (eqs. 9-11)")
-    elif isinstance(comp._base, _GPlayStepper):
+    else:  # a _GPlayStepper (checked above)
         part = _gplay_base(comp._base, real)
         chain.append(f"{base_name} inverse (bisection)")
-    else:
-        raise ModelError(f"the '{base_name}' base has no C code generator: the C export covers pi, linear and bspline")
     parts.append(part)
     for (e, p), state in zip(comp._inputs, comp._states):
         parts.append(_emit(emitters, e, p, state, real))

@@ -221,7 +221,8 @@ def first_input(y, k_lin, v_lo, v_hi):
 @njit(cache=True)
 def friction_inverse(family, y, k_lin, k_hys, rho, sigma, expo, v_lo, v_hi, run_starts):
     """The input (n,) whose output follows ``y`` (n,, offset removed) and the largest miss (deg)."""
-    return scaled_friction_inverse(family, y, k_lin, k_hys, rho, sigma, expo, v_lo, v_hi, run_starts, np.ones(y.shape[0]))
+    return scaled_friction_inverse(family, y, k_lin, k_hys, rho, sigma, expo, v_lo, v_hi, run_starts,
+                                   np.ones(y.shape[0]))
 
 
 @njit(cache=True)

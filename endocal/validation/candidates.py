@@ -2,8 +2,8 @@
 
 ``load`` takes a column (``load:sheath_wrap_deg``) and is tried on every extra column that
 varies; an effect's other forms (``Effect.variants``: ``deadzone:tip``, ``load:friction:COLUMN``) are tried
-beside it, and a form that scales a friction base's holding force in place of the plain term the model carries
-(:func:`_swaps_in`: a model changed to a friction base may hold the play its first base forced); an
+beside it, and a form that acts on a friction base's one friction state in place of the plain term the model
+carries (:func:`_swaps_in`: a model changed to a friction base may hold the plain form its first base forced); an
 effect the data cannot reveal or fit (what it declares in ``Effect.requires``,
 :mod:`endocal.validation.identifiability`) is not tested, and why is said.
 """

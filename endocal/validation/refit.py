@@ -131,7 +131,8 @@ def suggest_refit(model: HysteresisModel, effect: str, data_paths: Sequence[str]
         :attr:`Refit.start_values`.
     """
     return Refit(data_paths=tuple(str(p) for p in data_paths), axis=model.axis, base=model.base_name,
-                 effects=tuple(with_candidate(effect_labels(model), effect)), out_path=refit_path(model_path, effect, suffix),
+                 effects=tuple(with_candidate(effect_labels(model), effect)),
+                 out_path=refit_path(model_path, effect, suffix),
                  settings=changed_settings(model), planes_path=None if planes_path is None else str(planes_path),
                  start_from=None if model_path is None else str(model_path),
                  # 6 digits, which a start needs (the fit refines it) and the printed command keeps short; the

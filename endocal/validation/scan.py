@@ -35,8 +35,8 @@ import numpy as np
 from endocal.errors import EndocalError, ModelError
 from endocal.messages import Message
 from endocal.models import EFFECTS, HysteresisData
-from endocal.models.effects import plain_form
 from endocal.models.base import HysteresisModel
+from endocal.models.effects import plain_form
 from endocal.models.data import half_cycles
 from endocal.validation.ambiguity import ambiguities, cautioned_last, demoted, plain_first, settle_lookalikes
 from endocal.validation.bases import (base_before_effect, base_errors, held_back, joint_changes, other_bases,
@@ -69,8 +69,9 @@ MIN_SAMPLES_PER_CYCLE = 25
 
 
 def _column(candidate: str) -> str | None:
-    """The column a candidate names (``load:sheath_wrap_deg``); None for a plain effect or another form of one."""
-    name, _, arg = candidate.partition(":")
+    """The column a candidate names (``load:sheath_wrap_deg``, ``load:friction:sheath_wrap_deg``); None for an effect
+    without one (``delay``, ``deadzone:tip``)."""
+    arg = candidate.partition(":")[2]
     plain = plain_form(candidate)
     if plain is not None:
         arg = plain.partition(":")[2]
@@ -424,7 +425,8 @@ def expected_ranges(model: HysteresisModel, effects: Sequence[str], train: Hyste
     known = known or {}
     todo = [k for k, e in enumerate(effects) if e not in known]
     with one_blas_thread():
-        again = map_jobs(lambda k: _again_rmse(model, with_candidate(have, effects[k]), dt2, val, starts[k]), todo, jobs)
+        again = map_jobs(lambda k: _again_rmse(model, with_candidate(have, effects[k]), dt2, val, starts[k]), todo,
+                         jobs)
     rmse = {**known, **{effects[k]: r for k, r in zip(todo, again)}}
     return [spread(r0, r0 if rmse[e] is None else rmse[e]) for r0, e in zip(rmse_scanned, effects)]
 

@@ -202,6 +202,9 @@ class _Shape:
         slope = np.where(below, k0, np.where(above, k2, k1))
         return v, own, slope[:, None] * M
 
+    def stream_state(self, p: dict) -> np.ndarray:
+        return np.zeros(1)  # a static map: nothing to hold between samples
+
     def invert_step(self, p: dict, v: float, state: np.ndarray) -> float:
         # scalar form of eq. 10 (a numpy call per sample would dominate a 1 kHz loop)
         th0, th1, th2, k0, k1, k2 = self._args(p)
