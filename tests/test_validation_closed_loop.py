@@ -65,19 +65,16 @@ load       bspline+delay   load, coupling                                 2     
 deadzone   bspline+delay   deadzone, coupling, load                       2      1.67 -> 0.39 (-77%)  0.67 -> 0.39 (-42%)
 envelope   pi+delay        envelope, tension, deadzone, coupling, load    2      2.39 -> 0.53 (-78%)  1.40 -> 0.53 (-62%)
 coupling   bspline+delay   coupling, load                                 2      2.27 -> 0.46 (-80%)  2.04 -> 0.46 (-77%)
-(control)  bspline+delay   coupling, load; ends pointing at `rate`        2      1.89 -> 0.41 (-78%)  -
+(control)  bspline+delay   coupling, load                                 2      1.89 -> 0.42 (-78%)  -
 =========  ==============  =============================================  =====  ===================  ==================
 
 Until 2026-12-05 the loop refitted from the model alone, without the candidate's start values the printed
-command carries (`--start-value`), and the control then ended with nothing missing (1.89 -> 0.42). Run as
-printed, the refits of `load` fit lower (0.428 against 0.439 deg at the validate after it), and on the last
-record the residual follows the signed knob speed (|r| = 0.30 at lag +0.46 s): `validate` fits `rate` for
-it and finds -4 % (p = 0.061), so it ends "nothing the scan confirmed, but the data point at effects it could
-not settle", `rate` an untested suspect, and adds nothing. The control's bar is therefore not met as
-printed (``test_the_control_ends_with_nothing_missing``, an expected failure); what it adds stays what the
-plant has (``test_the_control_adds_nothing_the_plant_lacks``). The `envelope` case now adds `deadzone` too
-(the plant has no slack): a false discovery the old recipe did not make. The other cases name and add as
-before, and end within 0.01 deg of it.
+command carries (`--start-value`). Run as printed, the `envelope` case adds `deadzone` too (the plant has no
+slack): a false discovery the old recipe did not make. The other cases name and add as before, and end within
+0.01 deg of it. The control ends with nothing missing (1.89 -> 0.419 deg, its validations 0.335, 3.68, 0.619,
+0.439, 0.419; 2026-12-07, with one process and with two, at this session's code and at abd3083): the record of
+2026-12-06 that had it end pointing at `rate` (-4 %, p = 0.061, after a `load` refit at 0.428 deg) does not
+reproduce on the committed code.
 
 `load` is the sheath's wrap: the first --next asks for it (the records hold it constant), the
 recipe sets it to 120 deg, and the simulator's friction follows, so every loop finds it. `coupling`
@@ -328,9 +325,6 @@ def test_the_bars_of_the_issue():
 CONTROL_HAS = {"coupling", "load:sheath_wrap_deg"}
 
 
-@pytest.mark.xfail(strict=True, reason="a finding (2026-12-06): with each refit as printed, the control's last "
-                   "residual follows the knob speed and validate ends pointing at `rate`, which it cannot confirm "
-                   "(-4 %, p = 0.061); the module docstring")
 def test_the_control_ends_with_nothing_missing():
     loop = run_loop(None)
     _say(None, loop)
