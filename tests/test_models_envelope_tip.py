@@ -80,3 +80,17 @@ def test_the_c_export_names_the_base_it_cannot_generate_before_any_effect(fitted
     with pytest.raises(ModelError) as exc:
         generate_c(fitted[1])
     assert str(exc.value).startswith("the 'bouc-wen' base has no C code generator"), str(exc.value)
+
+
+def test_a_model_file_with_an_unknown_form_is_refused_naming_the_file_and_the_effect(fitted, tmp_path):
+    import json
+
+    path = tmp_path / "m.json"
+    save_model(fitted[1], path)
+    d = json.loads(path.read_text())
+    d["effects"][0]["settings"]["form"] = "top"
+    path.write_text(json.dumps(d))
+    with pytest.raises(ModelError) as exc:
+        load_model(path)
+    msg = str(exc.value)
+    assert "\n" not in msg and "m.json" in msg and "effect 'envelope': unknown form 'top'" in msg and "'tip'" in msg

@@ -131,7 +131,10 @@ def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
         for e in d["effects"]:
             if e["name"] not in EFFECTS:
                 raise ModelError(f"{where}: unknown effect '{e['name']}' (known: {', '.join(sorted(EFFECTS))})")
-            effects.append(EFFECTS[e["name"]].from_settings(e["settings"]))
+            try:
+                effects.append(EFFECTS[e["name"]].from_settings(e["settings"]))
+            except ModelError as exc:  # an effect's own refusal (an unknown form, a load without its column)
+                raise ModelError(f"{where}: effect '{e['name']}': {exc}") from None
         model = BASES[base](**d["settings"], effects=effects, fixed=d["fixed"], axis=d["axis"],
                             out_of_range=d["out_of_range"])
         model._check_common()
@@ -158,7 +161,8 @@ def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
         corr = np.array([[_from_num(x, math.nan) for x in row] for row in d["correlation"]["matrix"]], dtype=float)
         model.correlation_ = corr.reshape(len(names), len(names))
         se = np.array([model.stderr_[n] for n in names])
-        model.covariance_ = model.correlation_ * np.outer(se, se)
+        with np.errstate(over="ignore", invalid="ignore"):  # an error of 1e200 is an infinite one, as written
+            model.covariance_ = model.correlation_ * np.outer(se, se)
         model.fit_report_ = None if d["fit"] is None else FitReport.from_dict(d["fit"])
         model.training_data_ = list(d["training_data"])
         model.provenance_ = dict(d.get("provenance") or {})

@@ -171,8 +171,10 @@ class _Knob:
         return (360.0 / self.ticks_per_rev if self.unit == "ticks" else _SCALE[self.unit]) * self.direction
 
     def convert(self, v: np.ndarray) -> np.ndarray:
-        """Raw column values in the run's unit: deg (knobs, rotation) or mm (translation)."""
-        return (v - self.zero) * self.per_unit
+        """Raw column values in the run's unit: deg (knobs, rotation) or mm (translation); a reading too large to
+        convert (beyond 1e308 after scaling) is not finite, as an empty cell is."""
+        with np.errstate(over="ignore", invalid="ignore"):
+            return (v - self.zero) * self.per_unit
 
 
 @dataclass(frozen=True)
@@ -184,8 +186,9 @@ class _Angle:
     zero: float
 
     def convert(self, v: np.ndarray) -> np.ndarray:
-        """Raw readings as the bending angle in degrees."""
-        return (v - self.zero) * self.factor * self.direction
+        """Raw readings as the bending angle in degrees (one too large to convert is not finite, as an empty cell)."""
+        with np.errstate(over="ignore", invalid="ignore"):
+            return (v - self.zero) * self.factor * self.direction
 
 
 @dataclass(frozen=True)

@@ -30,13 +30,15 @@ from endocal.models.params import Parameter, fmt_value
 COLUMN = "COLUMN"
 
 
-def from_form(name: str, settings: dict, forms: dict, plain: str) -> Effect:
+def from_form(settings: dict, forms: dict, plain: str) -> Effect:
     """The effect a model file's entry describes, for an effect of several forms: ``settings["form"]`` (``plain``
-    when absent, as files written before the forms are) picks its class in ``forms``; the rest are its arguments."""
+    when absent, as files written before the forms are) picks its class in ``forms``; the rest are its arguments.
+    The model-file reader names the file and the effect in front of a refusal."""
     settings = dict(settings)
     form = settings.pop("form", plain)
     if form not in forms:
-        raise ModelError(f"{name}: unknown form '{form}' ({' or '.join(f or '(none)' for f in forms)})")
+        named = [f"'{f}'" for f in forms if f] + (["none"] if "" in forms else [])
+        raise ModelError(f"unknown form '{form}' (its forms: {', '.join(named)})")
     return forms[form](**settings)
 
 
@@ -125,6 +127,11 @@ class Effect(ABC):
     #: is the command reaching the base. Only a base with one friction state carries it
     #: (``HysteresisModel.friction_state``; the others refuse it in one line), the factors of several such effects
     #: multiply, and the fit then differentiates numerically.
+
+    def for_base(self, model) -> Effect:
+        """This effect as the base of ``model`` carries it (itself, unless a rule of the effect follows the base's:
+        ``coupling``'s lag of the other bend follows its memory rule)."""
+        return self
 
     @property
     def prefix(self) -> str:

@@ -20,7 +20,7 @@ unit of ``x`` and per knob degree) are their tension-proportional shares. The sa
 also costs transmission: while the tendon slips, the distal tension is the knob tension
 times ``e^{-mu Theta}`` (capstan), so a given bend needs more tendon stretch, i.e. more knob
 travel, the more the sheath wraps; the gain ``g`` (``load_<COLUMN>_gain``, per unit of ``x``,
-signed, bounded so the factor stays within 0.5..1.5 over the fitted range) scales the
+signed, bounded so the factor stays within 0.75..1.25 over the fitted range) scales the
 command that reaches the base. Without it the play alone would have to mimic a flatter loop
 by widening, which fits the covariate values it was fitted on but extrapolates wrongly
 beyond them. ``x_lo``, ``x_hi`` (``load_<COLUMN>_lo``, ``_hi``) are the covariate's range in the
@@ -111,7 +111,7 @@ class Load(InputEffect):
     def from_settings(cls, settings: dict) -> Load:
         """A model file's entry: ``{"form": "friction", "column": ...}`` for :class:`FrictionLoad`; files without a
         form are the play's."""
-        return from_form("load", settings, {"play": cls, "friction": FrictionLoad}, "play")
+        return from_form(settings, {"play": cls, "friction": FrictionLoad}, "play")
 
     @property
     def prefix(self) -> str:
@@ -144,10 +144,14 @@ class Load(InputEffect):
         return {"lo": float(x.min()), "hi": float(x.max())}
 
     def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
-        c = self.constants(data)
-        g_max = 0.5 / (c["hi"] - c["lo"])  # the gain factor stays within 0.5..1.5 over the fitted range
-        return [Parameter(f"{self.prefix}_{k}", 0.0, 0.0, np.inf) for k in ("up", "down", "up_amp", "down_amp")] + [
-                Parameter(f"{self.prefix}_gain", 0.0, -g_max, g_max),
+        plays = [Parameter(f"{self.prefix}_{k}", 0.0, 0.0, np.inf) for k in ("up", "down", "up_amp", "down_amp")]
+        return plays + self._condition_params(self.constants(data), 0.25)
+
+    def _condition_params(self, c: dict, spread: float) -> list[Parameter]:
+        """The gain ``g`` of a factor ``1 + g (x - (lo + hi) / 2)``, bounded so that the factor stays within
+        ``1 +- spread`` over the fitted range, and the range (``lo``, ``hi``), held fixed."""
+        g_max = spread / (0.5 * (c["hi"] - c["lo"]))
+        return [Parameter(f"{self.prefix}_gain", 0.0, -g_max, g_max),
                 Parameter(f"{self.prefix}_lo", c["lo"]), Parameter(f"{self.prefix}_hi", c["hi"])]
 
     def start_candidates(self, data: HysteresisData, u: np.ndarray) -> list[dict]:
@@ -243,10 +247,7 @@ class FrictionLoad(Load):
         return {"form": self.form, "column": self.column}
 
     def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
-        c = self.constants(data)
-        g_max = 0.95 / (0.5 * (c["hi"] - c["lo"]))  # the factor stays within 0.05..1.95 over the fitted range
-        return [Parameter(f"{self.prefix}_gain", 0.0, -g_max, g_max),
-                Parameter(f"{self.prefix}_lo", c["lo"]), Parameter(f"{self.prefix}_hi", c["hi"])]
+        return self._condition_params(self.constants(data), 0.95)  # the bound within 0.05..1.95 of its own
 
     def start_candidates(self, data: HysteresisData, u: np.ndarray) -> list[dict]:
         """Start values tried before the fit (the best is kept): the force constant, or growing or falling by a
