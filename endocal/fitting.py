@@ -135,6 +135,8 @@ def fit_hysteresis(
     model = make_model(base, effects=effects or (), axis=axis, **settings)
     given = effect_start_values(model, start_values or {}, data.cmd_unit)
     model = model.fit_from(start_from, data) if start_from is not None else model.fit(data)
+    if start_from is not None:  # from scratch too, kept where it ends lower (HysteresisModel.try_start)
+        model.try_start(data, {})
     if given:  # a second start, kept where it ends lower (HysteresisModel.try_start)
         check_start_values_whole(model, given)
         model.try_start(data, {**(model.lent_values(start_from) if start_from is not None else {}), **given})

@@ -237,7 +237,7 @@ def test_the_other_bends_lag_is_recovered_and_matters():
     d = synthetic("coupling")
     m = make_model("pi", ["envelope", "coupling"]).fit(d)
     assert abs(m.params_["coupling_lag_deg"] - 3.0) < max(5 * m.stderr_["coupling_lag_deg"], 0.1)
-    without = make_model("pi", ["envelope", EFFECTS["coupling"](other_lag=False)]).fit(d)
+    without = make_model("pi", ["envelope", EFFECTS["coupling"](lag="none")]).fit(d)
     rmse = [float(np.sqrt(np.mean((x.predict(d) - d.meas_deg) ** 2))) for x in (m, without)]
     # with the lag: the noise (0.299 deg, 2026-11-28); without it: 0.586, twice the noise
     assert rmse[0] < 1.05 * NOISE_DEG < rmse[1] / 1.1, rmse
@@ -245,12 +245,12 @@ def test_the_other_bends_lag_is_recovered_and_matters():
 
 def test_a_coupling_model_file_written_before_the_lag_loads_as_it_was_fitted(tmp_path):
     d = synthetic("coupling")
-    old = make_model("pi", ["envelope", EFFECTS["coupling"](other_lag=False)]).fit(d)
+    old = make_model("pi", ["envelope", EFFECTS["coupling"](lag="none")]).fit(d)
     path = tmp_path / "old.json"
     save_model(old, path)
     doc = json.loads(path.read_text())
     entry = next(e for e in doc["effects"] if e["name"] == "coupling")
-    del entry["settings"]["other_lag"]  # as the files before it were written
+    del entry["settings"]["lag"]  # as the files before it were written
     path.write_text(json.dumps(doc))
     back = load_model(path)
     assert "coupling_lag_deg" not in back.params_

@@ -146,20 +146,18 @@ def _names(loop: BaseLoop) -> set[str]:
     return {e.partition(":")[0] for e in loop.named}
 
 
-#: Cases measured above the 1.2x bar (2026-12-07, seed 0, with the friction base's forms `envelope:tip` and
-#: `load:friction:COLUMN` and the form swap): the end (deg) on the last record `--next` asked for, against that record's
-#: own noise floor. Where `--next` asked for a speed ladder after the two-knob record at two sheath wraps, the loop ends
-#: on the ladder; in `drift`, `deadzone` and `rate` it had nothing left to ask, and ends on the two-knob record, where
-#: every case's model misses by 1.4-1.8x the noise (0.51-0.66 deg): the `coupling` term's form (the other bend's
-#: anchor shift on the output, its lag a play) is what the two-knob records still miss. The control, `load`,
-#: `envelope` and `creep` end at 1.13-1.14x. The floor on the ladder itself: tests/test_friction_family_limits.py
-#: (`dahl` with `envelope:tip` 1.13x in-sample).
+#: Cases measured above the 1.2x bar (2026-12-07, seed 0; with the friction base's forms `envelope:tip` and
+#: `load:friction:COLUMN`, the form swap, the other bend's smooth lag on a friction base and the printed refit's second
+#: start from scratch): the end (deg) on the last record `--next` asked for, against that record's own noise floor. In
+#: `drift` and `rate` `--next` had nothing left to ask after the two-knob record at two sheath wraps, and the loop ends
+#: there; `coupling` (the hidden effect is stronger cross-talk) misses its two-knob records by 1.9x the noise while
+#: the other bend moves, a residual that is no static function of the two knobs and their directions (0.69 deg;
+#: binned by them, 0.54). The control, `delay`, `load`, `envelope`, `creep` and `deadzone` end at 1.12-1.16x. The floor on
+#: the ladder itself: tests/test_friction_family_limits.py (`dahl` with `envelope:tip` 1.13x in-sample).
 NOISE_GAPS = {
-    "drift": "ends at 0.570 deg on the two-knob record, 1.50x its noise (0.381): --next asked for nothing more",
-    "delay": "ends at 0.443 deg, 1.26x its record's noise (0.351)",
-    "rate": "ends at 0.581 deg on the two-knob record, 1.53x its noise (0.381): --next asked for nothing more",
-    "deadzone": "ends at 0.521 deg on the two-knob record, 1.45x its noise (0.361): --next asked for nothing more",
-    "coupling": "ends at 0.662 deg, 1.83x its record's noise (0.362)",
+    "drift": "ends at 0.551 deg on the two-knob record, 1.45x its noise (0.381): --next asked for nothing more",
+    "rate": "ends at 0.530 deg on the two-knob record, 1.39x its noise (0.381): --next asked for nothing more",
+    "coupling": "ends at 0.608 deg, 1.68x its record's noise (0.362)",
 }
 
 
@@ -207,8 +205,9 @@ def test_the_bars_of_the_issue():
 
 @pytest.mark.parametrize("hidden", ["creep", "deadzone"])
 def test_a_sharper_element_keeps_its_base_change_names_the_effect_and_adds_nothing_it_lacks(hidden):
-    """σ 3, a 12° lag (:data:`VARIANTS`); on 2026-12-07 they end at 1.11x (`creep`) and 1.17x (`deadzone`) their
-    records' noise. `creep` (-53 %, the plant's 2 s relaxation) carries the caution that no
+    """σ 3, a 12° lag (:data:`VARIANTS`); on 2026-12-07 they end at 1.15x (`creep`) and 1.14x (`deadzone`) their
+    records' noise (`deadzone` at 1.49x when the printed refit started from the validated model only: its warm fit
+    with `load:friction` stopped in a local minimum; from scratch it fits lower, so the refit tries both). `creep` (-53 %, the plant's 2 s relaxation) carries the caution that no
     record holds the knob still; it ranked after `rate:friction` (-14 %), which the loop then added though the plant
     lacks it: a caution that says only what would confirm the term now gives way where the term beats the first other
     one's refit by 10 % in a paired test (validation.ambiguity.cautioned_last). `deadzone`'s loop changed to

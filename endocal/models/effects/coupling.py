@@ -35,12 +35,21 @@ took the validation error from 0.80 to 0.51 deg with Bouc-Wen friction and from 
 0.44 deg with capstan friction, the noise being 0.33 deg (2026-11-28): without it the two
 bends' loops are fitted with one bend's.
 
+The other bend's tendons slide against the friction this axis's base models, so the lag follows
+the base's memory rule. On a base with return-point memory (``linear``, ``bspline``, ``pi``: a bank
+of plays) it is the play above. On a base without (``dahl``, ``bouc-wen``) it is the play's smooth
+counterpart, the stretch ``s = X - x = λ w`` of a Bouc-Wen element (n = 1, saturation ``λ``, shape
+``σ`` >= 1/2, ``lag_sigma``; :func:`~endocal.models._smooth_friction.smooth_lag`): right after a reversal
+the stretch unwinds one to one (the bend holds), then winds up the other way along an exponential of
+length ``2 σ λ``. The model file names the rule (``lag``: ``play``, ``smooth``, or ``none`` for files
+written before the lag).
+
 Parameters ``coupling_linear`` (``a``), ``coupling_abs`` (``b``), ``coupling_gain``
 (``g``), ``coupling_tilt_pos`` / ``coupling_tilt_neg`` (``c+`` / ``c-``), ``coupling_lag_deg``
 (``λ``). All zero is no coupling (``θ = y``). ``X`` is the extra column ``other_cmd_deg``
 (the other knob's command, deg) unless another is named: ``coupling:ml_meas_deg`` uses the
 other axis's measured angle (then ``g ≈ 1`` and ``λ ≈ 0``). A model file written before the
-lag (its ``coupling`` settings without ``other_lag``) loads without it, as it was fitted.
+lag (its ``coupling`` settings without ``lag`` or ``other_lag``) loads without it, as it was fitted.
 
 The term acts on the base's output (an :class:`OutputFilter`): the magnification
 multiplies it. The anchor shift is, physically, an input of this axis's tendons (it
@@ -59,6 +68,7 @@ from numba import njit
 
 from endocal.errors import ModelError
 from endocal.models._kernels import varplay_forward_jac
+from endocal.models._smooth_friction import smooth_lag
 from endocal.models.data import OTHER_CMD, HysteresisData
 from endocal.models.effects.base import OutputFilter
 from endocal.models.effects.requirements import other_knob_moving
@@ -95,14 +105,15 @@ def _eq1(u, z):
 def coupling_forward(y_deg, x_deg, a, b, g, c_pos, c_neg, dx_lag):
     """Measured angle (deg) from the base output ``y`` and the other axis's lagged ``x`` (deg).
 
-    ``dx_lag``: the derivative of ``x`` by the lag (:meth:`Coupling._x`). Returns ``theta`` (n,),
-    ``d theta / d y`` (n,) and the derivatives (n, 6) by ``(a, b, g, c_pos, c_neg, lag)``
-    (module docstring).
+    ``dx_lag`` (n, m): the derivatives of ``x`` by the lag's m parameters (:meth:`Coupling._x`). Returns
+    ``theta`` (n,), ``d theta / d y`` (n,) and the derivatives (n, 5 + m) by ``(a, b, g, c_pos, c_neg)``
+    and the lag's (module docstring).
     """
     n = y_deg.shape[0]
+    m = dx_lag.shape[1]
     out = np.empty(n)
     dy = np.empty(n)
-    own = np.zeros((n, 6))
+    own = np.zeros((n, 5 + m))
     for k in range(n):
         y = y_deg[k] * _D2R
         x = x_deg[k] * _D2R
@@ -116,7 +127,9 @@ def coupling_forward(y_deg, x_deg, a, b, g, c_pos, c_neg, dx_lag):
         own[k, 2] = f_z * x_deg[k]
         own[k, 3 if y >= 0.0 else 4] = f_z * y_deg[k]
         sx = 1.0 if x_deg[k] > 0.0 else (-1.0 if x_deg[k] < 0.0 else 0.0)
-        own[k, 5] = (f_u * (a + b * sx) + f_z * g) * dx_lag[k]
+        dth_dx = f_u * (a + b * sx) + f_z * g
+        for j in range(m):
+            own[k, 5 + j] = dth_dx * dx_lag[k, j]
     return out, dy, own
 
 
@@ -156,6 +169,12 @@ def coupling_inverse(theta_deg, x_deg, a, b, g, c_pos, c_neg):
 
 #: Fade in and out of the both-knob figure of ``--next`` (s).
 FADE_S = 5.0
+#: The other bend's lag behind its knob: a play, its smooth counterpart, or none (files written before the lag).
+LAG_RULES = ("play", "smooth", "none")
+#: Bounds and start of the smooth lag's shape ``σ`` (Bouc-Wen's, >= 1/2): from one-to-one unwinding until slack
+#: (1/2) to an exponential ten times the saturation long; the start, 1, lies between the shapes the friction
+#: literature fits (Ismail, Ikhouane & Rodellar 2009, sec. 4)
+LAG_SIGMA = (0.5, 1.0, 5.0)
 #: Start of the other bend's lag (deg of its knob), inside a tendon drive's play (on the closed loops'
 #: Lissajous records of the simulator it was fitted at 4.3 deg with capstan friction, 9.6 with Bouc-Wen).
 LAG_START_DEG = 2.0
@@ -172,11 +191,13 @@ class Coupling(OutputFilter):
     Fitted parameters (prefix ``coupling_``): ``linear``, ``abs`` (deg of this axis's
     half-bend per deg of the other's position), ``gain`` (the other axis's half-bend per
     deg of its position), ``tilt_pos``, ``tilt_neg`` (out-of-plane share of this axis's
-    own bend on its + / - half-plane), ``lag_deg`` (the other bend's play, deg of the
-    other knob; with ``other_lag`` only).
-    other_lag : bool
-        Fit the other bend's lag behind its knob (default); False keeps the form of model
-        files written before it (five parameters, ``x`` the column itself).
+    own bend on its + / - half-plane), ``lag_deg`` (the other bend's play, or its smooth
+    lag's saturation, deg of the other knob; not with ``lag="none"``).
+    lag : {"play", "smooth", "none"}, optional
+        The other bend's lag behind its knob: a play, its smooth counterpart, or none (the form of
+        model files written before the lag: five parameters, ``x`` the column itself). By default it
+        follows the base's memory rule (module docstring): ``play`` on a base with return-point
+        memory, ``smooth`` on one without.
     """
 
     name = "coupling"
@@ -187,7 +208,8 @@ class Coupling(OutputFilter):
     signature = ("residual that follows the other axis's position (odd or even in it) and grows with this "
                  "axis's angle, not this axis's command alone")
     protocol = "move the other knob alone, or both knobs at different frequencies (circle, lissajous)"
-    units = {"linear": "deg/deg", "abs": "deg/deg", "gain": "deg/deg", "tilt_pos": "", "tilt_neg": "", "lag_deg": "deg"}
+    units = {"linear": "deg/deg", "abs": "deg/deg", "gain": "deg/deg", "tilt_pos": "", "tilt_neg": "", "lag_deg": "deg",
+             "lag_sigma": ""}
     usage = "coupling[:COLUMN]"
     needs = ("other_cmd_deg (or the named column)",)
     requires = (other_knob_moving(),)
@@ -210,18 +232,36 @@ class Coupling(OutputFilter):
                        frequencies_hz=[round(f1, 6), round(1.5 * f1, 6)], duration_s=float(duration), fade_s=FADE_S)
         return design.planned(k, int(2 * f1 * (duration - 2 * FADE_S)))
 
-    def __init__(self, column: str = OTHER_CMD, other_lag: bool = True):
+    def __init__(self, column: str = OTHER_CMD, lag: str | None = None):
         if not isinstance(column, str) or not column:
             raise ModelError(f"coupling: column must be a column name, got {column!r}")
-        if not isinstance(other_lag, bool):
-            raise ModelError(f"coupling: other_lag must be true or false, got {other_lag!r}")
+        if lag is not None and lag not in LAG_RULES:
+            raise ModelError(f"coupling: lag must be one of {', '.join(LAG_RULES)}, got {lag!r}")
         self.column = column
-        self.other_lag = other_lag
+        self.lag = lag
 
     @classmethod
     def from_settings(cls, settings: dict) -> Coupling:
-        """A model file's entry; one written before the lag (no ``other_lag``) keeps its five parameters."""
-        return cls(**{"other_lag": False, **settings})
+        """A model file's entry. Files written before the smooth lag say ``other_lag`` (true: the play); files
+        written before the lag say neither and keep their five parameters."""
+        settings = dict(settings)
+        if "lag" not in settings:
+            old = settings.pop("other_lag", False)
+            if not isinstance(old, bool):
+                raise ModelError(f"coupling: other_lag must be true or false, got {old!r}")
+            settings["lag"] = "play" if old else "none"
+        return cls(**settings)
+
+    def for_base(self, model) -> Coupling:
+        """With the lag rule not named, the base's: a play on a base with return-point memory, else smooth."""
+        if self.lag is not None:
+            return self
+        return type(self)(self.column, "play" if model.return_point_memory else "smooth")
+
+    @property
+    def other_lag(self) -> bool:
+        """Whether the other bend's lag is fitted (``lag_deg``)."""
+        return self.lag != "none"
 
     @classmethod
     def from_argument(cls, arg: str) -> Coupling:
@@ -233,10 +273,11 @@ class Coupling(OutputFilter):
         return self.name if self.column == OTHER_CMD else f"{self.name}:{self.column}"
 
     def settings(self) -> dict:
-        return {"column": self.column, "other_lag": self.other_lag}
+        return {"column": self.column, "lag": self.lag or "play"}
 
     def param_names(self) -> list[str]:
-        return [k for k in self.units if self.other_lag or k != "lag_deg"]
+        lag = {"none": (), "smooth": ("lag_deg", "lag_sigma")}.get(self.lag or "play", ("lag_deg",))
+        return [k for k in self.units if not k.startswith("lag_") or k in lag]
 
     def check(self, data: HysteresisData) -> None:
         try:
@@ -256,6 +297,9 @@ class Coupling(OutputFilter):
             span = float(np.ptp(x)) if x.size else 0.0
             hi = max(0.25 * span, 1e-6)
             own.append(Parameter(f"{self.prefix}_lag_deg", min(LAG_START_DEG, 0.5 * hi), 0.0, hi))
+        if self.lag == "smooth":
+            lo, start, top = LAG_SIGMA
+            own.append(Parameter(f"{self.prefix}_lag_sigma", start, lo, top))
         return own
 
     def start_candidates(self, data: HysteresisData, u: np.ndarray) -> list[dict]:
@@ -272,15 +316,32 @@ class Coupling(OutputFilter):
         return np.ascontiguousarray(data.column(self.column), dtype=float)
 
     def _x(self, p: dict, data: HysteresisData) -> tuple[np.ndarray, np.ndarray]:
-        """The other bend's knob position and its derivative by the lag (zero without it)."""
+        """The other bend's knob position (n,) and its derivatives by the lag's parameters (n, m; m = 0 without)."""
         x = self._column(data)
         if not self.other_lag:
-            return x, np.zeros_like(x)
+            return x, np.zeros((x.size, 0))
+        starts = np.ascontiguousarray(data.run_starts, dtype=np.int64)
+        lam = float(p["lag_deg"])
+        if self.lag == "smooth":
+            sigma = float(p["lag_sigma"])
+            out = smooth_lag(x, lam, sigma, starts)
+            # central differences (one-sided at the lower bounds): the lag is O(n), each pass a fraction of a fit's step
+            d = np.empty((x.size, 2))
+            for j, (value, lo) in enumerate(((lam, 0.0), (sigma, LAG_SIGMA[0]))):
+                h = 1e-6 * max(abs(value), 1e-3)
+                args = [lam, sigma]
+                args[j] = value + h
+                up = smooth_lag(x, *args, starts)
+                if value - h >= lo:
+                    args[j] = value - h
+                    d[:, j] = (up - smooth_lag(x, *args, starts)) / (2.0 * h)
+                else:
+                    d[:, j] = (up - out) / h
+            return out, d
         # the play of the rate and load effects, its width constant: d width / d lag = 1, no upstream parameters
-        width = np.full(x.size, float(p["lag_deg"]))
-        played, d_lag = varplay_forward_jac(x, width, np.ones((x.size, 1)), np.zeros((x.size, 0)),
-                                            np.ascontiguousarray(data.run_starts, dtype=np.int64))
-        return played, np.ascontiguousarray(d_lag[:, 0])
+        width = np.full(x.size, lam)
+        played, d_lag = varplay_forward_jac(x, width, np.ones((x.size, 1)), np.zeros((x.size, 0)), starts)
+        return played, np.ascontiguousarray(d_lag[:, :1])
 
     @staticmethod
     def _args(p: dict) -> tuple[float, ...]:
@@ -289,7 +350,7 @@ class Coupling(OutputFilter):
     def _forward(self, p: dict, y: np.ndarray, data: HysteresisData):
         x, dx_lag = self._x(p, data)
         out, dy, own = coupling_forward(np.ascontiguousarray(y, dtype=float), x, *self._args(p), dx_lag)
-        return out, dy, (own if self.other_lag else own[:, :5])
+        return out, dy, own
 
     def apply(self, p: dict, y: np.ndarray, data: HysteresisData) -> np.ndarray:
         return self._forward(p, y, data)[0]
