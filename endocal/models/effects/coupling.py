@@ -46,7 +46,7 @@ written before the lag).
 
 Parameters ``coupling_linear`` (``a``), ``coupling_abs`` (``b``), ``coupling_gain``
 (``g``), ``coupling_tilt_pos`` / ``coupling_tilt_neg`` (``c+`` / ``c-``), ``coupling_lag_deg``
-(``λ``). All zero is no coupling (``θ = y``). ``X`` is the extra column ``other_cmd_deg``
+(``λ``) and, for the smooth lag, ``coupling_lag_sigma`` (``σ``). All zero is no coupling (``θ = y``). ``X`` is the extra column ``other_cmd_deg``
 (the other knob's command, deg) unless another is named: ``coupling:ml_meas_deg`` uses the
 other axis's measured angle (then ``g ≈ 1`` and ``λ ≈ 0``). A model file written before the
 lag (its ``coupling`` settings without ``lag`` or ``other_lag``) loads without it, as it was fitted.
@@ -172,8 +172,8 @@ FADE_S = 5.0
 #: The other bend's lag behind its knob: a play, its smooth counterpart, or none (files written before the lag).
 LAG_RULES = ("play", "smooth", "none")
 #: Bounds and start of the smooth lag's shape ``σ`` (Bouc-Wen's, >= 1/2): from one-to-one unwinding until slack
-#: (1/2) to an exponential ten times the saturation long; the start, 1, lies between the shapes the friction
-#: literature fits (Ismail, Ikhouane & Rodellar 2009, sec. 4)
+#: (1/2) to an exponential ten times the saturation long (5); the fit starts at 1, an exponential twice the
+#: saturation long
 LAG_SIGMA = (0.5, 1.0, 5.0)
 #: Start of the other bend's lag (deg of its knob), inside a tendon drive's play (on the closed loops'
 #: Lissajous records of the simulator it was fitted at 4.3 deg with capstan friction, 9.6 with Bouc-Wen).
