@@ -253,7 +253,6 @@ def scaled_friction_inverse(family, y, k_lin, k_hys, rho, sigma, expo, v_lo, v_h
     return v, worst
 
 
-
 @njit(cache=True)
 def smooth_lag(x, lam, sigma, run_starts):
     """A position ``x`` (n,) seen through a smooth friction lag: ``x - lam * w``, the state ``w`` following
