@@ -97,11 +97,8 @@ def fit_hysteresis(
         A fitted model of this axis whose parameters start the fit (every effect it shares with
         the new model starts from its fitted values and skips its start search; so does its base
         when it is ``base``, else the base starts afresh): the refit ``validate`` prints starts
-        from the model it validated, as its scan did, so the refit is the fit the scan scored.
-        The fit from scratch is run too and kept where it ends lower on the data: from the
-        validated model's values a fit can stop in a worse local minimum (a Bouc-Wen loop's
-        `load:friction` refit ended at 1.49x its record's noise from them, 1.14x from scratch,
-        2026-12-07), and from scratch in another.
+        from the model it validated, as its scan did, so the refit is the fit the scan scored
+        (from scratch, a fit can end in another local minimum).
     start_values : dict, optional
         A second start (``--start-value``): effect parameters by full name as the model prints them
         (``deadzone_slack_deg``, ``deadzone_slack_mm`` for a linear drive), over ``start_from``'s; an
@@ -138,8 +135,6 @@ def fit_hysteresis(
     model = make_model(base, effects=effects or (), axis=axis, **settings)
     given = effect_start_values(model, start_values or {}, data.cmd_unit)
     model = model.fit_from(start_from, data) if start_from is not None else model.fit(data)
-    if start_from is not None:  # from scratch too, kept where it ends lower (HysteresisModel.try_start)
-        model.try_start(data, {})
     if given:  # a second start, kept where it ends lower (HysteresisModel.try_start)
         check_start_values_whole(model, given)
         model.try_start(data, {**(model.lent_values(start_from) if start_from is not None else {}), **given})

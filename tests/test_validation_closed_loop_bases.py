@@ -147,16 +147,18 @@ def _names(loop: BaseLoop) -> set[str]:
 
 
 #: Cases measured above the 1.2x bar (2026-12-07, seed 0; with the friction base's forms `envelope:tip` and
-#: `load:friction:COLUMN`, the form swap, the other bend's smooth lag on a friction base and the printed refit's second
-#: start from scratch): the end (deg) on the last record `--next` asked for, against that record's own noise floor. In
-#: `drift` and `rate` `--next` had nothing left to ask after the two-knob record at two sheath wraps, and the loop ends
-#: there; `coupling` (the hidden effect is stronger cross-talk) misses its two-knob records by 1.9x the noise while
-#: the other bend moves, a residual that is no static function of the two knobs and their directions (0.69 deg;
-#: binned by them, 0.54). The control, `delay`, `load`, `envelope`, `creep` and `deadzone` end at 1.12-1.16x. The floor on
-#: the ladder itself: tests/test_friction_family_limits.py (`dahl` with `envelope:tip` 1.13x in-sample).
+#: `load:friction:COLUMN`, the form swap, and the other bend's smooth lag on a friction base): the end (deg) on the
+#: last record `--next` asked for, against that record's own noise floor. In `drift`, `rate` and `deadzone` `--next`
+#: had nothing left to ask after the two-knob record at two sheath wraps, and the loop ends there; `coupling` (the
+#: hidden effect is stronger cross-talk) misses its two-knob records by 1.9x the noise while the other bend moves, a
+#: residual that is no static function of the two knobs and their directions (0.69 deg; binned by them, 0.54). The
+#: control, `delay`, `load`, `envelope` and `creep` end at 1.12-1.16x. The loops vary in their last digits from run to
+#: run (`deadzone` ended at 1.15x in one run that went on to the speed ladder). The floor on the ladder itself:
+#: tests/test_friction_family_limits.py (`dahl` with `envelope:tip` 1.13x in-sample).
 NOISE_GAPS = {
     "drift": "ends at 0.551 deg on the two-knob record, 1.45x its noise (0.381): --next asked for nothing more",
     "rate": "ends at 0.530 deg on the two-knob record, 1.39x its noise (0.381): --next asked for nothing more",
+    "deadzone": "ends at 0.511 deg on the two-knob record, 1.42x its noise (0.361): --next asked for nothing more",
     "coupling": "ends at 0.608 deg, 1.68x its record's noise (0.362)",
 }
 
@@ -205,9 +207,9 @@ def test_the_bars_of_the_issue():
 
 @pytest.mark.parametrize("hidden", ["creep", "deadzone"])
 def test_a_sharper_element_keeps_its_base_change_names_the_effect_and_adds_nothing_it_lacks(hidden):
-    """σ 3, a 12° lag (:data:`VARIANTS`); on 2026-12-07 they end at 1.15x (`creep`) and 1.14x (`deadzone`) their
-    records' noise (`deadzone` at 1.49x when the printed refit started from the validated model only: its warm fit
-    with `load:friction` stopped in a local minimum; from scratch it fits lower, so the refit tries both). `creep` (-53 %, the plant's 2 s relaxation) carries the caution that no
+    """σ 3, a 12° lag (:data:`VARIANTS`); on 2026-12-07, with the other bend's smooth lag, they end at 1.15x
+    (`creep`) and 1.14x or 1.49x (`deadzone`, two runs of the same code: its coupling refit's validation was 0.69 deg
+    in one and 0.75 in the other) their records' noise. `creep` (-53 %, the plant's 2 s relaxation) carries the caution that no
     record holds the knob still; it ranked after `rate:friction` (-14 %), which the loop then added though the plant
     lacks it: a caution that says only what would confirm the term now gives way where the term beats the first other
     one's refit by 10 % in a paired test (validation.ambiguity.cautioned_last). `deadzone`'s loop changed to
