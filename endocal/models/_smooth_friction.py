@@ -261,17 +261,5 @@ def smooth_lag(x, lam, sigma, run_starts):
     slower as it slackens (``sigma`` > 1/2; one to one until slack at 1/2), winds up the other way along an exponential
     of length ``2 sigma lam`` (the output follows, ``lam`` behind at saturation): the smooth counterpart of a play of
     half-width ``lam``, without return-point memory. ``w = 0`` at each run's start (the output starts at ``x``)."""
-    n = x.shape[0]
-    out = np.empty(n)
     lam = max(lam, 1e-12)
-    rho = 1.0 / (2.0 * sigma * lam)
-    n_runs = run_starts.shape[0]
-    for r in range(n_runs):
-        a = run_starts[r]
-        b = run_starts[r + 1] if r + 1 < n_runs else n
-        w = 0.0
-        out[a] = x[a]
-        for k in range(a + 1, b):
-            w = state_step(BOUC_WEN, w, x[k] - x[k - 1], rho, sigma, 1.0)
-            out[k] = x[k] - lam * w
-    return out
+    return x - lam * friction_states(BOUC_WEN, x, 1.0 / (2.0 * sigma * lam), sigma, 1.0, run_starts)

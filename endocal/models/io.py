@@ -133,8 +133,8 @@ def model_from_dict(d: dict, where: str = "model") -> HysteresisModel:
                 raise ModelError(f"{where}: unknown effect '{e['name']}' (known: {', '.join(sorted(EFFECTS))})")
             try:
                 effects.append(EFFECTS[e["name"]].from_settings(e["settings"]))
-            except ModelError as exc:  # an effect's own refusal (an unknown form, a load without its column)
-                raise ModelError(f"{where}: effect '{e['name']}': {exc}") from None
+            except ModelError as exc:  # an effect's own refusal, which names it (an unknown form, a load's column)
+                raise ModelError(f"{where}: {exc}") from None
         model = BASES[base](**d["settings"], effects=effects, fixed=d["fixed"], axis=d["axis"],
                             out_of_range=d["out_of_range"])
         model._check_common()

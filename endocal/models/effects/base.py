@@ -30,15 +30,15 @@ from endocal.models.params import Parameter, fmt_value
 COLUMN = "COLUMN"
 
 
-def from_form(settings: dict, forms: dict, plain: str) -> Effect:
+def from_form(name: str, settings: dict, forms: dict, plain: str) -> Effect:
     """The effect a model file's entry describes, for an effect of several forms: ``settings["form"]`` (``plain``
     when absent, as files written before the forms are) picks its class in ``forms``; the rest are its arguments.
-    The model-file reader names the file and the effect in front of a refusal."""
+    A refusal names the effect, as every effect's own does; the model-file reader puts the file in front."""
     settings = dict(settings)
     form = settings.pop("form", plain)
     if form not in forms:
         named = [f"'{f}'" for f in forms if f] + (["none"] if "" in forms else [])
-        raise ModelError(f"unknown form '{form}' (its forms: {', '.join(named)})")
+        raise ModelError(f"effect '{name}': unknown form '{form}' (its forms: {', '.join(named)})")
     return forms[form](**settings)
 
 

@@ -245,7 +245,7 @@ class _Slack:
     @classmethod
     def from_settings(cls, settings: dict):
         """A model file's entry: ``{"form": "tip"}`` for the tip's side; files without it are the knob's."""
-        return from_form(settings, SIDES, "knob")
+        return from_form("deadzone", settings, SIDES, "knob")
 
     def _scale(self, data: HysteresisData, u: np.ndarray) -> np.ndarray:
         """The signal whose range the start and bounds are taken from."""

@@ -120,7 +120,7 @@ class _Shape:
     @classmethod
     def from_settings(cls, settings: dict):
         """A model file's entry: ``{"form": "tip"}`` for the tip's side; files without it are the command's."""
-        return from_form(settings, {"": Envelope, "tip": TipEnvelope}, "")
+        return from_form("envelope", settings, {"": Envelope, "tip": TipEnvelope}, "")
 
     def segment(self, design, n_half_cycles: int):
         """The full amplitude of the fitted range: any segment on this axis (every one sweeps it), else a sine."""

@@ -111,7 +111,7 @@ class Load(InputEffect):
     def from_settings(cls, settings: dict) -> Load:
         """A model file's entry: ``{"form": "friction", "column": ...}`` for :class:`FrictionLoad`; files without a
         form are the play's."""
-        return from_form(settings, {"play": cls, "friction": FrictionLoad}, "play")
+        return from_form("load", settings, {"play": cls, "friction": FrictionLoad}, "play")
 
     @property
     def prefix(self) -> str:

@@ -262,7 +262,7 @@ class Rate(InputEffect):
     @classmethod
     def from_settings(cls, settings: dict):
         """A model file's entry: ``{"form": "friction"}`` for :class:`FrictionRate`; files without it are the play's."""
-        return from_form(settings, {"play": cls, "friction": FrictionRate}, "play")
+        return from_form("rate", settings, {"play": cls, "friction": FrictionRate}, "play")
 
     def __init__(self, speed_filter_s: float = 0.1):
         if not (isinstance(speed_filter_s, (int, float)) and math.isfinite(speed_filter_s) and speed_filter_s > 0):
