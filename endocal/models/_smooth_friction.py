@@ -254,12 +254,15 @@ def scaled_friction_inverse(family, y, k_lin, k_hys, rho, sigma, expo, v_lo, v_h
 
 
 @njit(cache=True)
-def smooth_lag(x, lam, sigma, run_starts):
-    """A position ``x`` (n,) seen through a smooth friction lag: ``x - lam * w``, the state ``w`` following
+def smooth_lag(x, lam, sigma, run_starts, f):
+    """A position ``x`` (n,) seen through a smooth friction lag: ``x - lam * f * w``, the state ``w`` following
     normalised Bouc-Wen with ``n = 1`` and ``rho = 1 / (2 sigma lam)`` (module docstring; ``lam`` > 0, ``sigma`` >=
-    1/2). Right after a reversal from saturation the stretch ``lam * w`` unwinds one to one (the output holds), then,
-    slower as it slackens (``sigma`` > 1/2; one to one until slack at 1/2), winds up the other way along an exponential
-    of length ``2 sigma lam`` (the output follows, ``lam`` behind at saturation): the smooth counterpart of a play of
-    half-width ``lam``, without return-point memory. ``w = 0`` at each run's start (the output starts at ``x``)."""
+    1/2). Right after a reversal from saturation the stretch ``lam * f * w`` unwinds one to one (the output holds),
+    then, slower as it slackens (``sigma`` > 1/2; one to one until slack at 1/2), winds up the other way along an
+    exponential of length ``2 sigma lam f`` (the output follows, ``lam f`` behind at saturation): the smooth
+    counterpart of a play of half-width ``lam``, without return-point memory. ``f`` (n,, > 0) scales the friction's
+    bound at each sample as :func:`scaled_friction_states` does (ones: a constant bound). ``w = 0`` at each run's
+    start (the output starts at ``x``)."""
     lam = max(lam, 1e-12)
-    return x - lam * friction_states(BOUC_WEN, x, 1.0 / (2.0 * sigma * lam), sigma, 1.0, run_starts)
+    w = scaled_friction_states(BOUC_WEN, x, 1.0 / (2.0 * sigma * lam), sigma, 1.0, run_starts, f)
+    return x - lam * f * w

@@ -234,6 +234,18 @@ class HysteresisModel(ABC):
                 f = fe if f is None else f * fe
         return {} if f is None else {"factor": f}
 
+    def _filter_inputs(self, e: OutputFilter, eff_p: dict[int, dict], data: HysteresisData,
+                       effects: list[Effect]) -> dict:
+        """``{"friction": f}`` for an output filter that models another knob's friction (``other_friction``: the
+        column of that knob) when effects scale the base's friction: their factor (:meth:`_friction_factor`) with
+        that knob's position as the command (its speed for ``rate:friction``, the shared condition for
+        ``load:friction:COLUMN``); else ``{}``. The column is logged or planned, so the inverse has it too."""
+        if e.other_friction is None:
+            return {}
+        f = self._friction_factor(eff_p, np.ascontiguousarray(data.column(e.other_friction), dtype=float), data,
+                                  effects)
+        return {"friction": f["factor"]} if f else {}
+
     # ------------------------------------------------------------------ base hooks
     @abstractmethod
     def _resolve_structure(self, effects: list[Effect], v: np.ndarray | None, data: HysteresisData | None) -> dict:
@@ -326,7 +338,7 @@ class HysteresisModel(ABC):
         y = self._base_forward(structure, base_p, u, data.run_starts, **self._friction_factor(eff_p, u, data, effects))
         for e in effects:
             if isinstance(e, OutputFilter):
-                y = e.apply(eff_p[id(e)], y, data)
+                y = e.apply(eff_p[id(e)], y, data, **self._filter_inputs(e, eff_p, data, effects))
         for e in effects:
             if isinstance(e, OutputEffect):
                 y = y + e.term(eff_p[id(e)], data.cmd_deg, data)
@@ -365,7 +377,8 @@ class HysteresisModel(ABC):
         names = [f"{self.base_name}_{s}" for s in self._base_names(structure)] + up_names
         blocks = [Jb, Ju]
         for e in filters:
-            y, Jf, own = e.apply_jac(eff_p[id(e)], y, data, np.column_stack(blocks))
+            y, Jf, own = e.apply_jac(eff_p[id(e)], y, data, np.column_stack(blocks),
+                                     **self._filter_inputs(e, eff_p, data, effects))
             blocks = [Jf, own]
             names += e.full_names()
         for e in outputs:
@@ -1064,7 +1077,7 @@ class HysteresisModel(ABC):
         for _ in range(max_iter if iterate else 1):
             y_base = y_des - terms
             for e in reversed(filters):
-                y_base = e.invert(eff_p[id(e)], y_base, d)
+                y_base = e.invert(eff_p[id(e)], y_base, d, **self._filter_inputs(e, eff_p, d, self.effects_))
             # a friction bound scaled by a logged condition is known ahead (an effect whose factor follows the
             # command has no inverse: check_effects_invert refused it above)
             v = self._base_inverse(self.structure_, base_p, y_base, d.run_starts, v_range,

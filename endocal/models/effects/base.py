@@ -280,6 +280,10 @@ class OutputFilter(Effect):
     kind: ClassVar[str] = "filter"
     #: position in the output chain (lower acts first: the bend relaxes, then the tracker reads it)
     order: ClassVar[int] = 50
+    #: the column of a knob whose friction the filter models (``coupling``'s other bend): the effects that scale the
+    #: base's friction scale that one's too, and the model passes their factor at that knob as ``friction=`` (n,) to
+    #: :meth:`apply`, ``apply_jac`` and :meth:`invert` (:meth:`~endocal.models.base.HysteresisModel._filter_inputs`)
+    other_friction: ClassVar[str | None] = None
 
     @abstractmethod
     def apply(self, p: dict, y: np.ndarray, data: HysteresisData) -> np.ndarray:

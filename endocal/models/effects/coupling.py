@@ -44,6 +44,15 @@ the stretch unwinds one to one (the bend holds), then winds up the other way alo
 length ``2 σ λ``. The model file names the rule (``lag``: ``play``, ``smooth``, or ``none`` for files
 written before the lag).
 
+Those tendons also run through the same sheath, so what scales the base's friction scales theirs: with
+``rate:friction`` or ``load:friction:COLUMN`` in the model the smooth lag's bound is ``λ f``, ``f`` their factor
+at the other knob (its speed, the shared condition; :attr:`OutputFilter.other_friction`), held as
+:func:`~endocal.models._smooth_friction.scaled_friction_states` holds a changing bound. On the two-knob records
+at two sheath wraps of the Bouc-Wen closed loop (dahl, delay, envelope:tip, coupling, load:friction), in-sample,
+the bound held constant → scaled: 0.448 → 0.409 deg in the control, 0.526 → 0.401 with friction growing with
+speed (and rate:friction), the noise 0.37-0.38 deg; the other bend read from the plant's truth instead, 0.394 and
+0.396 (2026-12-07).
+
 Parameters ``coupling_linear`` (``a``), ``coupling_abs`` (``b``), ``coupling_gain``
 (``g``), ``coupling_tilt_pos`` / ``coupling_tilt_neg`` (``c+`` / ``c-``), ``coupling_lag_deg``
 (``λ``) and, for the smooth lag, ``coupling_lag_sigma`` (``σ``). All zero is no coupling (``θ = y``). ``X`` is the extra column ``other_cmd_deg``
@@ -315,8 +324,17 @@ class Coupling(OutputFilter):
     def _column(self, data: HysteresisData) -> np.ndarray:
         return np.ascontiguousarray(data.column(self.column), dtype=float)
 
-    def _x(self, p: dict, data: HysteresisData) -> tuple[np.ndarray, np.ndarray]:
-        """The other bend's knob position (n,) and its derivatives by the lag's parameters (n, m; m = 0 without)."""
+    @property
+    def other_friction(self) -> str | None:
+        """The column of the knob whose friction the smooth lag models: the conditions that scale the base's
+        friction scale that lag's bound too (:meth:`~endocal.models.base.HysteresisModel._filter_inputs`); None
+        for a play or no lag."""
+        return self.column if self.lag == "smooth" else None
+
+    def _x(self, p: dict, data: HysteresisData, friction: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The other bend's knob position (n,) and its derivatives by the lag's parameters (n, m; m = 0 without).
+        ``friction`` (n,): the smooth lag's bound per sample, times its own (the base's friction conditions at the
+        other knob; ones without)."""
         x = self._column(data)
         if not self.other_lag:
             return x, np.zeros((x.size, 0))
@@ -324,17 +342,18 @@ class Coupling(OutputFilter):
         lam = float(p["lag_deg"])
         if self.lag == "smooth":
             sigma = float(p["lag_sigma"])
-            out = smooth_lag(x, lam, sigma, starts)
+            f = np.ones(x.size) if friction is None else np.ascontiguousarray(friction, dtype=float)
+            out = smooth_lag(x, lam, sigma, starts, f)
             # central differences (one-sided at the lower bounds): the lag is O(n), each pass a fraction of a fit's step
             d = np.empty((x.size, 2))
             for j, (value, lo) in enumerate(((lam, 0.0), (sigma, LAG_SIGMA[0]))):
                 h = 1e-6 * max(abs(value), 1e-3)
                 args = [lam, sigma]
                 args[j] = value + h
-                up = smooth_lag(x, *args, starts)
+                up = smooth_lag(x, *args, starts, f)
                 if value - h >= lo:
                     args[j] = value - h
-                    d[:, j] = (up - smooth_lag(x, *args, starts)) / (2.0 * h)
+                    d[:, j] = (up - smooth_lag(x, *args, starts, f)) / (2.0 * h)
                 else:
                     d[:, j] = (up - out) / h
             return out, d
@@ -347,21 +366,22 @@ class Coupling(OutputFilter):
     def _args(p: dict) -> tuple[float, ...]:
         return tuple(float(p[k]) for k in ("linear", "abs", "gain", "tilt_pos", "tilt_neg"))
 
-    def _forward(self, p: dict, y: np.ndarray, data: HysteresisData):
-        x, dx_lag = self._x(p, data)
+    def _forward(self, p: dict, y: np.ndarray, data: HysteresisData, friction: np.ndarray | None = None):
+        x, dx_lag = self._x(p, data, friction)
         out, dy, own = coupling_forward(np.ascontiguousarray(y, dtype=float), x, *self._args(p), dx_lag)
         return out, dy, own
 
-    def apply(self, p: dict, y: np.ndarray, data: HysteresisData) -> np.ndarray:
-        return self._forward(p, y, data)[0]
+    def apply(self, p: dict, y: np.ndarray, data: HysteresisData, friction: np.ndarray | None = None) -> np.ndarray:
+        return self._forward(p, y, data, friction)[0]
 
-    def apply_jac(self, p: dict, y: np.ndarray, data: HysteresisData, J: np.ndarray):
-        """Coupled output, the upstream Jacobian through it (n, m) and the own columns (n, 5 or 6)."""
-        out, dy, own = self._forward(p, y, data)
+    def apply_jac(self, p: dict, y: np.ndarray, data: HysteresisData, J: np.ndarray,
+                  friction: np.ndarray | None = None):
+        """Coupled output, the upstream Jacobian through it (n, m) and the own columns (n, 5 to 7)."""
+        out, dy, own = self._forward(p, y, data, friction)
         return out, dy[:, None] * J, own
 
-    def invert(self, p: dict, y: np.ndarray, data: HysteresisData) -> np.ndarray:
-        return coupling_inverse(np.ascontiguousarray(y, dtype=float), self._x(p, data)[0], *self._args(p))
+    def invert(self, p: dict, y: np.ndarray, data: HysteresisData, friction: np.ndarray | None = None) -> np.ndarray:
+        return coupling_inverse(np.ascontiguousarray(y, dtype=float), self._x(p, data, friction)[0], *self._args(p))
 
     def describe(self, p: dict, se: dict) -> str:
         return "coupling" + self._bracket(p, se)
