@@ -205,7 +205,8 @@ class HysteresisModel(ABC):
             raise ModelError(f"out_of_range must be one of {OUT_OF_RANGE_CHOICES}, got {self.out_of_range!r}")
 
     def _effects(self) -> list[Effect]:
-        effects = [e.for_base(self) for e in resolve_effects(self.effects)]
+        resolved = resolve_effects(self.effects)
+        effects = [e.for_model(self, resolved) for e in resolved]
         for e in effects:
             if why := self.refuses(e):
                 raise ModelError(why)

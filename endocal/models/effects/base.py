@@ -128,9 +128,9 @@ class Effect(ABC):
     #: (``HysteresisModel.friction_state``; the others refuse it in one line), the factors of several such effects
     #: multiply, and the fit then differentiates numerically.
 
-    def for_base(self, model) -> Effect:
-        """This effect as the base of ``model`` carries it (itself, unless a rule of the effect follows the base's:
-        ``coupling``'s lag of the other bend follows its memory rule)."""
+    def for_model(self, model, effects: list[Effect]) -> Effect:
+        """This effect as ``model`` carries it beside ``effects`` (all of the model's; itself, unless a rule of the
+        effect follows the model's: ``coupling``'s other bend takes the base's memory rule and the model's dead band)."""
         return self
 
     @property

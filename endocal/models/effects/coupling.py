@@ -53,9 +53,19 @@ the bound held constant → scaled: 0.448 → 0.409 deg in the control, 0.526 �
 speed (and rate:friction), the noise 0.37-0.38 deg; the other bend read from the plant's truth instead, 0.394 and
 0.396 (2026-12-07).
 
+Those tendons also have the slack this axis's have: where the model carries a dead band (``deadzone`` in any
+form) the other bend's drive has one too, of half-width ``w`` (``band_deg``, deg of the other knob past the lag;
+the model file says ``"band": true``)::
+
+    x_b = x - clip(x, -w, w)       (flat inside the band: both of the other bend's tendons slack)
+
+On the same records with the plant's slack (`deadzone` hidden), in-sample: 0.412 → 0.374 deg, the noise 0.359,
+the plant's true other bend 0.368 (2026-12-07).
+
 Parameters ``coupling_linear`` (``a``), ``coupling_abs`` (``b``), ``coupling_gain``
 (``g``), ``coupling_tilt_pos`` / ``coupling_tilt_neg`` (``c+`` / ``c-``), ``coupling_lag_deg``
-(``λ``) and, for the smooth lag, ``coupling_lag_sigma`` (``σ``). All zero is no coupling (``θ = y``). ``X`` is the extra column ``other_cmd_deg``
+(``λ``), for the smooth lag ``coupling_lag_sigma`` (``σ``), and with a dead band ``coupling_band_deg`` (``w``). All
+zero is no coupling (``θ = y``). ``X`` is the extra column ``other_cmd_deg``
 (the other knob's command, deg) unless another is named: ``coupling:ml_meas_deg`` uses the
 other axis's measured angle (then ``g ≈ 1`` and ``λ ≈ 0``). A model file written before the
 lag (its ``coupling`` settings without ``lag`` or ``other_lag``) loads without it, as it was fitted.
@@ -187,6 +197,9 @@ LAG_SIGMA = (0.5, 1.0, 5.0)
 #: Start of the other bend's lag (deg of its knob), inside a tendon drive's play (on the closed loops'
 #: Lissajous records of the simulator it was fitted at 4.3 deg with capstan friction, 9.6 with Bouc-Wen).
 LAG_START_DEG = 2.0
+#: Start of the other bend's dead band (half-width, deg of its knob past the lag): the simulator's default slack
+#: (1.5 mm on a 10 mm pulley) is a band of 4.3 deg each side.
+BAND_START_DEG = 2.0
 
 
 class Coupling(OutputFilter):
@@ -201,12 +214,16 @@ class Coupling(OutputFilter):
     half-bend per deg of the other's position), ``gain`` (the other axis's half-bend per
     deg of its position), ``tilt_pos``, ``tilt_neg`` (out-of-plane share of this axis's
     own bend on its + / - half-plane), ``lag_deg`` (the other bend's play, or its smooth
-    lag's saturation, deg of the other knob; not with ``lag="none"``).
+    lag's saturation, deg of the other knob; not with ``lag="none"``), ``lag_sigma`` (the smooth
+    lag's shape), ``band_deg`` (the other bend's dead band, with ``band``).
     lag : {"play", "smooth", "none"}, optional
         The other bend's lag behind its knob: a play, its smooth counterpart, or none (the form of
         model files written before the lag: five parameters, ``x`` the column itself). By default it
         follows the base's memory rule (module docstring): ``play`` on a base with return-point
         memory, ``smooth`` on one without.
+    band : bool, optional
+        Whether the other bend's drive has a dead band (``band_deg``). By default it does where the model
+        carries ``deadzone`` in any form.
     """
 
     name = "coupling"
@@ -218,7 +235,7 @@ class Coupling(OutputFilter):
                  "axis's angle, not this axis's command alone")
     protocol = "move the other knob alone, or both knobs at different frequencies (circle, lissajous)"
     units = {"linear": "deg/deg", "abs": "deg/deg", "gain": "deg/deg", "tilt_pos": "", "tilt_neg": "", "lag_deg": "deg",
-             "lag_sigma": ""}
+             "lag_sigma": "", "band_deg": "deg"}
     usage = "coupling[:COLUMN]"
     needs = ("other_cmd_deg (or the named column)",)
     requires = (other_knob_moving(),)
@@ -241,19 +258,23 @@ class Coupling(OutputFilter):
                        frequencies_hz=[round(f1, 6), round(1.5 * f1, 6)], duration_s=float(duration), fade_s=FADE_S)
         return design.planned(k, int(2 * f1 * (duration - 2 * FADE_S)))
 
-    def __init__(self, column: str = OTHER_CMD, lag: str | None = None):
+    def __init__(self, column: str = OTHER_CMD, lag: str | None = None, band: bool | None = None):
         if not isinstance(column, str) or not column:
             raise ModelError(f"coupling: column must be a column name, got {column!r}")
         if lag is not None and lag not in LAG_RULES:
             raise ModelError(f"coupling: lag must be one of {', '.join(LAG_RULES)}, got {lag!r}")
+        if band is not None and not isinstance(band, bool):
+            raise ModelError(f"coupling: band must be true or false, got {band!r}")
         self.column = column
         self.lag = lag
+        self.band = band
 
     @classmethod
     def from_settings(cls, settings: dict) -> Coupling:
         """A model file's entry. Files written before the smooth lag say ``other_lag`` (true: the play); files
-        written before the lag say neither and keep their five parameters."""
-        settings = dict(settings)
+        written before the lag say neither and keep their five parameters; files written before the other bend's
+        dead band do not say ``band`` and load without it."""
+        settings = {"band": False, **settings}
         if "lag" not in settings:
             old = settings.pop("other_lag", False)
             if not isinstance(old, bool):
@@ -261,11 +282,15 @@ class Coupling(OutputFilter):
             settings["lag"] = "play" if old else "none"
         return cls(**settings)
 
-    def for_base(self, model) -> Coupling:
-        """With the lag rule not named, the base's: a play on a base with return-point memory, else smooth."""
-        if self.lag is not None:
+    def for_model(self, model, effects) -> Coupling:
+        """The other bend's drive as the model has this axis's (module docstring), where the effect does not name
+        it: the lag rule the base's (a play on a base with return-point memory, else smooth), and a dead band where
+        ``effects`` carry one (``deadzone`` in any form)."""
+        lag = self.lag if self.lag is not None else ("play" if model.return_point_memory else "smooth")
+        band = self.band if self.band is not None else any(e.name == "deadzone" for e in effects)
+        if (lag, band) == (self.lag, self.band):
             return self
-        return type(self)(self.column, "play" if model.return_point_memory else "smooth")
+        return type(self)(self.column, lag, band)
 
     @property
     def other_lag(self) -> bool:
@@ -282,11 +307,11 @@ class Coupling(OutputFilter):
         return self.name if self.column == OTHER_CMD else f"{self.name}:{self.column}"
 
     def settings(self) -> dict:
-        return {"column": self.column, "lag": self.lag or "play"}
+        return {"column": self.column, "lag": self.lag or "play", "band": bool(self.band)}
 
     def param_names(self) -> list[str]:
         lag = {"none": (), "smooth": ("lag_deg", "lag_sigma")}.get(self.lag or "play", ("lag_deg",))
-        return [k for k in self.units if not k.startswith("lag_") or k in lag]
+        return [k for k in self.units if (not k.startswith("lag_") or k in lag) and (k != "band_deg" or self.band)]
 
     def check(self, data: HysteresisData) -> None:
         try:
@@ -309,6 +334,10 @@ class Coupling(OutputFilter):
         if self.lag == "smooth":
             lo, start, top = LAG_SIGMA
             own.append(Parameter(f"{self.prefix}_lag_sigma", start, lo, top))
+        if self.band:  # below a quarter of the column's span, as the lag
+            span = float(np.ptp(self._column(data))) if data.n_samples else 0.0
+            hi = max(0.25 * span, 1e-6)
+            own.append(Parameter(f"{self.prefix}_band_deg", min(BAND_START_DEG, 0.5 * hi), 0.0, hi))
         return own
 
     def start_candidates(self, data: HysteresisData, u: np.ndarray) -> list[dict]:
@@ -332,9 +361,21 @@ class Coupling(OutputFilter):
         return self.column if self.lag == "smooth" else None
 
     def _x(self, p: dict, data: HysteresisData, friction: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """The other bend's knob position (n,) and its derivatives by the lag's parameters (n, m; m = 0 without).
-        ``friction`` (n,): the smooth lag's bound per sample, times its own (the base's friction conditions at the
-        other knob; ones without)."""
+        """The other bend's drive (n,): its knob's position through the lag and the dead band, and its derivatives
+        by their parameters (n, m; m = 0 without either). ``friction`` (n,): the smooth lag's bound per sample, times
+        its own (the base's friction conditions at the other knob; ones without)."""
+        x, d = self._lagged(p, data, friction)
+        if not self.band:
+            return x, d
+        # the dead band: x_b = x - clip(x, -w, w), flat inside (both tendons slack), x shifted by w outside
+        w = float(p["band_deg"])
+        outside = np.abs(x) > w
+        sign = np.sign(x)
+        xb = np.where(outside, x - sign * w, 0.0)
+        return xb, np.column_stack([d * outside[:, None], np.where(outside, -sign, 0.0)])
+
+    def _lagged(self, p: dict, data: HysteresisData, friction: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """The other knob's position through the lag (n,) and its derivatives by the lag's parameters (n, m)."""
         x = self._column(data)
         if not self.other_lag:
             return x, np.zeros((x.size, 0))
@@ -376,7 +417,7 @@ class Coupling(OutputFilter):
 
     def apply_jac(self, p: dict, y: np.ndarray, data: HysteresisData, J: np.ndarray,
                   friction: np.ndarray | None = None):
-        """Coupled output, the upstream Jacobian through it (n, m) and the own columns (n, 5 to 7)."""
+        """Coupled output, the upstream Jacobian through it (n, m) and the own columns (n, 5 to 8)."""
         out, dy, own = self._forward(p, y, data, friction)
         return out, dy[:, None] * J, own
 
