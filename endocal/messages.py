@@ -36,6 +36,9 @@ KEYS: dict[str, str] = {
                 "`--model linear`).",
     "local-minimum": "Started from the `--start-from` model's values, the fit ended worse than that model itself (a "
                      "local minimum); it was fitted from scratch instead, and the better of the two kept.",
+    "from-scratch": "A fit from scratch ended more than 1 % lower on the records than the one started from the "
+                    "`--start-from` model's values (a local minimum), and was kept: the refit is not the candidate "
+                    "`validate` scored, so its validation RMSE can differ from the one promised (usually lower).",
     "pi-weights": "The PI model's weight law (the paper's eq. 8, or free weights) fitted worse than a straight line "
                   "per direction of motion; the other law was taken.",
     "glitches": "Samples that jump away from their neighbours and back (a tracker or logger glitch), or a tracker "

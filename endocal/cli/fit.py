@@ -74,7 +74,7 @@ def hysteresis(
     force: bool = typer.Option(False, "--force", help="Overwrite --out."),
     as_json: bool = typer.Option(False, "--json", help="Print the model file's content as JSON."),
     sets: list[str] = typer.Option([], "--set", help="A base-model setting, e.g. --set n_knots=3 (bspline: n_knots, degree; pi: n_operators, weights, offset); repeatable."),
-    start_from: Optional[Path] = typer.Option(None, "--start-from", help="A fitted model (same axis) to start from: the effects it has start at its values, and its base's when it is this fit's. validate's refit commands use it."),
+    start_from: Optional[Path] = typer.Option(None, "--start-from", help="A fitted model (same axis) to start from: the effects it has start at its values, and its base's when it is this fit's; a fit from scratch replaces it where it ends more than 1 % lower. validate's refit commands use it."),
     start_values: list[str] = typer.Option([], "--start-value", help="A second start for an effect's parameter, e.g. --start-value deadzone_slack_deg=2.4 (full names as the fit prints them; repeatable; give each free parameter of the effect): the fit from it is kept where it ends lower on the data. validate's refit commands give the values its candidate reached."),
     explain: bool = typer.Option(False, "--explain", "-v", help=EXPLAIN_HELP),
     effects_files: list[Path] = effects_file_option(),

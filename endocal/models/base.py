@@ -506,9 +506,10 @@ class HysteresisModel(ABC):
         return {k: v for k, v in start.params_.items() if not k.startswith(own)}
 
     def try_start(self, data, warm_start: dict[str, float], *, max_nfev: int | None = None,
-                  ftol: float | None = None):
+                  ftol: float | None = None, margin: float = 0.0):
         """Fit this fitted model once more from ``warm_start`` (:meth:`fit`'s), and keep that fit only where it
-        ends lower on ``data`` than the fit it has: a second start, never a worse model.
+        ends lower on ``data`` than the fit it has (by more than the share ``margin`` of its training RMSE): a
+        second start, never a worse model.
 
         ``fit hysteresis --start-value`` (validate's refits of an effect whose start is searched) gives the values
         the scan's candidate reached: a search of the effect's start on every sample can end in a worse minimum
@@ -519,7 +520,7 @@ class HysteresisModel(ABC):
         self._require_fitted()
         first = dict(self.__dict__)
         self.fit(data, max_nfev=max_nfev, warm_start=warm_start, ftol=ftol)
-        if not self.fit_report_.rmse_deg < first["fit_report_"].rmse_deg:
+        if not self.fit_report_.rmse_deg < (1.0 - margin) * first["fit_report_"].rmse_deg:
             self.__dict__.update(first)
         return self
 
