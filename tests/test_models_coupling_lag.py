@@ -160,3 +160,30 @@ def test_the_other_bend_has_a_dead_band_where_the_model_carries_one(tmp_path):
     del entry["settings"]["band"]  # as the files before the band were written
     path.write_text(json.dumps(doc))
     assert np.array_equal(load_model(path).predict(plant), plain.predict(plant))
+
+
+def test_the_other_axis_s_frame_slip_where_the_model_carries_a_drift():
+    """A base sensor that slips turns the whole frame: this axis's share of the turn adds to its angle (``drift``),
+    the other axis's turns the tip about this axis's direction, which moves this angle in proportion to the other
+    bend. Where the model carries ``drift``, ``coupling`` turns eq. 1's tip by the other axis's slip
+    (``coupling_slip_dps``). On a Dahl plant whose frame slips by -1.2 deg/min about the other axis (3.6 deg over
+    the record), the fit recovers the rate within five standard errors with the noise left (0.302 deg on
+    2026-12-07); without the slip the fit misses by 0.382 deg (the other bend's 16 deg of half-bend turned by up to
+    3.6 deg). Tolerances as above."""
+    from endocal.models.effects.coupling import Coupling
+
+    assert [e.slip for e in make_model("dahl", ["drift", "coupling"])._effects() if e.name == "coupling"] == [True]
+    assert [e.slip for e in make_model("dahl", ["coupling"])._effects()] == [False]
+    t, u, extras = rich_command()
+    d = HysteresisData(cmd_deg=u, t_s=t, extras=extras)
+    truth = make_model("dahl", ["drift", Coupling(lag="smooth", slip=True)]).set_parameters(
+        {**DAHL, **COUPLING, "coupling_slip_dps": -0.02, "drift_rate_dps": 0.05})
+    plant = HysteresisData(cmd_deg=u, t_s=t, extras=extras,
+                           meas_deg=truth.predict(d) + NOISE_DEG * np.random.default_rng(9).standard_normal(u.size))
+    slipped = make_model("dahl", ["drift", "coupling"]).fit(plant)
+    assert abs(slipped.params_["coupling_slip_dps"] + 0.02) < max(5 * slipped.stderr_["coupling_slip_dps"], 4e-4)
+    held = make_model("dahl", ["drift", Coupling(slip=False)]).fit(plant)
+    errors = rmse(slipped, plant), rmse(held, plant)
+    assert errors[0] < 1.02 * NOISE_DEG and errors[1] > 1.05 * NOISE_DEG, errors
+    back = slipped.inverse(slipped.predict(d), t_s=t, extras=extras)  # the inverse turns the tip back too
+    assert np.max(np.abs(back - u)) < 1e-6

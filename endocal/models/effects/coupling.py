@@ -62,10 +62,21 @@ the model file says ``"band": true``)::
 On the same records with the plant's slack (`deadzone` hidden), in-sample: 0.412 → 0.374 deg, the noise 0.359,
 the plant's true other bend 0.368 (2026-12-07).
 
+A base sensor that slips turns the whole frame eq. 1 reads. This axis's share of the turn adds to its angle
+(``drift``); the other axis's turns the tip about this axis's direction, which moves this angle in proportion to
+the other bend. Where the model carries ``drift``, eq. 1's tip is turned by ``d = s · t`` (``slip_dps``, deg/s,
+``t`` from the run's start as ``drift`` counts it; the model file says ``"slip": true``)::
+
+    θ = atan2(h_y sinc|h|,  cos|h| cos d - h_x sinc|h| sin d)
+
+On the Bouc-Wen closed loop's `drift` case (the simulator's sensor slips by 3 and -1 deg/min about the two axes)
+the loop ended at 1.21x its last record's noise without the turn; with the other axis's slip set to 0 in the
+plant, at 1.13x (2026-12-07).
+
 Parameters ``coupling_linear`` (``a``), ``coupling_abs`` (``b``), ``coupling_gain``
 (``g``), ``coupling_tilt_pos`` / ``coupling_tilt_neg`` (``c+`` / ``c-``), ``coupling_lag_deg``
-(``λ``), for the smooth lag ``coupling_lag_sigma`` (``σ``), and with a dead band ``coupling_band_deg`` (``w``). All
-zero is no coupling (``θ = y``). ``X`` is the extra column ``other_cmd_deg``
+(``λ``), for the smooth lag ``coupling_lag_sigma`` (``σ``), with a dead band ``coupling_band_deg`` (``w``), and
+with the frame's slip ``coupling_slip_dps`` (``s``). All zero is no coupling (``θ = y``). ``X`` is the extra column ``other_cmd_deg``
 (the other knob's command, deg) unless another is named: ``coupling:ml_meas_deg`` uses the
 other axis's measured angle (then ``g ≈ 1`` and ``λ ≈ 0``). A model file written before the
 lag (its ``coupling`` settings without ``lag`` or ``other_lag``) loads without it, as it was fitted.
@@ -90,6 +101,7 @@ from endocal.models._kernels import varplay_forward_jac
 from endocal.models._smooth_friction import smooth_lag
 from endocal.models.data import OTHER_CMD, HysteresisData
 from endocal.models.effects.base import OutputFilter
+from endocal.models.effects.drift import elapsed_s
 from endocal.models.effects.requirements import other_knob_moving
 from endocal.models.params import Parameter
 
@@ -97,11 +109,13 @@ _D2R = math.pi / 180.0
 
 
 @njit(cache=True)
-def _eq1(u, z):
-    """Thesis eq. 1 on a constant-curvature arc: ``atan2(u sinc r, cos r)``, ``r = hypot(u, z)``.
+def _eq1(u, z, cd, sd):
+    """Thesis eq. 1 on a constant-curvature arc: ``atan2(u sinc r, cos r cos d - z sinc r sin d)``, ``r = hypot(u,
+    z)``, with the tip turned by ``d`` about this axis's direction (the other axis's frame slip; ``cd, sd = cos d,
+    sin d``, 1 and 0 without).
 
-    ``u``, ``z``: half-bend in and across this axis's plane (rad). Returns the angle (rad) and
-    its derivatives by ``u`` and ``z``; smooth at ``r = 0`` (series of ``sinc``).
+    ``u``, ``z``: half-bend in and across this axis's plane (rad). Returns the angle (rad) and its derivatives by
+    ``u``, ``z`` and ``d``; smooth at ``r = 0`` (series of ``sinc``).
     """
     r2 = u * u + z * z
     r = math.sqrt(r2)
@@ -112,33 +126,39 @@ def _eq1(u, z):
         s = math.sin(r) / r
         ds_r = (r * math.cos(r) - math.sin(r)) / (r2 * r)
     a = u * s
-    c = math.cos(r)
+    cr = math.cos(r)
+    c = cr * cd - z * s * sd
     den = a * a + c * c
-    # d(cos r)/du = -sinc(r) u, d(cos r)/dz = -sinc(r) z
-    f_u = (c * (s + u * u * ds_r) + a * s * u) / den
-    f_z = (c * u * z * ds_r + a * s * z) / den
-    return math.atan2(a, c), f_u, f_z
+    # d(cos r)/du = -sinc(r) u, d(cos r)/dz = -sinc(r) z; d(sinc r)/du = ds_r u, d(sinc r)/dz = ds_r z
+    a_u = s + u * u * ds_r
+    a_z = u * z * ds_r
+    c_u = -s * u * cd - z * u * ds_r * sd
+    c_z = -s * z * cd - (s + z * z * ds_r) * sd
+    c_d = -cr * sd - z * s * cd
+    return math.atan2(a, c), (c * a_u - a * c_u) / den, (c * a_z - a * c_z) / den, -a * c_d / den
 
 
 @njit(cache=True)
-def coupling_forward(y_deg, x_deg, a, b, g, c_pos, c_neg, dx_lag):
-    """Measured angle (deg) from the base output ``y`` and the other axis's lagged ``x`` (deg).
+def coupling_forward(y_deg, x_deg, a, b, g, c_pos, c_neg, dx_lag, slip_deg, elapsed_s):
+    """Measured angle (deg) from the base output ``y`` and the other axis's drive ``x`` (deg).
 
-    ``dx_lag`` (n, m): the derivatives of ``x`` by the lag's m parameters (:meth:`Coupling._x`). Returns
-    ``theta`` (n,), ``d theta / d y`` (n,) and the derivatives (n, 5 + m) by ``(a, b, g, c_pos, c_neg)``
-    and the lag's (module docstring).
+    ``dx_lag`` (n, m): the derivatives of ``x`` by the lag's and the band's m parameters (:meth:`Coupling._x`).
+    ``slip_deg`` (n,): the other axis's frame slip at each sample (deg; zeros without), ``elapsed_s`` (n,) its time
+    (its derivative by the slip rate). Returns ``theta`` (n,), ``d theta / d y`` (n,) and the derivatives (n, 6 + m)
+    by ``(a, b, g, c_pos, c_neg)``, the drive's m parameters and the slip rate (module docstring).
     """
     n = y_deg.shape[0]
     m = dx_lag.shape[1]
     out = np.empty(n)
     dy = np.empty(n)
-    own = np.zeros((n, 5 + m))
+    own = np.zeros((n, 6 + m))
     for k in range(n):
         y = y_deg[k] * _D2R
         x = x_deg[k] * _D2R
         ax = abs(x)
         c = c_pos if y >= 0.0 else c_neg
-        f, f_u, f_z = _eq1(y + a * x + b * ax, g * x + c * y)
+        d = slip_deg[k] * _D2R
+        f, f_u, f_z, f_d = _eq1(y + a * x + b * ax, g * x + c * y, math.cos(d), math.sin(d))
         out[k] = f / _D2R
         dy[k] = f_u + f_z * c
         own[k, 0] = f_u * x_deg[k]
@@ -149,24 +169,28 @@ def coupling_forward(y_deg, x_deg, a, b, g, c_pos, c_neg, dx_lag):
         dth_dx = f_u * (a + b * sx) + f_z * g
         for j in range(m):
             own[k, 5 + j] = dth_dx * dx_lag[k, j]
+        own[k, 5 + m] = f_d * elapsed_s[k]
     return out, dy, own
 
 
 @njit(cache=True)
-def coupling_inverse(theta_deg, x_deg, a, b, g, c_pos, c_neg):
+def coupling_inverse(theta_deg, x_deg, a, b, g, c_pos, c_neg, slip_deg):
     """Base output ``y`` (deg) whose coupled angle is ``theta`` (deg): safeguarded Newton per sample."""
     n = theta_deg.shape[0]
     out = np.empty(n)
     for k in range(n):
         th = theta_deg[k] * _D2R
         x = x_deg[k] * _D2R
+        d = slip_deg[k] * _D2R
+        cd = math.cos(d)
+        sd = math.sin(d)
         lo = -0.5 * math.pi
         hi = 0.5 * math.pi
         shift = a * x + b * abs(x)
         y = min(max(th - shift, lo), hi)
         for _ in range(200):
             c = c_pos if y >= 0.0 else c_neg
-            f, f_u, f_z = _eq1(y + shift, g * x + c * y)
+            f, f_u, f_z, _f_d = _eq1(y + shift, g * x + c * y, cd, sd)
             r = f - th
             if r > 0.0:
                 hi = y
@@ -174,8 +198,8 @@ def coupling_inverse(theta_deg, x_deg, a, b, g, c_pos, c_neg):
                 lo = y
             if r == 0.0 or hi - lo <= 1e-15:
                 break
-            d = f_u + f_z * c
-            yn = y - r / d if d > 0.0 else 0.5 * (lo + hi)
+            dd = f_u + f_z * c
+            yn = y - r / dd if dd > 0.0 else 0.5 * (lo + hi)
             if not lo < yn < hi:
                 yn = 0.5 * (lo + hi)
             if abs(yn - y) <= 1e-15:
@@ -215,7 +239,8 @@ class Coupling(OutputFilter):
     deg of its position), ``tilt_pos``, ``tilt_neg`` (out-of-plane share of this axis's
     own bend on its + / - half-plane), ``lag_deg`` (the other bend's play, or its smooth
     lag's saturation, deg of the other knob; not with ``lag="none"``), ``lag_sigma`` (the smooth
-    lag's shape), ``band_deg`` (the other bend's dead band, with ``band``).
+    lag's shape), ``band_deg`` (the other bend's dead band, with ``band``), ``slip_dps`` (the
+    other axis's frame slip, with ``slip``).
     lag : {"play", "smooth", "none"}, optional
         The other bend's lag behind its knob: a play, its smooth counterpart, or none (the form of
         model files written before the lag: five parameters, ``x`` the column itself). By default it
@@ -224,6 +249,9 @@ class Coupling(OutputFilter):
     band : bool, optional
         Whether the other bend's drive has a dead band (``band_deg``). By default it does where the model
         carries ``deadzone`` in any form.
+    slip : bool, optional
+        Whether eq. 1's tip is turned by the other axis's frame slip (``slip_dps``). By default it is where
+        the model carries ``drift``.
     """
 
     name = "coupling"
@@ -235,7 +263,7 @@ class Coupling(OutputFilter):
                  "axis's angle, not this axis's command alone")
     protocol = "move the other knob alone, or both knobs at different frequencies (circle, lissajous)"
     units = {"linear": "deg/deg", "abs": "deg/deg", "gain": "deg/deg", "tilt_pos": "", "tilt_neg": "", "lag_deg": "deg",
-             "lag_sigma": "", "band_deg": "deg"}
+             "lag_sigma": "", "band_deg": "deg", "slip_dps": "deg/s"}
     usage = "coupling[:COLUMN]"
     needs = ("other_cmd_deg (or the named column)",)
     requires = (other_knob_moving(),)
@@ -258,23 +286,26 @@ class Coupling(OutputFilter):
                        frequencies_hz=[round(f1, 6), round(1.5 * f1, 6)], duration_s=float(duration), fade_s=FADE_S)
         return design.planned(k, int(2 * f1 * (duration - 2 * FADE_S)))
 
-    def __init__(self, column: str = OTHER_CMD, lag: str | None = None, band: bool | None = None):
+    def __init__(self, column: str = OTHER_CMD, lag: str | None = None, band: bool | None = None,
+                 slip: bool | None = None):
         if not isinstance(column, str) or not column:
             raise ModelError(f"coupling: column must be a column name, got {column!r}")
         if lag is not None and lag not in LAG_RULES:
             raise ModelError(f"coupling: lag must be one of {', '.join(LAG_RULES)}, got {lag!r}")
-        if band is not None and not isinstance(band, bool):
-            raise ModelError(f"coupling: band must be true or false, got {band!r}")
+        for name, value in (("band", band), ("slip", slip)):
+            if value is not None and not isinstance(value, bool):
+                raise ModelError(f"coupling: {name} must be true or false, got {value!r}")
         self.column = column
         self.lag = lag
         self.band = band
+        self.slip = slip
 
     @classmethod
     def from_settings(cls, settings: dict) -> Coupling:
         """A model file's entry. Files written before the smooth lag say ``other_lag`` (true: the play); files
         written before the lag say neither and keep their five parameters; files written before the other bend's
-        dead band do not say ``band`` and load without it."""
-        settings = {"band": False, **settings}
+        dead band or the frame's slip do not say ``band`` or ``slip`` and load without them."""
+        settings = {"band": False, "slip": False, **settings}
         if "lag" not in settings:
             old = settings.pop("other_lag", False)
             if not isinstance(old, bool):
@@ -284,13 +315,14 @@ class Coupling(OutputFilter):
 
     def for_model(self, model, effects) -> Coupling:
         """The other bend's drive as the model has this axis's (module docstring), where the effect does not name
-        it: the lag rule the base's (a play on a base with return-point memory, else smooth), and a dead band where
-        ``effects`` carry one (``deadzone`` in any form)."""
+        it: the lag rule the base's (a play on a base with return-point memory, else smooth), a dead band where
+        ``effects`` carry one (``deadzone`` in any form), and the other axis's frame slip where they carry a drift."""
         lag = self.lag if self.lag is not None else ("play" if model.return_point_memory else "smooth")
         band = self.band if self.band is not None else any(e.name == "deadzone" for e in effects)
-        if (lag, band) == (self.lag, self.band):
+        slip = self.slip if self.slip is not None else any(e.name == "drift" for e in effects)
+        if (lag, band, slip) == (self.lag, self.band, self.slip):
             return self
-        return type(self)(self.column, lag, band)
+        return type(self)(self.column, lag, band, slip)
 
     @property
     def other_lag(self) -> bool:
@@ -307,17 +339,20 @@ class Coupling(OutputFilter):
         return self.name if self.column == OTHER_CMD else f"{self.name}:{self.column}"
 
     def settings(self) -> dict:
-        return {"column": self.column, "lag": self.lag or "play", "band": bool(self.band)}
+        return {"column": self.column, "lag": self.lag or "play", "band": bool(self.band), "slip": bool(self.slip)}
 
     def param_names(self) -> list[str]:
         lag = {"none": (), "smooth": ("lag_deg", "lag_sigma")}.get(self.lag or "play", ("lag_deg",))
-        return [k for k in self.units if (not k.startswith("lag_") or k in lag) and (k != "band_deg" or self.band)]
+        return [k for k in self.units if (not k.startswith("lag_") or k in lag) and (k != "band_deg" or self.band)
+                and (k != "slip_dps" or self.slip)]
 
     def check(self, data: HysteresisData) -> None:
         try:
             data.column(self.column)
         except ModelError as exc:
             raise ModelError(f"effect '{self.label}' needs the other axis's position: {exc}") from None
+        if self.slip:
+            data.require_time(f"effect '{self.label}' (the other axis's frame slip)")
 
     def initial(self, data: HysteresisData, u: np.ndarray) -> list[Parameter]:
         # Bounds: projections and deviations below 45 deg (|a|, |b|, |c| < 1); the other
@@ -338,6 +373,8 @@ class Coupling(OutputFilter):
             span = float(np.ptp(self._column(data))) if data.n_samples else 0.0
             hi = max(0.25 * span, 1e-6)
             own.append(Parameter(f"{self.prefix}_band_deg", min(BAND_START_DEG, 0.5 * hi), 0.0, hi))
+        if self.slip:  # either sign, as drift's rate; 60 deg/min is beyond any sensor's slip
+            own.append(Parameter(f"{self.prefix}_slip_dps", 0.0, -1.0, 1.0))
         return own
 
     def start_candidates(self, data: HysteresisData, u: np.ndarray) -> list[dict]:
@@ -407,22 +444,32 @@ class Coupling(OutputFilter):
     def _args(p: dict) -> tuple[float, ...]:
         return tuple(float(p[k]) for k in ("linear", "abs", "gain", "tilt_pos", "tilt_neg"))
 
+    def _slip(self, p: dict, data: HysteresisData) -> tuple[np.ndarray, np.ndarray]:
+        """The other axis's frame slip (deg, n) and the time it has grown over (s, n): zeros without ``slip``."""
+        if not self.slip:
+            zeros = np.zeros(data.n_samples)
+            return zeros, zeros
+        elapsed = elapsed_s(data)
+        return float(p["slip_dps"]) * elapsed, elapsed
+
     def _forward(self, p: dict, y: np.ndarray, data: HysteresisData, friction: np.ndarray | None = None):
         x, dx_lag = self._x(p, data, friction)
-        out, dy, own = coupling_forward(np.ascontiguousarray(y, dtype=float), x, *self._args(p), dx_lag)
-        return out, dy, own
+        slip, elapsed = self._slip(p, data)
+        out, dy, own = coupling_forward(np.ascontiguousarray(y, dtype=float), x, *self._args(p), dx_lag, slip, elapsed)
+        return out, dy, (own if self.slip else np.ascontiguousarray(own[:, :-1]))
 
     def apply(self, p: dict, y: np.ndarray, data: HysteresisData, friction: np.ndarray | None = None) -> np.ndarray:
         return self._forward(p, y, data, friction)[0]
 
     def apply_jac(self, p: dict, y: np.ndarray, data: HysteresisData, J: np.ndarray,
                   friction: np.ndarray | None = None):
-        """Coupled output, the upstream Jacobian through it (n, m) and the own columns (n, 5 to 8)."""
+        """Coupled output, the upstream Jacobian through it (n, m) and the own columns (n, 5 to 9)."""
         out, dy, own = self._forward(p, y, data, friction)
         return out, dy[:, None] * J, own
 
     def invert(self, p: dict, y: np.ndarray, data: HysteresisData, friction: np.ndarray | None = None) -> np.ndarray:
-        return coupling_inverse(np.ascontiguousarray(y, dtype=float), self._x(p, data, friction)[0], *self._args(p))
+        return coupling_inverse(np.ascontiguousarray(y, dtype=float), self._x(p, data, friction)[0], *self._args(p),
+                                self._slip(p, data)[0])
 
     def describe(self, p: dict, se: dict) -> str:
         return "coupling" + self._bracket(p, se)

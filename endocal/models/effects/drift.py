@@ -14,7 +14,7 @@ from endocal.models.effects.requirements import TIME_STAMPS
 from endocal.models.params import Parameter, fmt_value
 
 
-def _elapsed_s(data: HysteresisData) -> np.ndarray:
+def elapsed_s(data: HysteresisData) -> np.ndarray:
     t = data.require_time("effect 'drift'")
     out = np.empty_like(t)
     for sl, first in zip(data.run_slices(), data.record_starts()):
@@ -81,10 +81,10 @@ class Drift(OutputEffect):
                 f"({bend_speed:.3g} deg/s): no slow drift moves that fast; it likely fits how the records start")
 
     def term(self, p: dict, cmd: np.ndarray, data: HysteresisData) -> np.ndarray:
-        return p["rate_dps"] * _elapsed_s(data)
+        return p["rate_dps"] * elapsed_s(data)
 
     def term_jac(self, p: dict, cmd: np.ndarray, data: HysteresisData):
-        e = _elapsed_s(data)
+        e = elapsed_s(data)
         return p["rate_dps"] * e, e[:, None]
 
     def describe(self, p: dict, se: dict) -> str:
