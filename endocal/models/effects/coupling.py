@@ -139,11 +139,11 @@ def _eq1(u, z, cd, sd):
 
 
 @njit(cache=True)
-def coupling_forward(y_deg, x_deg, a, b, g, c_pos, c_neg, dx_lag, slip_deg, elapsed_s):
+def coupling_forward(y_deg, x_deg, a, b, g, c_pos, c_neg, dx_lag, slip_deg, t_run_s):
     """Measured angle (deg) from the base output ``y`` and the other axis's drive ``x`` (deg).
 
     ``dx_lag`` (n, m): the derivatives of ``x`` by the lag's and the band's m parameters (:meth:`Coupling._x`).
-    ``slip_deg`` (n,): the other axis's frame slip at each sample (deg; zeros without), ``elapsed_s`` (n,) its time
+    ``slip_deg`` (n,): the other axis's frame slip at each sample (deg; zeros without), ``t_run_s`` (n,) its time
     (its derivative by the slip rate). Returns ``theta`` (n,), ``d theta / d y`` (n,) and the derivatives (n, 6 + m)
     by ``(a, b, g, c_pos, c_neg)``, the drive's m parameters and the slip rate (module docstring).
     """
@@ -169,7 +169,7 @@ def coupling_forward(y_deg, x_deg, a, b, g, c_pos, c_neg, dx_lag, slip_deg, elap
         dth_dx = f_u * (a + b * sx) + f_z * g
         for j in range(m):
             own[k, 5 + j] = dth_dx * dx_lag[k, j]
-        own[k, 5 + m] = f_d * elapsed_s[k]
+        own[k, 5 + m] = f_d * t_run_s[k]
     return out, dy, own
 
 
