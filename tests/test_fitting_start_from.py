@@ -11,9 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from endocal import fitting
 from endocal.fitting import SCRATCH_MARGIN, fit_hysteresis
+from endocal.models import make_model
 from endocal.models.base import HysteresisModel
+from endocal.runs.aligned import load_aligned
+from endocal.validation.data import axis_data
 
 RUN = Path(__file__).resolve().parent.parent / "data_samples" / "sim-damped-sine"
 
@@ -31,7 +33,7 @@ def test_a_start_that_stops_in_a_worse_place_gives_way_to_the_fit_from_scratch(s
         return self.fit(data, max_nfev=1, warm_start={**self.lent_values(model), **closed})
 
     monkeypatch.setattr(HysteresisModel, "fit_from", stuck)
-    warm = HysteresisModel.fit_from(make_like(scratch), start, fitting.axis_data([fitting.load_aligned(RUN)], "ap"))
+    warm = HysteresisModel.fit_from(make_like(scratch), start, axis_data([load_aligned(RUN)], "ap"))
     assert warm.fit_report_.rmse_deg > (1 + 2 * SCRATCH_MARGIN) * scratch.fit_report_.rmse_deg  # the stand-in holds
     got = fit_hysteresis([RUN], "ap", "bspline", ["delay", "deadzone"], start_from=start).model
     assert got.fit_report_.rmse_deg == pytest.approx(scratch.fit_report_.rmse_deg, rel=1e-9)
@@ -41,7 +43,7 @@ def test_a_start_that_stops_in_a_worse_place_gives_way_to_the_fit_from_scratch(s
 def test_a_start_that_ends_as_low_keeps_the_fit_validate_scored(start):
     """Converged from the model's values, the refit is that fit: the fit from scratch, if it differs at all, is
     within the margin, and the refit's parameters are those of the start from the model (no warning)."""
-    d = fitting.axis_data([fitting.load_aligned(RUN)], "ap")
+    d = axis_data([load_aligned(RUN)], "ap")
     warm = make_like(fit_hysteresis([RUN], "ap", "bspline", ["delay", "deadzone"]).model).fit_from(start, d)
     got = fit_hysteresis([RUN], "ap", "bspline", ["delay", "deadzone"], start_from=start).model
     assert got.params_ == pytest.approx(warm.params_, rel=1e-12)
@@ -51,6 +53,4 @@ def test_a_start_that_ends_as_low_keeps_the_fit_validate_scored(start):
 
 def make_like(model: HysteresisModel) -> HysteresisModel:
     """An unfitted model of ``model``'s base and effects."""
-    from endocal.models import make_model
-
     return make_model(model.base_name, [e.label for e in model.effects_], axis=model.axis)

@@ -378,8 +378,7 @@ class HysteresisModel(ABC):
         names = [f"{self.base_name}_{s}" for s in self._base_names(structure)] + up_names
         blocks = [Jb, Ju]
         for e in filters:
-            y, Jf, own = e.apply_jac(eff_p[id(e)], y, data, np.column_stack(blocks),
-                                     **self._filter_inputs(e, eff_p, data, effects))
+            y, Jf, own = e.apply_jac(eff_p[id(e)], y, data, np.column_stack(blocks))
             blocks = [Jf, own]
             names += e.full_names()
         for e in outputs:

@@ -248,6 +248,15 @@ class HysteresisData:
             raise ModelError(f"{who} needs time stamps: give t_s (s) with the data")
         return self.t_s
 
+    def elapsed_s(self, who: str) -> np.ndarray:
+        """Time since each run's record began (s, n): negative on a lead-in (:mod:`endocal.models.start`), which runs
+        before the record's time 0. A ModelError naming ``who`` without time stamps."""
+        t = self.require_time(who)
+        out = np.empty_like(t)
+        for sl, first in zip(self.run_slices(), self.record_starts()):
+            out[sl] = t[sl] - t[first]
+        return out
+
     def n_reversals(self, tol_frac: float = 0.01) -> int:
         """Direction reversals of the command per run (:func:`reversals`), summed."""
         return sum(reversals(self.cmd_deg[s], tol_frac) for s in self.run_slices())

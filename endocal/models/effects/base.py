@@ -282,7 +282,8 @@ class OutputFilter(Effect):
     order: ClassVar[int] = 50
     #: the column of a knob whose friction the filter models (``coupling``'s other bend): the effects that scale the
     #: base's friction scale that one's too, and the model passes their factor at that knob as ``friction=`` (n,) to
-    #: :meth:`apply`, ``apply_jac`` and :meth:`invert` (:meth:`~endocal.models.base.HysteresisModel._filter_inputs`)
+    #: :meth:`apply` and :meth:`invert` (:meth:`~endocal.models.base.HysteresisModel._filter_inputs`; such a model
+    #: is differentiated numerically, so ``apply_jac`` never gets one)
     other_friction: ClassVar[str | None] = None
 
     @abstractmethod

@@ -101,7 +101,6 @@ from endocal.models._kernels import varplay_forward_jac
 from endocal.models._smooth_friction import smooth_lag
 from endocal.models.data import OTHER_CMD, HysteresisData
 from endocal.models.effects.base import OutputFilter
-from endocal.models.effects.drift import elapsed_s
 from endocal.models.effects.requirements import other_knob_moving
 from endocal.models.params import Parameter
 
@@ -449,7 +448,7 @@ class Coupling(OutputFilter):
         if not self.slip:
             zeros = np.zeros(data.n_samples)
             return zeros, zeros
-        elapsed = elapsed_s(data)
+        elapsed = data.elapsed_s(f"effect '{self.label}' (the other axis's frame slip)")
         return float(p["slip_dps"]) * elapsed, elapsed
 
     def _forward(self, p: dict, y: np.ndarray, data: HysteresisData, friction: np.ndarray | None = None):
@@ -461,10 +460,10 @@ class Coupling(OutputFilter):
     def apply(self, p: dict, y: np.ndarray, data: HysteresisData, friction: np.ndarray | None = None) -> np.ndarray:
         return self._forward(p, y, data, friction)[0]
 
-    def apply_jac(self, p: dict, y: np.ndarray, data: HysteresisData, J: np.ndarray,
-                  friction: np.ndarray | None = None):
-        """Coupled output, the upstream Jacobian through it (n, m) and the own columns (n, 5 to 9)."""
-        out, dy, own = self._forward(p, y, data, friction)
+    def apply_jac(self, p: dict, y: np.ndarray, data: HysteresisData, J: np.ndarray):
+        """Coupled output, the upstream Jacobian through it (n, m) and the own columns (n, 5 to 9). A model whose
+        effects scale the base's friction is differentiated numerically, so no ``friction`` comes here."""
+        out, dy, own = self._forward(p, y, data)
         return out, dy[:, None] * J, own
 
     def invert(self, p: dict, y: np.ndarray, data: HysteresisData, friction: np.ndarray | None = None) -> np.ndarray:

@@ -14,14 +14,6 @@ from endocal.models.effects.requirements import TIME_STAMPS
 from endocal.models.params import Parameter, fmt_value
 
 
-def elapsed_s(data: HysteresisData) -> np.ndarray:
-    t = data.require_time("effect 'drift'")
-    out = np.empty_like(t)
-    for sl, first in zip(data.run_slices(), data.record_starts()):
-        out[sl] = t[sl] - t[first]  # a lead-in (models.start) runs before the record's time 0
-    return out
-
-
 #: ``--next`` tests a drift by holding the knob still this long (s): a drift of 1 deg/min moves the
 #: zero by 1 deg, three times a tracker's noise.
 DRIFT_HOLD_S = 60.0
@@ -81,10 +73,10 @@ class Drift(OutputEffect):
                 f"({bend_speed:.3g} deg/s): no slow drift moves that fast; it likely fits how the records start")
 
     def term(self, p: dict, cmd: np.ndarray, data: HysteresisData) -> np.ndarray:
-        return p["rate_dps"] * elapsed_s(data)
+        return p["rate_dps"] * data.elapsed_s("effect 'drift'")
 
     def term_jac(self, p: dict, cmd: np.ndarray, data: HysteresisData):
-        e = elapsed_s(data)
+        e = data.elapsed_s("effect 'drift'")
         return p["rate_dps"] * e, e[:, None]
 
     def describe(self, p: dict, se: dict) -> str:
