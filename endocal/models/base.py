@@ -71,12 +71,6 @@ START_SCREEN_SHARE = 0.25
 START_KEEP = 2
 #: samples a start candidate's or a start history's screening fit sees of a long record (:func:`_subsample`)
 SUBSAMPLE_SAMPLES = 4000
-#: samples :meth:`HysteresisModel._best_start` refines start candidates on, of a longer subsample (:func:`_subsample`;
-#: a record under twice this is searched whole). ``validate`` on the demo's records, in process and one job: 6.8 s
-#: searching the 4000-sample subsample, 5.1-5.5 s on 2000, every candidate's gain within 0.1 points. At 1000 a
-#: one-sweep record (2001 samples: tests/test_validate_split.py) lost its slack's basin, -36 % where the search on
-#: every sample reaches -56 % (2026-12-07)
-START_SAMPLES = 2000
 #: relative cost decrease per step under which a fit stops (:func:`_solve`), unless ``fit(ftol=...)`` says otherwise
 FTOL = 1e-7
 #: the stopping rule of the fit running in this context (:meth:`HysteresisModel.fit`'s ``ftol``)
@@ -819,10 +813,7 @@ class HysteresisModel(ABC):
         searches of ``validate`` on the demo's records (3 to 7 candidates each) the start kept ended within
         0.25 % of the cost of the best of all candidates refined in full, with 10 to 60 % fewer evaluations
         (where several candidates lead into one basin, it may be another of them than the full search's).
-        Both rounds see START_SAMPLES of a longer ``ds``: which basin a start leads into shows on every other
-        sample of the subsample as well (the loops keep their shape), and the fit after it runs on them all.
         """
-        ds = _subsample(ds, START_SAMPLES)
         if len(tried) <= START_KEEP:
             kept = [(*self._start_cost(ds, st, stru, own, effects, fixed), trial, stru, own)
                     for trial, st, stru, own in tried]
@@ -1190,10 +1181,10 @@ def _columns(block: np.ndarray) -> np.ndarray:
     return block[:, None] if np.ndim(block) == 1 else block
 
 
-def _subsample(d: HysteresisData, samples: int = SUBSAMPLE_SAMPLES) -> HysteresisData:
-    """Every k-th sample of a record over 2 x ``samples`` long, about ``samples`` of them (the knob moves little
-    between samples, so the loops keep their shape); else ``d``."""
-    return d.decimate(d.n_samples // samples) if d.n_samples >= 2 * samples else d
+def _subsample(d: HysteresisData) -> HysteresisData:
+    """Every k-th sample of a record over 2 x SUBSAMPLE_SAMPLES long, about SUBSAMPLE_SAMPLES of them
+    (the knob moves little between samples, so the loops keep their shape); else ``d``."""
+    return d.decimate(d.n_samples // SUBSAMPLE_SAMPLES) if d.n_samples >= 2 * SUBSAMPLE_SAMPLES else d
 
 
 def _no_better_than_a_line(d: HysteresisData, rmse_deg: float, base: str) -> list[str]:
