@@ -151,11 +151,11 @@ def _names(loop: BaseLoop) -> set[str]:
 #: friction base, its bound scaled by what scales the base's friction, a dead band where the model has one, the
 #: other axis's frame slip where it has a drift), and the printed refit's second start from scratch): the end (deg)
 #: on the last record `--next` asked for, against that record's own noise floor. `coupling` (stronger cross-talk:
-#: each bend shifts the other's tendon anchors) ends on a single-knob speed ladder whose other bend swings by 49 deg
+#: each bend shifts the other's tendon anchors) ends on a single-knob speed ladder whose other bend spans 32 deg
 #: with its knob still: fitted on the single-knob records alone the structure predicts it at 1.09x, on all of them
-#: 1.94x (one term on this axis's output cannot hold the mutual shift in both regimes). The other eight cases end at
-#: 1.07-1.15x. The floor on the ladder itself: tests/test_friction_family_limits.py (`dahl` with `envelope:tip`
-#: 1.13x in-sample).
+#: 1.94x (its drive misses the true other bend on two-knob motion by 5-6 deg RMS: docs/evidence/known-limits.md).
+#: The other eight cases end at 1.07-1.15x. The floor on the ladder itself: tests/test_friction_family_limits.py
+#: (`dahl` with `envelope:tip` 1.13x in-sample).
 NOISE_GAPS = {
     "coupling": "ends at 0.702 deg on the speed ladder, 1.94x its record's noise (0.362)",
 }
