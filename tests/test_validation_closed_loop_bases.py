@@ -146,19 +146,13 @@ def _names(loop: BaseLoop) -> set[str]:
     return {e.partition(":")[0] for e in loop.named}
 
 
-#: Cases measured above the 1.2x bar (2026-12-07, seed 0; with the friction base's forms `envelope:tip` and
-#: `load:friction:COLUMN`, the form swap, the other bend driven as the model drives this axis (a smooth lag on a
-#: friction base, its bound scaled by what scales the base's friction, a dead band where the model has one, the
-#: other axis's frame slip where it has a drift), and the printed refit's second start from scratch): the end (deg)
-#: on the last record `--next` asked for, against that record's own noise floor. `coupling` (stronger cross-talk:
-#: each bend shifts the other's tendon anchors) ends on a single-knob speed ladder whose other bend spans 32 deg
-#: with its knob still: fitted on the single-knob records alone the structure predicts it at 1.09x, on all of them
-#: 1.94x (its drive misses the true other bend on two-knob motion by 5-6 deg RMS: docs/evidence/known-limits.md).
-#: The other eight cases end at 1.07-1.15x. The floor on the ladder itself: tests/test_friction_family_limits.py
+#: Cases measured above the 1.2x bar: none since the other bend follows this one through its anchors
+#: (`coupling_mutual`, 2026-12-07, seed 0). `coupling` (stronger cross-talk: each bend shifts the other's tendon
+#: anchors) ends on a single-knob speed ladder whose other bend spans 32 deg with its knob still; with this axis's
+#: anchors shifted by the other knob's drive, not the other bend, it ended at 1.94x. A case that misses goes here with
+#: its measured end, as a strict xfail. The floor on the ladder itself: tests/test_friction_family_limits.py
 #: (`dahl` with `envelope:tip` 1.13x in-sample).
-NOISE_GAPS = {
-    "coupling": "ends at 0.702 deg on the speed ladder, 1.94x its record's noise (0.362)",
-}
+NOISE_GAPS: dict[str, str] = {}
 
 
 def _gaps(gaps: dict, cases) -> list:

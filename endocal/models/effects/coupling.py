@@ -15,13 +15,23 @@ different on each half-plane), is projected onto this axis's plane and this axis
 bend onto the other's. The two half-bends, from this axis's output ``y`` (the base
 model's, deg) and the other axis's position ``x`` (deg)::
 
-    h_y = y + a · x + b · |x|        a, b: the other bend projected through its deviated
+    B   = g · x + κ · y              the other half-bend. g: per deg of x; κ (``mutual``): per
+                                     deg of this one, whose bend shifts the other's tendon
+                                     anchors (tendon-hole offsets), so the other bend moves with
+                                     this one even with its knob still
+    h_y = y + a · B + b · |B|        a, b: the other bend projected through its deviated
                                      half-planes (odd and even part), and the shift of this
-                                     axis's tendon anchors by the other bend (tendon-hole
-                                     offsets) that the other knob's motion causes
-    h_x = g · x + c± · y             g: the other axis's half-bend per deg of x; c±: this
-                                     axis's own deviation on its + / - half-plane
+                                     axis's tendon anchors by the other bend
+    h_x = B + c± · y                 c±: this axis's own deviation on its + / - half-plane
                                      (c = -tan(deviation))
+
+Model files written before the mutual shift (``"mutual": false``, or no ``mutual`` in their settings) shift this
+axis's anchors by the other knob's drive (``a · x + b · |x|``) and have no ``κ``; they load so, as fitted. On the
+Bouc-Wen closed loop's `coupling` case (each bend shifts the other's anchors) the last record is a speed ladder
+of this knob with the other still, on which the plant's other half-bend spans 16 deg at -0.18 deg per deg of this
+one. Fitted on the loop's records (two-knob and ladder), scored on the ladder against its noise (0.362 deg): the
+drive of the files before, 0.702 deg (1.94x); with the mutual shift, 0.419 deg (1.16x, ``κ`` fitted at -0.163);
+the plant's true other half-bend in place of ``B``, 0.401 deg (2026-12-07, a scratch fit of the loop's records).
 
 The other bend lags its knob as this one does: its tendons slide through their own sheath
 against friction. ``x`` is therefore the other knob's position through a play of half-width
@@ -75,15 +85,16 @@ plant, at 1.13x (2026-12-07).
 
 Parameters ``coupling_linear`` (``a``), ``coupling_abs`` (``b``), ``coupling_gain``
 (``g``), ``coupling_tilt_pos`` / ``coupling_tilt_neg`` (``c+`` / ``c-``), ``coupling_lag_deg``
-(``λ``), for the smooth lag ``coupling_lag_sigma`` (``σ``), with a dead band ``coupling_band_deg`` (``w``), and
-with the frame's slip ``coupling_slip_dps`` (``s``). All zero is no coupling (``θ = y``). ``X`` is the extra column ``other_cmd_deg``
+(``λ``), for the smooth lag ``coupling_lag_sigma`` (``σ``), with a dead band ``coupling_band_deg`` (``w``),
+with the frame's slip ``coupling_slip_dps`` (``s``), and ``coupling_mutual`` (``κ``). All zero is no coupling
+(``θ = y``). ``X`` is the extra column ``other_cmd_deg``
 (the other knob's command, deg) unless another is named: ``coupling:ml_meas_deg`` uses the
 other axis's measured angle (then ``g ≈ 1`` and ``λ ≈ 0``). A model file written before the
 lag (its ``coupling`` settings without ``lag`` or ``other_lag``) loads without it, as it was fitted.
 
 The term acts on the base's output (an :class:`OutputFilter`): the magnification
 multiplies it. The anchor shift is, physically, an input of this axis's tendons (it
-passes through their friction); ``a · x`` is its first-order share on the output.
+passes through their friction); ``a · B`` is its first-order share on the output.
 ``θ`` rises monotonically with ``y``, so the inverse solves one scalar equation per sample
 exactly (safeguarded Newton); it needs the other axis's logged (or planned) trajectory and
 therefore does not stream.
@@ -138,58 +149,69 @@ def _eq1(u, z, cd, sd):
 
 
 @njit(cache=True)
-def coupling_forward(y_deg, x_deg, a, b, g, c_pos, c_neg, dx_lag, slip_deg, t_run_s):
+def coupling_forward(y_deg, x_deg, a, b, g, c_pos, c_neg, kappa, mutual, dx_lag, slip_deg, t_run_s):
     """Measured angle (deg) from the base output ``y`` and the other axis's drive ``x`` (deg).
 
+    ``kappa``: the other half-bend per deg of this one (the shift of its anchors by this bend); with ``mutual``
+    the other half-bend ``B = g x + kappa y``, not ``x``, shifts this axis's anchors (module docstring).
     ``dx_lag`` (n, m): the derivatives of ``x`` by the lag's and the band's m parameters (:meth:`Coupling._x`).
     ``slip_deg`` (n,): the other axis's frame slip at each sample (deg; zeros without), ``t_run_s`` (n,) its time
-    (its derivative by the slip rate). Returns ``theta`` (n,), ``d theta / d y`` (n,) and the derivatives (n, 6 + m)
-    by ``(a, b, g, c_pos, c_neg)``, the drive's m parameters and the slip rate (module docstring).
+    (its derivative by the slip rate). Returns ``theta`` (n,), ``d theta / d y`` (n,) and the derivatives (n, 7 + m)
+    by ``(a, b, g, c_pos, c_neg)``, the drive's m parameters, the slip rate and ``kappa``.
     """
     n = y_deg.shape[0]
     m = dx_lag.shape[1]
     out = np.empty(n)
     dy = np.empty(n)
-    own = np.zeros((n, 6 + m))
+    own = np.zeros((n, 7 + m))
     for k in range(n):
         y = y_deg[k] * _D2R
         x = x_deg[k] * _D2R
-        ax = abs(x)
+        other = g * x + kappa * y  # the other half-bend
+        # what shifts this axis's anchors: the other half-bend, or (files before the mutual shift) its drive
+        s_deg = (g * x_deg[k] + kappa * y_deg[k]) if mutual else x_deg[k]
+        s = s_deg * _D2R
         c = c_pos if y >= 0.0 else c_neg
         d = slip_deg[k] * _D2R
-        f, f_u, f_z, f_d = _eq1(y + a * x + b * ax, g * x + c * y, math.cos(d), math.sin(d))
+        f, f_u, f_z, f_d = _eq1(y + a * s + b * abs(s), other + c * y, math.cos(d), math.sin(d))
         out[k] = f / _D2R
-        dy[k] = f_u + f_z * c
-        own[k, 0] = f_u * x_deg[k]
-        own[k, 1] = f_u * abs(x_deg[k])
-        own[k, 2] = f_z * x_deg[k]
+        sgn = 1.0 if s_deg > 0.0 else (-1.0 if s_deg < 0.0 else 0.0)
+        ab = a + b * sgn  # d(a s + b |s|) / ds
+        ds_dy = kappa if mutual else 0.0
+        ds_dx = g if mutual else 1.0
+        dy[k] = f_u * (1.0 + ab * ds_dy) + f_z * (kappa + c)
+        own[k, 0] = f_u * s_deg
+        own[k, 1] = f_u * abs(s_deg)
+        own[k, 2] = (f_u * ab if mutual else 0.0) * x_deg[k] + f_z * x_deg[k]
         own[k, 3 if y >= 0.0 else 4] = f_z * y_deg[k]
-        sx = 1.0 if x_deg[k] > 0.0 else (-1.0 if x_deg[k] < 0.0 else 0.0)
-        dth_dx = f_u * (a + b * sx) + f_z * g
+        dth_dx = f_u * ab * ds_dx + f_z * g
         for j in range(m):
             own[k, 5 + j] = dth_dx * dx_lag[k, j]
         own[k, 5 + m] = f_d * t_run_s[k]
+        own[k, 6 + m] = ((f_u * ab) if mutual else 0.0) * y_deg[k] + f_z * y_deg[k]
     return out, dy, own
 
 
 @njit(cache=True)
-def coupling_inverse(theta_deg, x_deg, a, b, g, c_pos, c_neg, slip_deg):
+def coupling_inverse(theta_deg, x_deg, a, b, g, c_pos, c_neg, kappa, mutual, slip_deg):
     """Base output ``y`` (deg) whose coupled angle is ``theta`` (deg): safeguarded Newton per sample."""
     n = theta_deg.shape[0]
     out = np.empty(n)
+    ds_dy = kappa if mutual else 0.0
     for k in range(n):
         th = theta_deg[k] * _D2R
         x = x_deg[k] * _D2R
+        s0 = g * x if mutual else x  # the anchors' shift at y = 0; it grows by ds_dy per rad of y
         d = slip_deg[k] * _D2R
         cd = math.cos(d)
         sd = math.sin(d)
         lo = -0.5 * math.pi
         hi = 0.5 * math.pi
-        shift = a * x + b * abs(x)
-        y = min(max(th - shift, lo), hi)
+        y = min(max(th - a * s0 - b * abs(s0), lo), hi)
         for _ in range(200):
             c = c_pos if y >= 0.0 else c_neg
-            f, f_u, f_z, _f_d = _eq1(y + shift, g * x + c * y, cd, sd)
+            s = s0 + ds_dy * y
+            f, f_u, f_z, _f_d = _eq1(y + a * s + b * abs(s), g * x + kappa * y + c * y, cd, sd)
             r = f - th
             if r > 0.0:
                 hi = y
@@ -197,7 +219,8 @@ def coupling_inverse(theta_deg, x_deg, a, b, g, c_pos, c_neg, slip_deg):
                 lo = y
             if r == 0.0 or hi - lo <= 1e-15:
                 break
-            dd = f_u + f_z * c
+            sgn = 1.0 if s > 0.0 else (-1.0 if s < 0.0 else 0.0)
+            dd = f_u * (1.0 + (a + b * sgn) * ds_dy) + f_z * (kappa + c)
             yn = y - r / dd if dd > 0.0 else 0.5 * (lo + hi)
             if not lo < yn < hi:
                 yn = 0.5 * (lo + hi)
@@ -234,12 +257,12 @@ class Coupling(OutputFilter):
         Extra column holding the other axis's position (deg); default ``other_cmd_deg``.
 
     Fitted parameters (prefix ``coupling_``): ``linear``, ``abs`` (deg of this axis's
-    half-bend per deg of the other's position), ``gain`` (the other axis's half-bend per
-    deg of its position), ``tilt_pos``, ``tilt_neg`` (out-of-plane share of this axis's
+    half-bend per deg of the other's half-bend; per deg of its position without ``mutual``), ``gain`` (the
+    other axis's half-bend per deg of its position), ``tilt_pos``, ``tilt_neg`` (out-of-plane share of this axis's
     own bend on its + / - half-plane), ``lag_deg`` (the other bend's play, or its smooth
     lag's saturation, deg of the other knob; not with ``lag="none"``), ``lag_sigma`` (the smooth
     lag's shape), ``band_deg`` (the other bend's dead band, with ``band``), ``slip_dps`` (the
-    other axis's frame slip, with ``slip``).
+    other axis's frame slip, with ``slip``), ``mutual`` (the other half-bend per deg of this one, with ``mutual``).
     lag : {"play", "smooth", "none"}, optional
         The other bend's lag behind its knob: a play, its smooth counterpart, or none (the form of
         model files written before the lag: five parameters, ``x`` the column itself). By default it
@@ -251,6 +274,9 @@ class Coupling(OutputFilter):
     slip : bool, optional
         Whether eq. 1's tip is turned by the other axis's frame slip (``slip_dps``). By default it is where
         the model carries ``drift``.
+    mutual : bool, optional
+        Whether this bend shifts the other's anchors (``mutual``) and the other bend, not its knob's drive, shifts
+        this axis's. By default it does; model files written before it load without.
     """
 
     name = "coupling"
@@ -262,7 +288,7 @@ class Coupling(OutputFilter):
                  "axis's angle, not this axis's command alone")
     protocol = "move the other knob alone, or both knobs at different frequencies (circle, lissajous)"
     units = {"linear": "deg/deg", "abs": "deg/deg", "gain": "deg/deg", "tilt_pos": "", "tilt_neg": "", "lag_deg": "deg",
-             "lag_sigma": "", "band_deg": "deg", "slip_dps": "deg/s"}
+             "lag_sigma": "", "band_deg": "deg", "slip_dps": "deg/s", "mutual": "deg/deg"}
     usage = "coupling[:COLUMN]"
     needs = ("other_cmd_deg (or the named column)",)
     requires = (other_knob_moving(),)
@@ -286,25 +312,26 @@ class Coupling(OutputFilter):
         return design.planned(k, int(2 * f1 * (duration - 2 * FADE_S)))
 
     def __init__(self, column: str = OTHER_CMD, lag: str | None = None, band: bool | None = None,
-                 slip: bool | None = None):
+                 slip: bool | None = None, mutual: bool | None = None):
         if not isinstance(column, str) or not column:
             raise ModelError(f"coupling: column must be a column name, got {column!r}")
         if lag is not None and lag not in LAG_RULES:
             raise ModelError(f"coupling: lag must be one of {', '.join(LAG_RULES)}, got {lag!r}")
-        for name, value in (("band", band), ("slip", slip)):
+        for name, value in (("band", band), ("slip", slip), ("mutual", mutual)):
             if value is not None and not isinstance(value, bool):
                 raise ModelError(f"coupling: {name} must be true or false, got {value!r}")
         self.column = column
         self.lag = lag
         self.band = band
         self.slip = slip
+        self.mutual = mutual
 
     @classmethod
     def from_settings(cls, settings: dict) -> Coupling:
         """A model file's entry. Files written before the smooth lag say ``other_lag`` (true: the play); files
         written before the lag say neither and keep their five parameters; files written before the other bend's
         dead band or the frame's slip do not say ``band`` or ``slip`` and load without them."""
-        settings = {"band": False, "slip": False, **settings}
+        settings = {"band": False, "slip": False, "mutual": False, **settings}
         if "lag" not in settings:
             old = settings.pop("other_lag", False)
             if not isinstance(old, bool):
@@ -319,9 +346,10 @@ class Coupling(OutputFilter):
         lag = self.lag if self.lag is not None else ("play" if model.return_point_memory else "smooth")
         band = self.band if self.band is not None else any(e.name == "deadzone" for e in effects)
         slip = self.slip if self.slip is not None else any(e.name == "drift" for e in effects)
-        if (lag, band, slip) == (self.lag, self.band, self.slip):
+        mutual = self.mutual if self.mutual is not None else True
+        if (lag, band, slip, mutual) == (self.lag, self.band, self.slip, self.mutual):
             return self
-        return type(self)(self.column, lag, band, slip)
+        return type(self)(self.column, lag, band, slip, mutual)
 
     @property
     def other_lag(self) -> bool:
@@ -338,12 +366,13 @@ class Coupling(OutputFilter):
         return self.name if self.column == OTHER_CMD else f"{self.name}:{self.column}"
 
     def settings(self) -> dict:
-        return {"column": self.column, "lag": self.lag or "play", "band": bool(self.band), "slip": bool(self.slip)}
+        return {"column": self.column, "lag": self.lag or "play", "band": bool(self.band), "slip": bool(self.slip),
+                "mutual": bool(self.mutual)}
 
     def param_names(self) -> list[str]:
         lag = {"none": (), "smooth": ("lag_deg", "lag_sigma")}.get(self.lag or "play", ("lag_deg",))
         return [k for k in self.units if (not k.startswith("lag_") or k in lag) and (k != "band_deg" or self.band)
-                and (k != "slip_dps" or self.slip)]
+                and (k != "slip_dps" or self.slip) and (k != "mutual" or self.mutual)]
 
     def check(self, data: HysteresisData) -> None:
         try:
@@ -374,6 +403,8 @@ class Coupling(OutputFilter):
             own.append(Parameter(f"{self.prefix}_band_deg", min(BAND_START_DEG, 0.5 * hi), 0.0, hi))
         if self.slip:  # either sign, as drift's rate; 60 deg/min is beyond any sensor's slip
             own.append(Parameter(f"{self.prefix}_slip_dps", 0.0, -1.0, 1.0))
+        if self.mutual:  # the other half-bend per deg of this one: a tendon-hole offset below the bend's radius
+            own.append(Parameter(f"{self.prefix}_mutual", 0.0, -1.0, 1.0))
         return own
 
     def start_candidates(self, data: HysteresisData, u: np.ndarray) -> list[dict]:
@@ -439,9 +470,10 @@ class Coupling(OutputFilter):
         played, d_lag = varplay_forward_jac(x, width, np.ones((x.size, 1)), np.zeros((x.size, 0)), starts)
         return played, np.ascontiguousarray(d_lag[:, :1])
 
-    @staticmethod
-    def _args(p: dict) -> tuple[float, ...]:
-        return tuple(float(p[k]) for k in ("linear", "abs", "gain", "tilt_pos", "tilt_neg"))
+    def _args(self, p: dict) -> tuple:
+        """``(a, b, g, c_pos, c_neg, kappa, mutual)`` for the kernels (``kappa`` 0 without the mutual shift)."""
+        own = tuple(float(p[k]) for k in ("linear", "abs", "gain", "tilt_pos", "tilt_neg"))
+        return (*own, float(p["mutual"]) if self.mutual else 0.0, bool(self.mutual))
 
     def _slip(self, p: dict, data: HysteresisData) -> tuple[np.ndarray, np.ndarray]:
         """The other axis's frame slip (deg, n) and the time it has grown over (s, n): zeros without ``slip``."""
@@ -455,13 +487,17 @@ class Coupling(OutputFilter):
         x, dx_lag = self._x(p, data, friction)
         slip, elapsed = self._slip(p, data)
         out, dy, own = coupling_forward(np.ascontiguousarray(y, dtype=float), x, *self._args(p), dx_lag, slip, elapsed)
-        return out, dy, (own if self.slip else np.ascontiguousarray(own[:, :-1]))
+        if self.slip and self.mutual:
+            return out, dy, own
+        keep = [j for j in range(own.shape[1] - 2)] + ([own.shape[1] - 2] if self.slip else []) + (
+            [own.shape[1] - 1] if self.mutual else [])
+        return out, dy, np.ascontiguousarray(own[:, keep])
 
     def apply(self, p: dict, y: np.ndarray, data: HysteresisData, friction: np.ndarray | None = None) -> np.ndarray:
         return self._forward(p, y, data, friction)[0]
 
     def apply_jac(self, p: dict, y: np.ndarray, data: HysteresisData, J: np.ndarray):
-        """Coupled output, the upstream Jacobian through it (n, m) and the own columns (n, 5 to 9). A model whose
+        """Coupled output, the upstream Jacobian through it (n, m) and the own columns (n, 5 to 10). A model whose
         effects scale the base's friction is differentiated numerically, so no ``friction`` comes here."""
         out, dy, own = self._forward(p, y, data)
         return out, dy[:, None] * J, own
