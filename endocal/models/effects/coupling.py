@@ -330,7 +330,8 @@ class Coupling(OutputFilter):
     def from_settings(cls, settings: dict) -> Coupling:
         """A model file's entry. Files written before the smooth lag say ``other_lag`` (true: the play); files
         written before the lag say neither and keep their five parameters; files written before the other bend's
-        dead band or the frame's slip do not say ``band`` or ``slip`` and load without them."""
+        dead band, the frame's slip or the mutual shift do not say ``band``, ``slip`` or ``mutual`` and load without
+        them."""
         settings = {"band": False, "slip": False, "mutual": False, **settings}
         if "lag" not in settings:
             old = settings.pop("other_lag", False)
