@@ -46,8 +46,7 @@ TRUTH = {
     # the other half-bend 0.8 deg per deg of the other knob, lagging it by a 3 deg play; own half-planes
     # deviated by +8.5 and -11.3 deg
     "coupling": ("coupling", {"coupling_linear": 0.12, "coupling_abs": 0.06, "coupling_gain": 0.8,
-                              "coupling_tilt_pos": -0.15, "coupling_tilt_neg": 0.2, "coupling_lag_deg": 3.0,
-                              "coupling_mutual": -0.15},
+                              "coupling_tilt_pos": -0.15, "coupling_tilt_neg": 0.2, "coupling_lag_deg": 3.0},
                  "coupling["),
     "creep": ("creep", {"creep_fraction": 0.25, "creep_tau_s": 2.0}, "creep("),
     "load": ("load:wrap_deg", {"load_wrap_deg_up": 0.05, "load_wrap_deg_down": 0.0, "load_wrap_deg_up_amp": 0.0005,
