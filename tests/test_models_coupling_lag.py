@@ -220,3 +220,29 @@ def test_the_other_bend_follows_this_one_through_its_anchors(tmp_path):
     back = mutual.inverse(mutual.predict(d), t_s=t, extras=extras)
     assert np.max(np.abs(back - u)) < 1e-6
     assert_loads_as_written_before(before, "mutual", tmp_path / "m.json", plant)
+
+
+def test_the_coupling_jacobian_with_the_mutual_shift_matches_finite_differences():
+    """The analytic columns (``apply_jac``: d theta / d y and by each own parameter, the drive's through the lag)
+    against central differences of ``apply``. The angle is smooth in every parameter away from the kinks (this
+    axis's output or the anchors' shift crossing zero, where the tilt or the even term switches side), so there the
+    two agree to rounding: 1e-5 of a deg per unit, far below the 1e-3 a wrong sign or factor leaves."""
+    from endocal.models.effects.coupling import Coupling
+
+    t, u, extras = rich_command()
+    d = HysteresisData(cmd_deg=u, t_s=t, extras=extras)
+    c = Coupling(lag="smooth", mutual=True, slip=True)
+    p = {k.removeprefix("coupling_"): v for k, v in {**COUPLING, "coupling_slip_dps": -0.02}.items()}
+    assert set(p) == set(c.param_names())
+    y = 50.0 * np.sin(2 * np.pi * 0.07 * t) + 5.0
+    out, dy_j, own = c.apply_jac(p, y, d, np.ones((y.size, 1)))
+    x = c._x(p, d)[0]
+    shift = p["gain"] * x + p["mutual"] * y
+    smooth = (np.abs(y) > 0.5) & (np.abs(shift) > 0.5)
+    h = 1e-5
+    num_y = (c.apply(p, y + h, d) - c.apply(p, y - h, d)) / (2 * h)
+    assert np.max(np.abs(dy_j[smooth, 0] - num_y[smooth])) < 1e-5
+    for j, name in enumerate(c.param_names()):
+        step = h * max(1.0, abs(p[name]))
+        num = (c.apply({**p, name: p[name] + step}, y, d) - c.apply({**p, name: p[name] - step}, y, d)) / (2 * step)
+        assert np.max(np.abs(own[smooth, j] - num[smooth])) < 1e-5 * max(1.0, np.max(np.abs(num))), name

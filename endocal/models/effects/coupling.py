@@ -494,11 +494,9 @@ class Coupling(OutputFilter):
         x, dx_lag = self._x(p, data, friction)
         slip, elapsed = self._slip(p, data)
         out, dy, own = coupling_forward(np.ascontiguousarray(y, dtype=float), x, *self._args(p), dx_lag, slip, elapsed)
-        if self.slip and self.mutual:
-            return out, dy, own
-        keep = [j for j in range(own.shape[1] - 2)] + ([own.shape[1] - 2] if self.slip else []) + (
-            [own.shape[1] - 1] if self.mutual else [])
-        return out, dy, np.ascontiguousarray(own[:, keep])
+        n_drive = own.shape[1] - 2  # (a, b, g, c+, c-) and the drive's; then the slip rate and kappa, where fitted
+        cols = [*range(n_drive), *([n_drive] if self.slip else []), *([n_drive + 1] if self.mutual else [])]
+        return out, dy, own[:, cols]
 
     def apply(self, p: dict, y: np.ndarray, data: HysteresisData, friction: np.ndarray | None = None) -> np.ndarray:
         return self._forward(p, y, data, friction)[0]
