@@ -38,8 +38,9 @@ other bend too (endocal/sim/tendon.py), and there the shift predicts records its
 validate's rolling-origin folds of its circle record (tests/test_validation_hidden.py, `bspline`) it loses the
 last block, where the record spirals back to rest through the circle's interior, a region no fold was fitted on:
 1.08 against 0.81 deg there, so 0.620 against 0.541 deg over the five blocks, while it wins each block on the
-circle (tests/test_models_coupling_lag.py, 2026-12-07). On a bank of plays a shift fitted on one region
-extrapolates worse than the drive does; on the Bouc-Wen plant its gain (1.94x to 1.16x) outweighs that.
+circle (tests/test_models_coupling_lag.py, 2026-12-07). So a shift fitted on one region of the two knobs' travel
+can extrapolate worse than the drive does; the bank-of-plays bases keep the drive their closed loops were validated
+with, and on the Bouc-Wen plant the shift's gain (1.94x to 1.16x) outweighs that risk.
 
 The other bend lags its knob as this one does: its tendons slide through their own sheath
 against friction. ``x`` is therefore the other knob's position through a play of half-width
