@@ -12,7 +12,15 @@ import pytest
 from endocal.errors import ModelError
 from endocal.models import HysteresisData, load_model, make_model, save_model
 from endocal.models.effects import EFFECTS
+from endocal.models.effects.coupling import Coupling
+from endocal.sim import SimConfig
+from endocal.validation.data import axis_data
+from endocal.validation.folds import fold_bounds, fold_errors
+from endocal.validation.scan import scan_stride
+from endocal.validation.structure import SCAN_FTOL
 from tests.test_models_effects_catalog import NOISE_DEG, rich_command
+from tests.test_validation_hidden import CASES as HIDDEN
+from tests.test_validation_hidden import NO_SLACK, SCAN_SAMPLES, simulate
 
 DAHL = {"dahl_k_lin": 1.0, "dahl_fc_deg": 5.0, "dahl_sigma0": 0.4, "dahl_offset_deg": 1.0}
 #: The other half-bend 0.8 deg per deg of the other knob, lagging it by a smooth stretch saturating at 6 deg
@@ -119,7 +127,6 @@ def test_the_base_s_friction_conditions_scale_the_other_bend_s_lag():
     residual is the noise (0.301 deg on 2026-12-07); the same model with the lag's bound held constant misses by
     more than 5 % over it (0.336 deg: the lag errs by up to 1.8 deg of the other knob, which reaches this axis's angle
     through the coupling's 0.12 and the magnification). Tolerances as in the test above."""
-    from endocal.models.effects.coupling import Coupling
 
     class HeldLag(Coupling):
         other_friction = None  # the lag's bound constant, whatever scales the base's friction
@@ -148,7 +155,6 @@ def test_the_other_bend_has_a_dead_band_where_the_model_carries_one(tmp_path):
     errors with the noise left (0.297 deg on 2026-12-07), where the drive without the band misses by more than 5 %
     over it (0.341 deg: within the band the other half-bend reads 3.2 deg too far, which reaches this axis through the
     coupling's 0.12 and its magnification). A file written before the band loads without it. Tolerances as above."""
-    from endocal.models.effects.coupling import Coupling
 
     assert [e.band for e in make_model("dahl", ["deadzone:tip", "coupling"])._effects() if e.name == "coupling"] == [True]
     assert [e.band for e in make_model("pi", ["deadzone", "coupling"])._effects() if e.name == "coupling"] == [True]
@@ -175,7 +181,6 @@ def test_the_other_axis_s_frame_slip_where_the_model_carries_a_drift():
     the record), the fit recovers the rate within five standard errors with the noise left (0.302 deg on
     2026-12-07); without the slip the fit misses by 0.382 deg (the other bend's 16 deg of half-bend turned by up to
     3.6 deg). Tolerances as above."""
-    from endocal.models.effects.coupling import Coupling
 
     assert [e.slip for e in make_model("dahl", ["drift", "coupling"])._effects() if e.name == "coupling"] == [True]
     assert [e.slip for e in make_model("dahl", ["coupling"])._effects()] == [False]
@@ -203,7 +208,6 @@ def test_the_other_bend_follows_this_one_through_its_anchors(tmp_path):
     by more than 5 % over the noise (0.325 deg). A file
     written before the shift loads without it, as it was fitted, and the inverse undoes the shift. Tolerances as
     above."""
-    from endocal.models.effects.coupling import Coupling
 
     assert [e.mutual for e in make_model("dahl", ["coupling"])._effects()] == [True]
     assert [e.mutual for e in make_model("pi", ["coupling"])._effects()] == [False]  # measured: module docstring
@@ -227,7 +231,6 @@ def test_the_coupling_jacobian_with_the_mutual_shift_matches_finite_differences(
     against central differences of ``apply``. The angle is smooth in every parameter away from the kinks (this
     axis's output or the anchors' shift crossing zero, where the tilt or the even term switches side), so there the
     two agree to rounding: 1e-5 of a deg per unit, far below the 1e-3 a wrong sign or factor leaves."""
-    from endocal.models.effects.coupling import Coupling
 
     t, u, extras = rich_command()
     d = HysteresisData(cmd_deg=u, t_s=t, extras=extras)
@@ -255,30 +258,17 @@ def test_on_a_circle_the_mutual_shift_loses_only_where_the_record_leaves_the_cir
     # last block, where the record spirals back to rest through the circle's interior (a third of its samples
     # inside 0.8 of the radius, 4 % of the training prefix's), a region no fold was fitted on. There both
     # structures extrapolate beyond 1.5x the noise, the shift worse.
-    from endocal.models.effects.coupling import Coupling
-    from endocal.sim import SimConfig
-    from endocal.validation.data import axis_data
-    from endocal.validation.folds import fold_bounds, fold_split
-    from endocal.validation.scan import scan_stride
-    from endocal.validation.structure import SCAN_FTOL
-    from tests.test_validation_hidden import CASES, NO_SLACK, SCAN_SAMPLES, simulate
-
-    sections, protocol, overrides = CASES["coupling"][:3]
-    cfg = SimConfig.default().replace(**NO_SLACK).replace(**sections)
-    aligned, noise = simulate(cfg, protocol, overrides, seed=0)
+    cfg = SimConfig.default().replace(**NO_SLACK).replace(**HIDDEN["coupling"][0])
+    aligned, noise = simulate(cfg, *HIDDEN["coupling"][1:3], seed=0)
     data = axis_data([aligned], "ap")
     d = data.decimate(scan_stride(data, SCAN_SAMPLES))
     bounds = fold_bounds(d.n_samples, 5, 0.5)
     radius = np.hypot(d.cmd_deg, d.extras["other_cmd_deg"])
     inside = radius < 0.8 * radius.max()
     assert inside[bounds[-1][0]:].mean() > 0.25 > 0.05 > inside[:bounds[-1][0]].mean()
-    held = {}
-    for mutual in (False, True):
-        held[mutual] = []
-        for bd in bounds:
-            train, over, idx = fold_split(d, bd)
-            m = make_model("bspline", [Coupling(mutual=mutual)], axis="ap").fit(train, ftol=SCAN_FTOL)
-            held[mutual].append(float(np.sqrt(np.mean((m.predict(over)[idx] - over.meas_deg[idx]) ** 2))))
+    base = make_model("bspline", axis="ap")
+    held = {mutual: [float(np.sqrt(np.mean(fold_errors(base, [Coupling(mutual=mutual)], d, bd, SCAN_FTOL)[0] ** 2)))
+                     for bd in bounds] for mutual in (False, True)}
     on_circle = [(off, on) for off, on in zip(held[False][:-1], held[True][:-1])]
     assert all(on < off for off, on in on_circle), on_circle
     assert held[True][-1] > held[False][-1] > 1.5 * noise, (held, noise)
@@ -290,12 +280,7 @@ def test_fitted_on_more_than_a_circle_the_mutual_shift_predicts_unseen_two_knob_
     # simulator shifts each axis's anchors by the other bend, endocal/sim/tendon.py), predicts the Lissajous and
     # a new circle better by 2-4 % on `bspline` (2026-12-07: 1.406 against 1.446 deg, 0.660 against 0.687; the
     # knob-by-knob check equal, 0.767). So a bank of plays keeps it off for the loss above, not for its physics.
-    from endocal.models.effects.coupling import Coupling
-    from endocal.sim import SimConfig
-    from endocal.validation.data import axis_data
-    from tests.test_validation_hidden import CASES, NO_SLACK, simulate
-
-    cfg = SimConfig.default().replace(**NO_SLACK).replace(**CASES["coupling"][0])
+    cfg = SimConfig.default().replace(**NO_SLACK).replace(**HIDDEN["coupling"][0])
     train = axis_data([simulate(cfg, p, o, seed=s)[0] for p, o, s in
                        (("circle", {"cycles": 5}, 0), ("check", {}, 1), ("random", {}, 2))], "ap")
     unseen = {p: axis_data([simulate(cfg, p, {}, seed=7)[0]], "ap") for p in ("lissajous", "circle")}

@@ -104,9 +104,10 @@ lag (its ``coupling`` settings without ``lag`` or ``other_lag``) loads without i
 The term acts on the base's output (an :class:`OutputFilter`): the magnification
 multiplies it. The anchor shift is, physically, an input of this axis's tendons (it
 passes through their friction); ``a · B`` is its first-order share on the output.
-``θ`` rises monotonically with ``y``, so the inverse solves one scalar equation per sample
-exactly (safeguarded Newton); it needs the other axis's logged (or planned) trajectory and
-therefore does not stream.
+``θ`` rises monotonically with ``y`` (with the mutual shift, for values as fitted: a, b and κ are
+tenths, so ``1 + (a ± b) κ`` stays near 1), so the inverse solves one scalar equation per sample
+exactly (safeguarded Newton, bisection where a step leaves its bracket); it needs the other
+axis's logged (or planned) trajectory and therefore does not stream.
 """
 
 from __future__ import annotations
