@@ -30,8 +30,9 @@ import math
 import re
 import warnings
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
-from typing import ClassVar
+from typing import ClassVar, NamedTuple
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -44,6 +45,7 @@ from endocal.models.data import HysteresisData, as_data
 from endocal.models.effects import plain_form, resolve_effects
 from endocal.models.effects.base import Effect, InputEffect, OutputEffect
 from endocal.models.effects.base import OutputFilter
+from endocal.models.lsq import least_squares_compressed
 from endocal.models.params import Parameter
 from endocal.models.start import (FIT_HISTORY_FRACTION, HISTORIES, START_GAIN_MIN, assumed_starts, estimate_starts,
                                   first_stretch_fraction, rescored, with_lead_ins)
@@ -599,14 +601,13 @@ class HysteresisModel(ABC):
         lo = np.array([start[n].lower for n in free])
         hi = np.array([start[n].upper for n in free])
         values = {n: float(start[n].value) for n in names}
-        residual, jac = self._residual_fns(d, values, free, structure, effects)
+        fns = self._residual_fns(d, values, free, structure, effects)
         nfev = njev = 0
         if stride >= 2:
-            residual_d, jac_d = self._residual_fns(dd, values, free, structure, effects)
-            pre = _solve(residual_d, x0, jac_d, (lo, hi), max_nfev)
+            pre = _solve(self._residual_fns(dd, values, free, structure, effects), x0, (lo, hi), max_nfev)
             x0 = np.clip(pre.x, lo, hi)
             nfev, njev = pre.nfev, int(pre.njev or 0)
-        res = _solve(residual, x0, jac, (lo, hi), max_nfev)
+        res = _solve(fns, x0, (lo, hi), max_nfev)
         # A run that starts where a longer motion left the knob is fitted from its estimated start
         # (models.start): else its stretch before the first reversal pulls the parameters.
         starts = self._estimated_starts(d, values, free, res.x, structure, effects)
@@ -620,8 +621,8 @@ class HysteresisModel(ABC):
         if starts:
             nfev, njev = nfev + res.nfev, njev + int(res.njev or 0)
             led, keep = with_lead_ins(d, starts)
-            residual, jac = self._residual_fns(led, values, free, structure, effects, keep)
-            res = _solve(residual, np.clip(x_from, lo, hi), jac, (lo, hi), max_nfev)
+            res = _solve(self._residual_fns(led, values, free, structure, effects, keep), np.clip(x_from, lo, hi),
+                         (lo, hi), max_nfev)
             final = {**values, **{n: float(v) for n, v in zip(free, res.x)}}
             starts = rescored(starts, d, self._forward(d, *self._grouped(final), structure, effects), res.fun)
         res.nfev += nfev
@@ -700,8 +701,8 @@ class HysteresisModel(ABC):
             if not trial:
                 continue
             led, keep = with_lead_ins(ds, trial)
-            residual, jac = self._residual_fns(led, values, free, structure, effects, keep)
-            fit = _solve(residual, np.clip(rest.x, *bounds), jac, bounds, max_nfev)
+            fit = _solve(self._residual_fns(led, values, free, structure, effects, keep), np.clip(rest.x, *bounds),
+                         bounds, max_nfev)
             spent = [spent[0] + fit.nfev, spent[1] + int(fit.njev or 0)]
             if fit.cost < (1.0 - START_GAIN_MIN) ** 2 * rest_cost and (best is None or fit.cost < best.cost):
                 best = fit
@@ -711,9 +712,10 @@ class HysteresisModel(ABC):
 
     def _residual_fns(self, data: HysteresisData, values: dict, free: list[str], structure: dict,
                       effects: list[Effect], keep: np.ndarray | None = None):
-        """The fit's residual (deg) over the ``free`` parameters and its Jacobian (analytic, else "2-point").
+        """The fit's residual (deg) over the ``free`` parameters and its Jacobian (analytic, else "2-point"), as
+        :class:`Residuals`.
 
-        Both write the trial values into ``values`` (shared with the caller, which reads the
+        Each writes the trial values into ``values`` (shared with the caller, which reads the
         solution back from it). With ``keep``, ``data`` carries lead-ins (models.start) and only
         the samples at ``keep`` are residuals.
         """
@@ -728,7 +730,7 @@ class HysteresisModel(ABC):
 
         analytic = self._forward_jac_blocks(data, *self._grouped(values), structure, effects)
         if analytic is None:
-            return residual, "2-point"
+            return Residuals(residual, "2-point")
         # where each free parameter's column sits: (block, column in it, column of the fit's Jacobian); the
         # Jacobian is assembled from the blocks directly (joining them first, then picking the free columns,
         # copied every column twice: several per cent of a scan candidate's time)
@@ -741,20 +743,18 @@ class HysteresisModel(ABC):
             picks[b][1].append(k)
         n_rows = meas.size
 
-        def jac(x):
+        def both(x):
             for n, v in zip(free, x):
                 values[n] = float(v)
             base_p, eff_p = self._grouped(values)
-            blocks = self._forward_jac_blocks(data, base_p, eff_p, structure, effects)[1]
-            # Fortran order, as picking the columns gave it before: LAPACK's SVD in the solver rounds
-            # differently on the other layout, and fits on the edge of a tie (the scan's) went the other way
+            y, blocks, _ = self._forward_jac_blocks(data, base_p, eff_p, structure, effects)
             J = np.empty((n_rows, len(free)), order="F")
             for b, (src, dst) in picks.items():
                 block = _columns(blocks[b])
                 J[:, dst] = (block if keep is None else block[keep])[:, src]
-            return J
+            return y[rows] - meas, J
 
-        return residual, jac
+        return Residuals(residual, lambda x: both(x)[1], both)
 
     def _start(self, dd: HysteresisData, effects: list[Effect], fixed: dict, overrides: dict,
                initials: dict | None = None):
@@ -846,9 +846,9 @@ class HysteresisModel(ABC):
         lo = np.array([start[n].lower for n in free])
         hi = np.array([start[n].upper for n in free])
 
-        residual, jac = self._residual_fns(ds, values, free, structure, effects)
+        fns = self._residual_fns(ds, values, free, structure, effects)
         try:
-            res = _solve(residual, x0, jac, (lo, hi), max(1, round(share * START_NFEV_PER_PARAMETER * (1 + len(free)))))
+            res = _solve(fns, x0, (lo, hi), max(1, round(share * START_NFEV_PER_PARAMETER * (1 + len(free)))))
         except (ValueError, FloatingPointError):
             return math.inf, start
         refined = dict(start)
@@ -1162,8 +1162,29 @@ class HysteresisModel(ABC):
     __str__ = __repr__
 
 
-def _solve(residual, x0: np.ndarray, jac, bounds: tuple, max_nfev: int | None):
+class Residuals(NamedTuple):
+    """A fit's least-squares problem over its free parameters (:meth:`HysteresisModel._residual_fns`).
+
+    Attributes
+    ----------
+    residual : callable
+        ``x -> f`` (n,), model minus measurement (deg).
+    jac : callable or "2-point"
+        ``x -> J`` (n, p), analytic; else scipy's finite differences.
+    both : callable or None
+        ``x -> (f, J)`` from one pass of the analytic derivatives (None without them).
+    """
+
+    residual: Callable[[np.ndarray], np.ndarray]
+    jac: Callable[[np.ndarray], np.ndarray] | str
+    both: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
+
+
+def _solve(fns: Residuals, x0: np.ndarray, bounds: tuple, max_nfev: int | None):
     """:func:`scipy.optimize.least_squares`, trust-region reflective within ``bounds``, as every fit here runs it.
+
+    With analytic derivatives it runs on the problem's compressed form (:mod:`endocal.models.lsq`: the same
+    steps, without the SVD of the n x p Jacobian at every iteration).
 
     It stops when a step lowers the cost by less than FTOL of itself, or the ``ftol`` the running
     :meth:`HysteresisModel.fit` was given (scipy's default is 1e-8):
@@ -1172,8 +1193,10 @@ def _solve(residual, x0: np.ndarray, jac, bounds: tuple, max_nfev: int | None):
     to their evaluation cap (a B-spline `coupling` candidate on the thesis's sine-set: 2 600
     evaluations, 15 s, to an RMSE 3e-5 lower than it reached in 11).
     """
-    return least_squares(residual, x0, jac=jac, bounds=bounds, method="trf", x_scale="jac", ftol=_FTOL_NOW.get(),
-                         max_nfev=max_nfev)
+    if fns.both is not None:
+        return least_squares_compressed(fns.both, x0, bounds=bounds, ftol=_FTOL_NOW.get(), max_nfev=max_nfev)
+    return least_squares(fns.residual, x0, jac=fns.jac, bounds=bounds, method="trf", x_scale="jac",
+                         ftol=_FTOL_NOW.get(), max_nfev=max_nfev)
 
 
 def _columns(block: np.ndarray) -> np.ndarray:
