@@ -2,8 +2,9 @@
 
 The compression replaces the residual ``f`` (n,) and its Jacobian ``J`` (n, p) by ``p + 1`` rows with the
 same ``||f + J s||`` for every step ``s``. In exact arithmetic that makes scipy's trust-region iterates
-identical; in floating point they differ by rounding, about ``cond(J) * 1e-16`` relative for the orthogonal
-factorisations used (CholeskyQR2, else the SVD), so the checks below hold to 1e-9 relative unless said.
+identical; in floating point they differ by rounding: the factorisations used (one Cholesky pass where J is well
+conditioned, CholeskyQR2's second pass up to cond 1e6, else the SVD) keep the local model to about 1e-10 relative,
+so the checks below hold to 1e-9 relative unless said.
 """
 
 from __future__ import annotations
