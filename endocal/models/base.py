@@ -748,6 +748,7 @@ class HysteresisModel(ABC):
                 values[n] = float(v)
             base_p, eff_p = self._grouped(values)
             y, blocks, _ = self._forward_jac_blocks(data, base_p, eff_p, structure, effects)
+            # Fortran order, LAPACK's: the compression's triangular solve (models.lsq) works on it without a copy
             J = np.empty((n_rows, len(free)), order="F")
             for b, (src, dst) in picks.items():
                 block = _columns(blocks[b])
