@@ -343,8 +343,18 @@ def test_a_validation_sweep_wider_than_the_estimation_sweep_is_scored_on_the_mod
     v = axis_data([load_aligned(tmp / "wide")], "ap")
     with pytest.warns(UserWarning):
         clamped = float(np.sqrt(np.mean((model.predict(v) - v.meas_deg) ** 2)))
-    # measured 0.80 deg continued against 3.35 clamped (the tracker noise is 0.33)
-    assert d["metrics"]["rmse_deg"] <= 0.4 * clamped, (d["metrics"]["rmse_deg"], clamped)
+    model.out_of_range = "extrapolate"
+    continued = model.predict(v)
+    model.out_of_range = "clamp"
+    with pytest.warns(UserWarning):
+        beyond = np.abs(continued - model.predict(v))[np.abs(v.cmd_deg) > 60.5]
+    assert beyond.max() > 3.0, beyond.max()  # the branches go on: several deg from the clamped prediction
+    # How well they go on is not the data's to say: the up branch's first span and the down branch's last, which
+    # only a reversal reaches, are unidentified (no finite standard error), and so are the tangents the
+    # continuation follows there (test_..._continued_rmse_depends_on_the_cpu)
+    for name in ("bspline_up_dc1", "bspline_down_dc9"):
+        assert not np.isfinite(model.stderr_[name]), (name, model.stderr_[name])
+    assert d["metrics"]["rmse_deg"] < clamped, (d["metrics"]["rmse_deg"], clamped)
     # a sine to 70 deg spends a third of its time beyond 60 (|sin| > 6/7): said under the metrics,
     # before any diagnosis, not only in a note at the end
     n = d["data"][0]["n_samples"]
@@ -352,6 +362,33 @@ def test_a_validation_sweep_wider_than_the_estimation_sweep_is_scored_on_the_mod
     res = _run("validate", tmp / "bs.json", tmp / "wide")
     assert f"warning[beyond-range]: {d['beyond_samples']} of {n} samples command beyond the model's fitted range" in res.stdout, \
         res.stdout
+
+
+@pytest.mark.xfail(strict=False, reason=(
+    "a finding (2026-12-08): the RMSE of the B-spline continued beyond its fitted range rests on end spans the data "
+    "do not determine. Fitted on this machine with OpenBLAS's Haswell, SandyBridge and Nehalem kernels "
+    "(OPENBLAS_CORETYPE), the validation RMSE is 0.795, 1.25 and 1.53 deg with the plain solver and 1.54, 0.785 and "
+    "0.82 with the compressed one, against this bar of 1.34: it holds on some CPUs, not others, for both solvers"))
+def test_the_continued_rmse_depends_on_the_cpu(sine_sweeps):
+    """The bar the test above held until 2026-12-08: continued, 0.4x the clamped prediction's RMSE or better."""
+    import numpy as np
+
+    from endocal.models import load_model
+    from endocal.runs.aligned import load_aligned
+    from endocal.validation.data import axis_data
+
+    tmp = sine_sweeps
+    if not (tmp / "wide").exists():
+        _run("excite", "sine", "--set", "cycles=1", "--set", "frequency_hz=0.04", "--amplitude", "70", "--out",
+             tmp / "wide", "--seed", "3", "--quiet")
+    _run("fit", "hysteresis", tmp / "est", "--axis", "ap", "--model", "bspline", "--out", tmp / "bs.json", "--force")
+    d = _validate_json(tmp, tmp / "bs.json", tmp / "wide")
+    model = load_model(tmp / "bs.json")
+    model.out_of_range = "clamp"
+    v = axis_data([load_aligned(tmp / "wide")], "ap")
+    with pytest.warns(UserWarning):
+        clamped = float(np.sqrt(np.mean((model.predict(v) - v.meas_deg) ** 2)))
+    assert d["metrics"]["rmse_deg"] <= 0.4 * clamped, (d["metrics"]["rmse_deg"], clamped)
 
 
 def test_the_refit_folds_the_validation_data_in_only_when_asked(sine_sweeps, pe_on_val):
