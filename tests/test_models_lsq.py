@@ -15,7 +15,8 @@ from scipy.optimize import least_squares
 
 import endocal.models.base as base
 from endocal.models import make_model
-from endocal.models.lsq import MIN_PIVOT_RATIO, ONE_PASS_PIVOT_RATIO, compress, least_squares_compressed
+import endocal.models.lsq as lsq
+from endocal.models.lsq import MIN_PIVOT_RATIO, ONE_PASS_PIVOT_RATIO, Residuals, compress, solve
 from endocal.sim import SimConfig
 from endocal.validation.data import axis_data
 from tests.test_validation_hidden import simulate
@@ -29,14 +30,20 @@ def _jacobian(rng, n: int, p: int, cond: float) -> np.ndarray:
     return np.asfortranarray((U * s) @ V.T * np.geomspace(1e-3, 1e3, p))
 
 
-@pytest.mark.parametrize("cond", [10.0, 1e5, 1e9])
-def test_the_compressed_model_is_the_full_one_for_every_step(cond):
+@pytest.mark.parametrize("cond, way", [(10.0, "one pass"), (1e5, "two passes"), (1e9, "svd")])
+def test_the_compressed_model_is_the_full_one_for_every_step(cond, way, monkeypatch):
     # well conditioned (one Cholesky pass), cond 1e5 (CholeskyQR2's second pass), 1e9 (the SVD)
+    assert 0.0 < MIN_PIVOT_RATIO < ONE_PASS_PIVOT_RATIO < 1.0
     rng = np.random.default_rng(int(np.log10(cond)))
     n, p = 3000, 12
     J = _jacobian(rng, n, p, cond)
     f = J @ rng.standard_normal(p) + rng.standard_normal(n)  # partly explained, partly not
+    taken = []
+    dtrsm, svd = lsq.dtrsm, lsq.scipy.linalg.svd
+    monkeypatch.setattr(lsq, "dtrsm", lambda *a, **k: taken.append("two passes") or dtrsm(*a, **k))
+    monkeypatch.setattr(lsq.scipy.linalg, "svd", lambda *a, **k: taken.append("svd") or svd(*a, **k))
     ft, Jt = compress(f, J)
+    assert taken == ([] if way == "one pass" else [way]), taken
     assert ft.shape == (p + 1,) and Jt.shape == (p + 1, p)
     assert np.dot(ft, ft) == pytest.approx(np.dot(f, f), rel=1e-12)
     assert Jt.T @ ft == pytest.approx(J.T @ f, rel=1e-9, abs=1e-9 * np.abs(J.T @ f).max())
@@ -59,10 +66,6 @@ def test_a_vanishing_column_is_compressed_exactly():
     assert np.abs(Jt[:, 2]).max() < 1e-12
     s = rng.standard_normal(6)
     assert np.linalg.norm(ft + Jt @ s) == pytest.approx(np.linalg.norm(f + J @ s), rel=1e-10)
-
-
-def test_the_pivot_thresholds_are_ordered():
-    assert 0.0 < MIN_PIVOT_RATIO < ONE_PASS_PIVOT_RATIO < 1.0
 
 
 def test_a_non_finite_trial_stays_non_finite():
@@ -91,7 +94,7 @@ def test_the_solver_takes_the_same_path_on_a_nonlinear_fit():
     x0 = np.array([1.0, 1.0, 1.0, 3.0])
     bounds = (np.zeros(4), np.full(4, 10.0))
     plain = least_squares(fun, x0, jac=jac, bounds=bounds, method="trf", x_scale="jac", ftol=1e-10)
-    comp = least_squares_compressed(lambda x: (fun(x), jac(x)), x0, bounds=bounds, ftol=1e-10, max_nfev=None)
+    comp = solve(Residuals(fun, jac, lambda x: (fun(x), jac(x))), x0, bounds=bounds, ftol=1e-10, max_nfev=None)
     assert comp.x == pytest.approx(plain.x, rel=1e-7)
     assert comp.nfev == plain.nfev and comp.njev == plain.njev
     assert comp.cost == pytest.approx(plain.cost, rel=1e-10)
@@ -106,9 +109,10 @@ def test_a_model_fit_is_the_plain_solvers_fit(monkeypatch):
     d = axis_data([simulate(SimConfig.default(), "damped-sine", {}, seed=0)[0]], "ap")
     model = make_model("bspline", ["delay", "deadzone"], axis="ap").fit(d)
 
-    def plain(fns, x0, bounds, max_nfev):  # what every fit ran before the compression
-        return least_squares(fns.residual, x0, jac=fns.jac, bounds=bounds, method="trf", x_scale="jac",
-                             ftol=base._FTOL_NOW.get(), max_nfev=max_nfev)
+    compressed = base._solve
+
+    def plain(fns, x0, bounds, max_nfev):  # what every fit ran before the compression: the full residual
+        return compressed(fns._replace(both=None), x0, bounds, max_nfev)
 
     monkeypatch.setattr(base, "_solve", plain)
     ref = make_model("bspline", ["delay", "deadzone"], axis="ap").fit(d)

@@ -322,27 +322,37 @@ def test_the_same_condition_names_no_change_between_the_records(pe_on_val):
     assert d["suspects"][0]["effect"] == "deadzone", d["suspects"]
 
 
-def test_a_validation_sweep_wider_than_the_estimation_sweep_is_scored_on_the_model_continued(sine_sweeps):
-    """A sweep to 70 deg validates a model fitted to 60 deg: beyond 60 the model's branches go on (the
-    B-spline along its end tangents), as the tip does; a clamped prediction would stand still for
-    10 deg of knob (about 8 deg of bend) and bury every physical effect under that artefact."""
+def _wide_sweep_validated(tmp):
+    """A `bspline` fitted on the 60 deg sweep, validated on a sweep to 70 deg: validate's JSON, the model (its
+    predictions clamped at the fitted range), the sweep's data and the clamped prediction's RMSE (deg)."""
     import numpy as np
 
     from endocal.models import load_model
     from endocal.runs.aligned import load_aligned
     from endocal.validation.data import axis_data
 
-    tmp = sine_sweeps
-    _run("excite", "sine", "--set", "cycles=1", "--set", "frequency_hz=0.04", "--amplitude", "70", "--out",
-         tmp / "wide", "--seed", "3", "--quiet")
+    if not (tmp / "wide").exists():
+        _run("excite", "sine", "--set", "cycles=1", "--set", "frequency_hz=0.04", "--amplitude", "70", "--out",
+             tmp / "wide", "--seed", "3", "--quiet")
     _run("fit", "hysteresis", tmp / "est", "--axis", "ap", "--model", "bspline", "--out", tmp / "bs.json", "--force")
     d = _validate_json(tmp, tmp / "bs.json", tmp / "wide")
-    assert any("beyond the model's fitted range [-60, 60] deg" in n for n in d["notes"]), d["notes"]
     model = load_model(tmp / "bs.json")
     model.out_of_range = "clamp"
     v = axis_data([load_aligned(tmp / "wide")], "ap")
     with pytest.warns(UserWarning):
         clamped = float(np.sqrt(np.mean((model.predict(v) - v.meas_deg) ** 2)))
+    return d, model, v, clamped
+
+
+def test_a_validation_sweep_wider_than_the_estimation_sweep_is_scored_on_the_model_continued(sine_sweeps):
+    """A sweep to 70 deg validates a model fitted to 60 deg: beyond 60 the model's branches go on (the
+    B-spline along its end tangents), as the tip does; a clamped prediction would stand still for
+    10 deg of knob (about 8 deg of bend) and bury every physical effect under that artefact."""
+    import numpy as np
+
+    tmp = sine_sweeps
+    d, model, v, clamped = _wide_sweep_validated(tmp)
+    assert any("beyond the model's fitted range [-60, 60] deg" in n for n in d["notes"]), d["notes"]
     model.out_of_range = "extrapolate"
     continued = model.predict(v)
     model.out_of_range = "clamp"
@@ -371,23 +381,7 @@ def test_a_validation_sweep_wider_than_the_estimation_sweep_is_scored_on_the_mod
     "0.82 with the compressed one, against this bar of 1.34: it holds on some CPUs, not others, for both solvers"))
 def test_the_continued_rmse_depends_on_the_cpu(sine_sweeps):
     """The bar the test above held until 2026-12-08: continued, 0.4x the clamped prediction's RMSE or better."""
-    import numpy as np
-
-    from endocal.models import load_model
-    from endocal.runs.aligned import load_aligned
-    from endocal.validation.data import axis_data
-
-    tmp = sine_sweeps
-    if not (tmp / "wide").exists():
-        _run("excite", "sine", "--set", "cycles=1", "--set", "frequency_hz=0.04", "--amplitude", "70", "--out",
-             tmp / "wide", "--seed", "3", "--quiet")
-    _run("fit", "hysteresis", tmp / "est", "--axis", "ap", "--model", "bspline", "--out", tmp / "bs.json", "--force")
-    d = _validate_json(tmp, tmp / "bs.json", tmp / "wide")
-    model = load_model(tmp / "bs.json")
-    model.out_of_range = "clamp"
-    v = axis_data([load_aligned(tmp / "wide")], "ap")
-    with pytest.warns(UserWarning):
-        clamped = float(np.sqrt(np.mean((model.predict(v) - v.meas_deg) ** 2)))
+    d, _, _, clamped = _wide_sweep_validated(sine_sweeps)
     assert d["metrics"]["rmse_deg"] <= 0.4 * clamped, (d["metrics"]["rmse_deg"], clamped)
 
 

@@ -30,12 +30,10 @@ import math
 import re
 import warnings
 from abc import ABC, abstractmethod
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
-from typing import ClassVar, NamedTuple
+from typing import ClassVar
 
 import numpy as np
-from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
 from endocal.errors import CompensationRefusedError, ModelError, OutOfRangeWarning
@@ -45,7 +43,7 @@ from endocal.models.data import HysteresisData, as_data
 from endocal.models.effects import plain_form, resolve_effects
 from endocal.models.effects.base import Effect, InputEffect, OutputEffect
 from endocal.models.effects.base import OutputFilter
-from endocal.models.lsq import least_squares_compressed
+from endocal.models.lsq import Residuals, solve
 from endocal.models.params import Parameter
 from endocal.models.start import (FIT_HISTORY_FRACTION, HISTORIES, START_GAIN_MIN, assumed_starts, estimate_starts,
                                   first_stretch_fraction, rescored, with_lead_ins)
@@ -1163,29 +1161,11 @@ class HysteresisModel(ABC):
     __str__ = __repr__
 
 
-class Residuals(NamedTuple):
-    """A fit's least-squares problem over its free parameters (:meth:`HysteresisModel._residual_fns`).
-
-    Attributes
-    ----------
-    residual : callable
-        ``x -> f`` (n,), model minus measurement (deg).
-    jac : callable or "2-point"
-        ``x -> J`` (n, p), analytic; else scipy's finite differences.
-    both : callable or None
-        ``x -> (f, J)`` from one pass of the analytic derivatives (None without them).
-    """
-
-    residual: Callable[[np.ndarray], np.ndarray]
-    jac: Callable[[np.ndarray], np.ndarray] | str
-    both: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
-
-
 def _solve(fns: Residuals, x0: np.ndarray, bounds: tuple, max_nfev: int | None):
     """:func:`scipy.optimize.least_squares`, trust-region reflective within ``bounds``, as every fit here runs it.
 
-    With analytic derivatives it runs on the problem's compressed form (:mod:`endocal.models.lsq`: the same
-    steps, without the SVD of the n x p Jacobian at every iteration).
+    With analytic derivatives it runs on the problem's compressed form (:func:`endocal.models.lsq.solve`: the
+    same steps, without the SVD of the n x p Jacobian at every iteration).
 
     It stops when a step lowers the cost by less than FTOL of itself, or the ``ftol`` the running
     :meth:`HysteresisModel.fit` was given (scipy's default is 1e-8):
@@ -1194,10 +1174,7 @@ def _solve(fns: Residuals, x0: np.ndarray, bounds: tuple, max_nfev: int | None):
     to their evaluation cap (a B-spline `coupling` candidate on the thesis's sine-set: 2 600
     evaluations, 15 s, to an RMSE 3e-5 lower than it reached in 11).
     """
-    if fns.both is not None:
-        return least_squares_compressed(fns.both, x0, bounds=bounds, ftol=_FTOL_NOW.get(), max_nfev=max_nfev)
-    return least_squares(fns.residual, x0, jac=fns.jac, bounds=bounds, method="trf", x_scale="jac",
-                         ftol=_FTOL_NOW.get(), max_nfev=max_nfev)
+    return solve(fns, x0, bounds=bounds, ftol=_FTOL_NOW.get(), max_nfev=max_nfev)
 
 
 def _columns(block: np.ndarray) -> np.ndarray:

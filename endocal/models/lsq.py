@@ -23,7 +23,8 @@ conditioned better than about 1e3 (the implicit Q's loss of orthogonality is abo
 ``Q₁ = J R⁻¹`` and factors again, which restores it; beyond that (a parameter whose column vanishes, two columns
 alike) the SVD compresses, exact at any rank, as scipy would have taken it. On 4000 x 33 Jacobians
 (``tests/test_models_lsq.py``'s, one core, 2026-12-08): 1.1 ms one pass, 2.7 ms two, 8.1 ms the SVD, where
-scipy's own SVD takes 8-10 ms. In the demo's fits half the Jacobians take one pass, 40 % two, 11 % the SVD.
+scipy's own SVD takes 8-10 ms. Of the 1 887 Jacobians of six fits on the demo's records, 37 % took one pass, 52 %
+two, 11 % the SVD.
 
 Since ``f̃`` needs J at every point the solver evaluates (also a trial step it rejects), each
 evaluation computes the residual and the Jacobian together (one pass of the model's analytic
@@ -33,6 +34,7 @@ derivatives, which computes the output anyway); a trial step is rejected in abou
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 import scipy.linalg
@@ -46,6 +48,8 @@ MIN_PIVOT_RATIO = 1e-6
 #: Above this ratio (cond(A) under about 1e3) one Cholesky pass is exact enough: the implicit Q's loss of
 #: orthogonality, about cond(A)² u, stays under 1e-10; below it CholeskyQR2's second pass restores it.
 ONE_PASS_PIVOT_RATIO = 1e-3
+#: scipy's solver as every fit runs it: trust-region reflective, each parameter scaled by its Jacobian column's norm.
+_TRF = {"method": "trf", "x_scale": "jac"}
 
 
 def compress(f: np.ndarray, J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -64,7 +68,6 @@ def compress(f: np.ndarray, J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return np.append(np.zeros(J.shape[1]), np.sqrt(float(f @ f))), np.full((J.shape[1] + 1, J.shape[1]), np.nan)
     ff = float(f @ f)
     G = J.T @ J
-    c = J.T @ f
     norms = np.sqrt(np.diag(G))
     scale = np.where(norms > 0.0, norms, 1.0)
     try:
@@ -80,7 +83,7 @@ def compress(f: np.ndarray, J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             top = scipy.linalg.solve_triangular(R2, Q1.T @ f, trans="T", lower=False, check_finite=False)
             R = R2 @ R
         else:
-            top = scipy.linalg.solve_triangular(R, c, trans="T", lower=False, check_finite=False)
+            top = scipy.linalg.solve_triangular(R, J.T @ f, trans="T", lower=False, check_finite=False)
     except (np.linalg.LinAlgError, ValueError):
         U, s, Vt = scipy.linalg.svd(J, full_matrices=False, check_finite=False)
         top = U.T @ f
@@ -89,13 +92,32 @@ def compress(f: np.ndarray, J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.append(top, tail), np.vstack([R, np.zeros((1, J.shape[1]))])
 
 
-def least_squares_compressed(both: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], x0: np.ndarray, *,
-                             bounds: tuple, ftol: float, max_nfev: int | None) -> OptimizeResult:
-    """:func:`scipy.optimize.least_squares` (trust-region reflective, ``x_scale="jac"``) on the compressed form.
+class Residuals(NamedTuple):
+    """A fit's least-squares problem over its free parameters (``HysteresisModel._residual_fns``).
 
-    ``both(x)`` gives the residual (n,) and its Jacobian (n, p) at ``x``. The result is scipy's, with
-    ``fun`` and ``jac`` the uncompressed residual and Jacobian at the solution, as the fit reads them.
+    Attributes
+    ----------
+    residual : callable
+        ``x -> f`` (n,), model minus measurement (deg).
+    jac : callable or "2-point"
+        ``x -> J`` (n, p), analytic; else scipy's finite differences.
+    both : callable or None
+        ``x -> (f, J)`` from one pass of the analytic derivatives (None without them).
     """
+
+    residual: Callable[[np.ndarray], np.ndarray]
+    jac: Callable[[np.ndarray], np.ndarray] | str
+    both: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
+
+
+def solve(fns: Residuals, x0: np.ndarray, *, bounds: tuple, ftol: float, max_nfev: int | None) -> OptimizeResult:
+    """:func:`scipy.optimize.least_squares`, trust-region reflective within ``bounds`` with ``x_scale="jac"``, as every
+    fit runs it: on the compressed form where ``fns`` has analytic derivatives (``both``), else on the full residual.
+
+    The result is scipy's; its ``fun`` and ``jac`` are the full residual and Jacobian at the solution either way.
+    """
+    if fns.both is None:
+        return least_squares(fns.residual, x0, jac=fns.jac, bounds=bounds, ftol=ftol, max_nfev=max_nfev, **_TRF)
     seen: dict[bytes, tuple] = {}  # the last few points evaluated: a trial step, then the Jacobian at it
 
     def at(x: np.ndarray) -> tuple:
@@ -103,12 +125,12 @@ def least_squares_compressed(both: Callable[[np.ndarray], tuple[np.ndarray, np.n
         if key not in seen:
             if len(seen) >= 3:
                 seen.pop(next(iter(seen)))
-            f, J = both(x)
+            f, J = fns.both(x)
             seen[key] = (f, J, *compress(f, J))
         return seen[key]
 
-    res = least_squares(lambda x: at(x)[2], x0, jac=lambda x: at(x)[3], bounds=bounds, method="trf",
-                        x_scale="jac", ftol=ftol, max_nfev=max_nfev)
+    res = least_squares(lambda x: at(x)[2], x0, jac=lambda x: at(x)[3], bounds=bounds, ftol=ftol, max_nfev=max_nfev,
+                        **_TRF)
     f, J, _, _ = at(res.x)
     res.fun, res.jac = f, J
     return res
